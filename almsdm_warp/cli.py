@@ -1,0 +1,147 @@
+"""The `almsdm` command line. Bad input ends with one line on stderr and exit code 2."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+
+from .errors import InputError
+
+EXIT_BAD_INPUT = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, not usage + message
+        raise InputError(f"{self.prog}: {message}")
+
+
+def _device(name):
+    import warp as wp
+
+    try:
+        return wp.get_device(name)
+    except (RuntimeError, ValueError) as exc:
+        known = ", ".join(d.alias for d in wp.get_devices())
+        raise InputError(f"unknown device {name!r} (available: {known})") from exc
+
+
+def _quiet_warp():
+    import warp as wp
+
+    wp.config.quiet = True
+    wp.init()
+
+
+def cmd_touch(args) -> int:
+    """Load a scene or mesh, touch it with the probe, build the ring region and print it."""
+    from .contact import find_contacts
+    from .output import check_writable, write_json
+    from .region import Region
+    from .scene import resolve_scene_or_mesh
+
+    if args.json:
+        check_writable(args.json)
+    if args.rings < 0:
+        raise InputError(f"--rings must be >= 0, got {args.rings}")
+    _quiet_warp()
+    device = _device(args.device)
+    scene = resolve_scene_or_mesh(args.scene)
+    mesh = scene.load_mesh()
+    for note in mesh.notes:
+        print(f"note: {note}", file=sys.stderr)
+    rings = scene.rings if args.rings is None else args.rings
+    print(mesh.summary())
+
+    if args.probe_mm is not None:
+        probe = np.asarray(args.probe_mm, dtype=np.float64) * 1e-3
+        if not np.all(np.isfinite(probe)):
+            raise InputError(f"--probe-mm must be finite, got {args.probe_mm}")
+    else:
+        # above the highest surface vertex: a press from the top
+        top = mesh.surface_vertices[np.argmax(mesh.vertices[mesh.surface_vertices, 2])]
+        probe = mesh.vertices[top] + np.array([0.0, 0.0, 5e-3])
+    contact = find_contacts(mesh, probe, device=device)
+    print(
+        f"probe at {np.round(probe * 1e3, 2).tolist()} mm touches face {contact.face} at "
+        f"{np.round(contact.point * 1e3, 2).tolist()} mm ({contact.distance * 1e3:.2f} mm away); "
+        f"nearest vertex {contact.vertex}"
+    )
+    region = Region(mesh, device)
+    rows = []
+    for k in range(1, rings + 1):
+        t0 = time.perf_counter()
+        region.build(int(contact.vertex), k)
+        build_us = (time.perf_counter() - t0) * 1e6
+        rows.append(
+            {
+                "rings": k,
+                "region_vertices": region.vertex_count,
+                "region_springs": region.spring_count,
+                "fixed_vertices": region.boundary_count,
+                "build_us": round(build_us, 1),
+            }
+        )
+        print(f"  {region.summary()}")
+    if args.json:
+        write_json(
+            args.json,
+            {
+                "mesh": _mesh_json(mesh),
+                "device": str(device),
+                "probe_mm": (probe * 1e3).tolist(),
+                "contact": {
+                    "point_mm": (contact.point * 1e3).tolist(),
+                    "face": int(contact.face),
+                    "vertex": int(contact.vertex),
+                    "distance_mm": float(contact.distance * 1e3),
+                },
+                "regions": rows,
+            },
+        )
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _mesh_json(mesh):
+    return {
+        "path": mesh.path,
+        "vertices": mesh.vertex_count,
+        "triangles": mesh.triangle_count,
+        "tetrahedra": mesh.tet_count,
+        "edges": mesh.edge_count,
+    }
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="almsdm", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", parser_class=_Parser)
+    touch = sub.add_parser("touch", help="touch a scene or mesh with the probe and print the ring region")
+    touch.add_argument("scene", nargs="?", default=None, help="scene (.toml) or mesh file; default: the stomach scene")
+    touch.add_argument("--rings", type=int, default=None, help="rings to grow (default: the scene's)")
+    touch.add_argument("--probe-mm", type=float, nargs=3, metavar=("X", "Y", "Z"), help="probe position [mm]")
+    touch.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
+    touch.add_argument("--json", default=None, help="write the result as JSON here")
+    touch.set_defaults(func=cmd_touch)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        if args.command is None:
+            args = parser.parse_args(["touch", *(argv if argv is not None else sys.argv[1:])])
+        return args.func(args)
+    except InputError as exc:
+        print(f"almsdm: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("almsdm: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

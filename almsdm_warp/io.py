@@ -1,0 +1,133 @@
+"""Load an organ mesh from a file: pick a reader by suffix, then validate and repair (validate.py).
+
+Every failure is an :class:`InputError` with one line that starts with the path; third-party
+reader exceptions are wrapped (`raise ... from exc`), never let through.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io as _stdio
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .gmsh_v1 import is_gmsh_v1, read_gmsh_v1
+from .mesh import TissueMesh
+from .validate import _check_scale, build_mesh
+from .vtk_polydata import read_vtk_polydata, vtk_dataset
+
+KNOWN_FORMATS = {
+    ".obj": "Wavefront OBJ surface (trimesh); several objects are concatenated",
+    ".stl": "STL surface, ASCII or binary (trimesh)",
+    ".ply": "PLY surface, ASCII or binary (trimesh)",
+    ".off": "OFF surface (trimesh)",
+    ".vtu": "VTK XML unstructured grid: tetra and triangle cells (meshio)",
+    ".vtk": "legacy VTK: UNSTRUCTURED_GRID (meshio), or an ASCII POLYDATA surface",
+    ".msh": "Gmsh v2 / v4 (meshio), or Gmsh v1 $NOD/$ELM as SOFA ships it",
+}
+"""File suffixes that :func:`load_mesh` reads (any case), with what each holds."""
+
+_TRIMESH = {".obj": "OBJ", ".stl": "STL", ".ply": "PLY", ".off": "OFF"}
+# meshio cell types that carry no surface or volume: ignored, and reported in the notes.
+_IGNORED_CELLS = ("vertex", "line", "line3", "polyline")
+
+
+def load_mesh(path, *, scale: float = 1.0) -> TissueMesh:
+    """Read, validate and repair a tetrahedral or surface mesh.
+
+    path: a file whose suffix is one of :data:`KNOWN_FORMATS`.
+    scale: file units x scale = millimetres (1.0 for a file in mm, 10.0 for cm, 1000.0 for m).
+    Returns a :class:`TissueMesh` in metres whose `notes` list every repair; raises InputError.
+    """
+    where = str(path)
+    _check_scale(scale, where)  # before reading, not after
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{where}: no such file")
+    if p.is_dir():
+        raise InputError(f"{where}: is a directory, not a mesh file")
+    suffix = p.suffix.lower()
+    if suffix not in KNOWN_FORMATS:
+        known = ", ".join(KNOWN_FORMATS)
+        raise InputError(f"{where}: unknown mesh format {suffix or '(no suffix)'!r}; known: {known}")
+    try:
+        with open(p, "rb") as f:
+            head = f.read(4096)
+    except PermissionError as exc:
+        raise InputError(f"{where}: permission denied, cannot read the file") from exc
+    except OSError as exc:
+        raise InputError(f"{where}: cannot read: {exc.strerror or exc}") from exc
+    if not head:
+        raise InputError(f"{where}: empty file (0 bytes)")
+
+    if suffix in _TRIMESH:
+        fmt, read = _TRIMESH[suffix], _read_trimesh
+    elif suffix == ".msh" and is_gmsh_v1(head):
+        fmt, read = "Gmsh v1", read_gmsh_v1
+    elif suffix == ".vtk" and vtk_dataset(head) == "POLYDATA":
+        fmt, read = "VTK POLYDATA", _read_polydata
+    else:
+        fmt, read = {".vtu": "VTU", ".vtk": "VTK", ".msh": "Gmsh"}[suffix], _read_meshio
+    try:
+        vertices, triangles, tetrahedra, notes = read(p, where)
+    except InputError:
+        raise
+    except Exception as exc:  # wrapped, never let through: the message says which file and format
+        raise InputError(f"{where}: cannot read as {fmt}: {_one_line(exc)}") from exc
+
+    mesh = build_mesh(vertices, triangles, tetrahedra, scale=scale, path=where)
+    if notes:
+        mesh.notes = tuple(notes) + mesh.notes
+    return mesh
+
+
+def _read_trimesh(p: Path, where: str):
+    import trimesh
+
+    loaded = trimesh.load_mesh(p, file_type=p.suffix.lower()[1:], process=False)
+    if isinstance(loaded, trimesh.Scene):  # several objects: concatenated, none dropped
+        loaded = loaded.to_mesh()
+    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    faces = getattr(loaded, "faces", None)
+    faces = np.zeros((0, 3), dtype=np.int64) if faces is None else np.asarray(faces, dtype=np.int64)
+    return vertices, faces, None, []
+
+
+def _read_polydata(p: Path, where: str):
+    vertices, triangles, notes = read_vtk_polydata(p, where)
+    return vertices, triangles, None, notes
+
+
+def _read_meshio(p: Path, where: str):
+    import meshio
+
+    reader = {".vtu": meshio.vtu.read, ".vtk": meshio.vtk.read, ".msh": meshio.gmsh.read}[p.suffix.lower()]
+    captured = _stdio.StringIO()
+    with contextlib.redirect_stderr(captured):  # meshio prints its warnings to stderr: keep them as notes
+        m = reader(os.fspath(p))
+    notes = [f"meshio: {' '.join(line.split())}" for line in captured.getvalue().splitlines() if line.strip()]
+
+    blocks = {"triangle": [], "tetra": []}
+    ignored: dict[str, int] = {}
+    for block in m.cells:
+        if block.type in blocks:
+            blocks[block.type].append(np.asarray(block.data, dtype=np.int64))
+        elif block.type in _IGNORED_CELLS:
+            ignored[block.type] = ignored.get(block.type, 0) + len(block.data)
+        else:
+            raise InputError(
+                f"{where}: unsupported cell type {block.type!r} ({len(block.data)} cells); only 'tetra' and "
+                f"'triangle' cells are read ({', '.join(_IGNORED_CELLS)} cells are ignored)"
+            )
+    notes += [f"ignored {count} {kind} cells" for kind, count in ignored.items()]
+    tri = np.concatenate(blocks["triangle"]) if blocks["triangle"] else None
+    tet = np.concatenate(blocks["tetra"]) if blocks["tetra"] else None
+    return np.asarray(m.points, dtype=np.float64), tri, tet, notes
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__

@@ -1,0 +1,129 @@
+"""Mesh topology on the host, vectorized NumPy: edges, CSR adjacency, incidence, surfaces, masses.
+
+Everything here runs once per mesh, when it enters; the device kernels read the arrays it makes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# The six edges of a tetrahedron (a, b, c, d) as local corner pairs.
+TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
+# The four faces of a positively oriented tet (det[b-a, c-a, d-a] > 0), each wound outward.
+TET_FACES_OUT = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int64)
+
+
+def unique_edges(triangles: np.ndarray, tetrahedra: np.ndarray | None = None) -> np.ndarray:
+    """Unique undirected edges, shape [edge_count, 2], int32, each row (i, j) with i < j, rows sorted.
+
+    The edges of the tetrahedra when there are any (they include the surface's), else of the triangles.
+    """
+    if tetrahedra is not None and len(tetrahedra):
+        pairs = np.asarray(tetrahedra, dtype=np.int64)[:, TET_EDGES].reshape(-1, 2)
+    else:
+        tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        pairs = tri[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)
+    if len(pairs) == 0:
+        return np.zeros((0, 2), dtype=np.int32)
+    pairs = np.sort(pairs, axis=1)
+    return np.unique(pairs, axis=0).astype(np.int32)
+
+
+def csr_adjacency(edges: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertex adjacency in CSR form: (offsets [n+1], neighbour [2e], edge id [2e]), int32.
+
+    Vertex v's neighbours are neighbour[offsets[v]:offsets[v+1]], sorted by vertex id, and
+    edge[k] is the id (row in `edges`) of the edge from v to neighbour[k].
+    """
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    edge_id = np.arange(len(e), dtype=np.int64)
+    rows = np.concatenate([e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 1], e[:, 0]])
+    ids = np.concatenate([edge_id, edge_id])
+    order = np.lexsort((cols, rows))
+    offsets = np.zeros(vertex_count + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=vertex_count), out=offsets[1:])
+    return offsets.astype(np.int32), cols[order].astype(np.int32), ids[order].astype(np.int32)
+
+
+def csr_incidence(elements: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex-to-element incidence in CSR form: (offsets [n+1], element id [k*m]), int32.
+
+    For triangles this is what the normal update reads: the faces around each vertex, found once.
+    """
+    el = np.asarray(elements, dtype=np.int64)
+    if el.size == 0:
+        return np.zeros(vertex_count + 1, dtype=np.int32), np.zeros(0, dtype=np.int32)
+    corners = el.reshape(-1)
+    owner = np.repeat(np.arange(len(el), dtype=np.int64), el.shape[1])
+    order = np.lexsort((owner, corners))
+    offsets = np.zeros(vertex_count + 1, dtype=np.int64)
+    np.cumsum(np.bincount(corners, minlength=vertex_count), out=offsets[1:])
+    return offsets.astype(np.int32), owner[order].astype(np.int32)
+
+
+def tet_signed_volumes(vertices: np.ndarray, tetrahedra: np.ndarray) -> np.ndarray:
+    """Signed volume of each tet, det[b-a, c-a, d-a] / 6, shape [t]."""
+    p = np.asarray(vertices, dtype=np.float64)[np.asarray(tetrahedra, dtype=np.int64)]
+    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+
+
+def triangle_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area of each triangle, shape [m]."""
+    p = np.asarray(vertices, dtype=np.float64)[np.asarray(triangles, dtype=np.int64)]
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+def tet_surface(tetrahedra: np.ndarray) -> np.ndarray:
+    """The boundary of a positively oriented tet mesh: the faces used by exactly one tet, wound outward.
+
+    Returned in the order of their tets, shape [f, 3], int32.
+    """
+    tets = np.asarray(tetrahedra, dtype=np.int64)
+    faces = tets[:, TET_FACES_OUT].reshape(-1, 3)
+    if len(faces) == 0:
+        return np.zeros((0, 3), dtype=np.int32)
+    key = np.sort(faces, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return faces[counts[inverse.reshape(-1)] == 1].astype(np.int32)
+
+
+def edge_lengths(vertices: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Length of each edge, shape [e], in the units of `vertices`."""
+    v = np.asarray(vertices, dtype=np.float64)
+    e = np.asarray(edges, dtype=np.int64)
+    return np.linalg.norm(v[e[:, 1]] - v[e[:, 0]], axis=1)
+
+
+def lumped_masses(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    tetrahedra: np.ndarray,
+    density: float,
+    thickness: float,
+) -> np.ndarray:
+    """Lumped vertex masses [kg], shape [n].
+
+    Volume mesh: each tet's volume x density, a quarter to each corner. Surface mesh: each
+    triangle's area x thickness x density, a third to each corner. Units follow the inputs
+    (metres, kg/m^3, metres give kg).
+    """
+    n = len(vertices)
+    masses = np.zeros(n, dtype=np.float64)
+    if tetrahedra is not None and len(tetrahedra):
+        share = np.abs(tet_signed_volumes(vertices, tetrahedra)) * density / 4.0
+        np.add.at(masses, np.asarray(tetrahedra, dtype=np.int64).reshape(-1), np.repeat(share, 4))
+    else:
+        share = triangle_areas(vertices, triangles) * thickness * density / 3.0
+        np.add.at(masses, np.asarray(triangles, dtype=np.int64).reshape(-1), np.repeat(share, 3))
+    return masses
+
+
+def connected_components(edges: np.ndarray, vertex_count: int) -> tuple[int, np.ndarray]:
+    """(count, label per vertex) of the graph of `edges`."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components as cc
+
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(vertex_count, vertex_count))
+    return cc(graph, directed=False)

@@ -1,0 +1,181 @@
+"""Ring regions on the device: grow rings of neighbours from a contact vertex, then compact them.
+
+The region's vertices live in one array, ring after ring: ring r occupies
+``region_vertex[ring_offsets[r]:ring_offsets[r+1]]``. Growing ring r+1 launches one thread per
+vertex of ring r (the compacted frontier) and appends the newly reached neighbours, so the work is
+proportional to the region, not to the mesh. Ring membership is claimed with an integer
+compare-and-swap, which gives the breadth-first ring index whatever the thread order; the order of
+the new ring in the array is then made deterministic by a radix sort on vertex id.
+"""
+
+import warp as wp
+
+
+@wp.kernel
+def seed_ring(
+    seed: int,
+    vertex_ring: wp.array(dtype=wp.int32),
+    region_vertex: wp.array(dtype=wp.int32),
+):
+    # ring 0 is the contact vertex itself
+    vertex_ring[seed] = 0
+    region_vertex[0] = seed
+
+
+@wp.kernel
+def grow_ring(
+    adj_offsets: wp.array(dtype=wp.int32),
+    adj_vertex: wp.array(dtype=wp.int32),
+    frontier_begin: int,
+    ring: int,
+    vertex_ring: wp.array(dtype=wp.int32),
+    region_vertex: wp.array(dtype=wp.int32),
+    region_count: wp.array(dtype=wp.int32),
+):
+    # one thread per vertex of ring (ring - 1): claim each unvisited neighbour for `ring`
+    v = region_vertex[frontier_begin + wp.tid()]
+    for k in range(adj_offsets[v], adj_offsets[v + 1]):
+        u = adj_vertex[k]
+        if vertex_ring[u] < 0:
+            if wp.atomic_cas(vertex_ring, u, -1, ring) == -1:
+                slot = wp.atomic_add(region_count, 0, 1)
+                region_vertex[slot] = u
+
+
+@wp.kernel
+def sort_ring_small(region_vertex: wp.array(dtype=wp.int32), begin: int, count: int):
+    # one thread: insertion sort of a short ring by vertex id (same order as the radix sort)
+    for i in range(1, count):
+        key = region_vertex[begin + i]
+        j = i - 1
+        while j >= 0 and region_vertex[begin + j] > key:
+            region_vertex[begin + j + 1] = region_vertex[begin + j]
+            j -= 1
+        region_vertex[begin + j + 1] = key
+
+
+@wp.kernel
+def clear_region(
+    region_vertex: wp.array(dtype=wp.int32),
+    vertex_ring: wp.array(dtype=wp.int32),
+    vertex_local: wp.array(dtype=wp.int32),
+):
+    # forget the old region: only its own vertices are touched
+    v = region_vertex[wp.tid()]
+    vertex_ring[v] = -1
+    vertex_local[v] = -1
+
+
+@wp.kernel
+def index_region(
+    region_vertex: wp.array(dtype=wp.int32),
+    vertex_ring: wp.array(dtype=wp.int32),
+    outer_ring: int,
+    vertex_local: wp.array(dtype=wp.int32),
+    region_ring: wp.array(dtype=wp.int32),
+    region_boundary: wp.array(dtype=wp.int32),
+):
+    # local index of each region vertex, its ring, and the boundary flag on the outermost ring
+    i = wp.tid()
+    v = region_vertex[i]
+    r = vertex_ring[v]
+    vertex_local[v] = i
+    region_ring[i] = r
+    region_boundary[i] = wp.where(r == outer_ring and outer_ring > 0, 1, 0)
+
+
+@wp.kernel
+def count_region_edges(
+    adj_offsets: wp.array(dtype=wp.int32),
+    adj_vertex: wp.array(dtype=wp.int32),
+    region_vertex: wp.array(dtype=wp.int32),
+    vertex_ring: wp.array(dtype=wp.int32),
+    edge_count: wp.array(dtype=wp.int32),
+):
+    # each edge with both ends inside is owned by its lower-id end, so it is counted once
+    v = region_vertex[wp.tid()]
+    c = int(0)
+    for k in range(adj_offsets[v], adj_offsets[v + 1]):
+        u = adj_vertex[k]
+        if u > v and vertex_ring[u] >= 0:
+            c += 1
+    edge_count[wp.tid()] = c
+
+
+@wp.kernel
+def write_region_edges(
+    adj_offsets: wp.array(dtype=wp.int32),
+    adj_vertex: wp.array(dtype=wp.int32),
+    adj_edge: wp.array(dtype=wp.int32),
+    region_vertex: wp.array(dtype=wp.int32),
+    vertex_ring: wp.array(dtype=wp.int32),
+    vertex_local: wp.array(dtype=wp.int32),
+    edge_count: wp.array(dtype=wp.int32),
+    edge_end: wp.array(dtype=wp.int32),
+    region_edge: wp.array(dtype=wp.int32),
+    region_edge_local: wp.array(dtype=wp.vec2i),
+):
+    # the region's springs: mesh edge id and local end points, in owner order then CSR order
+    i = wp.tid()
+    v = region_vertex[i]
+    slot = edge_end[i] - edge_count[i]
+    for k in range(adj_offsets[v], adj_offsets[v + 1]):
+        u = adj_vertex[k]
+        if u > v and vertex_ring[u] >= 0:
+            region_edge[slot] = adj_edge[k]
+            region_edge_local[slot] = wp.vec2i(i, vertex_local[u])
+            slot += 1
+
+
+def grow_region_ring(adjacency, region, frontier_begin, frontier_end, ring):
+    """Append ring `ring` (the unvisited neighbours of region_vertex[frontier_begin:frontier_end])."""
+    offsets, neighbours = adjacency
+    wp.launch(
+        grow_ring,
+        dim=frontier_end - frontier_begin,
+        inputs=[offsets, neighbours, frontier_begin, ring],
+        outputs=[region.vertex_ring, region.region_vertex, region.region_count],
+        device=region.device,
+    )
+
+
+SMALL_RING = 512
+"""Rings up to this size are sorted by one thread; longer ones by Warp's radix sort."""
+
+
+def sort_region_ring(region, begin, end):
+    """Sort region_vertex[begin:end] by vertex id, so the region's order does not depend on threads."""
+    count = end - begin
+    if count < 2:
+        return
+    if count <= SMALL_RING:
+        wp.launch(sort_ring_small, dim=1, inputs=[region.region_vertex, begin, count], device=region.device)
+        return
+    keys, values = region.sort_keys, region.sort_values
+    wp.copy(keys, region.region_vertex, 0, begin, count)
+    wp.utils.radix_sort_pairs(keys, values, count)
+    wp.copy(region.region_vertex, keys, begin, 0, count)
+
+
+def eval_region_edges(adjacency_with_edges, region, count, edge_count, edge_end):
+    """Count, scan and write the region's edges (each once, both ends inside).
+
+    `edge_end` receives the inclusive scan of the counts: its entry count-1 is the total.
+    """
+    offsets, neighbours, edge_ids = adjacency_with_edges
+    device = region.device
+    wp.launch(
+        count_region_edges,
+        dim=count,
+        inputs=[offsets, neighbours, region.region_vertex, region.vertex_ring],
+        outputs=[edge_count],
+        device=device,
+    )
+    wp.utils.array_scan(edge_count[:count], edge_end[:count], inclusive=True)
+    wp.launch(
+        write_region_edges,
+        dim=count,
+        inputs=[offsets, neighbours, edge_ids, region.region_vertex, region.vertex_ring, region.vertex_local, edge_count, edge_end],
+        outputs=[region.region_edge, region.region_edge_local],
+        device=device,
+    )
