@@ -29,10 +29,9 @@ def _device(name):
 
 
 def _quiet_warp():
-    import warp as wp
+    from .warp_init import init_warp
 
-    wp.config.quiet = True
-    wp.init()
+    init_warp()
 
 
 def cmd_touch(args) -> int:
@@ -44,7 +43,7 @@ def cmd_touch(args) -> int:
 
     if args.json:
         check_writable(args.json)
-    if args.rings < 0:
+    if args.rings is not None and args.rings < 0:
         raise InputError(f"--rings must be >= 0, got {args.rings}")
     _quiet_warp()
     device = _device(args.device)

@@ -60,8 +60,9 @@ def main(argv=None):
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--seeds", type=int, default=200)
     args = ap.parse_args(argv)
-    wp.config.quiet = True
-    wp.init()
+    from almsdm_warp.warp_init import init_warp
+
+    init_warp()
     for path in args.meshes or default_meshes():
         mesh, sizes, build_us = measure(path, args.device, args.seeds)
         kind = "volume" if mesh.is_volume else "surface"

@@ -14,8 +14,9 @@ os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp_cache"))
 
 import warp as wp  # noqa: E402
 
-wp.config.quiet = True
-wp.init()
+from almsdm_warp.warp_init import init_warp  # noqa: E402
+
+init_warp()
 
 DEVICES = ["cpu"] + [d.alias for d in wp.get_cuda_devices()]
 MESH_SUFFIXES = {".obj", ".stl", ".ply", ".off", ".vtu", ".vtk", ".msh"}

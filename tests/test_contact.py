@@ -70,8 +70,10 @@ def test_single_probe_and_reuse(device):
     # a probe exactly on a vertex touches that vertex
     one = query(mesh.vertices[v])
     assert one.vertex == v and one.distance < 1e-7
-    big = query(probes_around(mesh, 100, seed=1))
-    small = query(probes_around(mesh, 10, seed=1)[:10])
+    probes = probes_around(mesh, 100, seed=1)
+    big = query(probes)
+    small = query(probes[:10])  # buffers sized for 100 are reused for 10
     np.testing.assert_array_equal(small.vertex, big.vertex[:10])
+    np.testing.assert_array_equal(small.point, big.point[:10])
     with pytest.raises(ValueError, match="probe 1 has a non-finite position"):
         find_contacts(mesh, [[0, 0, 0], [np.nan, 0, 0]], device=device)

@@ -1,0 +1,355 @@
+"""Scenes: an organ mesh with its tissue, region and press parameters, read from a TOML file.
+
+A scene file names every value's unit in its key (``depth_mm``, ``edge_stiffness_N_per_m``);
+:func:`load_scene` checks it strictly (unknown sections and keys are errors, so a typo never
+goes unnoticed) and converts it to SI units: :class:`Scene` holds metres, kilograms, seconds
+and newtons. The project ships two scenes, ``stomach`` (the default) and ``liver``; see
+``scenes/stomach.toml`` for the documented schema. Every problem is an :class:`InputError`
+with one line that starts with the scene file's path.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import os
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .errors import InputError
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+if TYPE_CHECKING:
+    from .mesh import TissueMesh
+
+DEFAULT_SCENE = "stomach"
+"""The scene used when none is given."""
+
+
+@dataclass(frozen=True)
+class TissueParams:
+    """Mass, spring and damper parameters of the tissue, in SI units.
+
+    The defaults are the stomach scene's. The stiffness and damping defaults are placeholders,
+    to be calibrated against the paper's feedback force (2.4 N at 10 mm indentation).
+    """
+
+    density: float = 1000.0
+    """Tissue density [kg/m^3], for the lumped vertex masses."""
+    thickness: float = 3.0e-3
+    """Shell thickness [m] of a surface mesh, for its lumped masses (area x thickness x density);
+    ignored for a tet mesh, whose masses come from the tet volumes."""
+    edge_stiffness: float = 100.0
+    """k_ij [N/m]: stiffness of the spring on each mesh edge, eqs. (4)-(6)."""
+    edge_damping: float = 1.0
+    """d_ij [N s/m]: damping along each mesh edge, eqs. (4)-(6)."""
+    anchor_stiffness: float = 10.0
+    """k_i [N/m]: stiffness of the spring that pulls each vertex back to its rest position, eq. (3)."""
+    anchor_damping: float = 1.0
+    """d_i [N s/m]: damping of each vertex's velocity, eq. (3)."""
+
+    def __post_init__(self):
+        for f in fields(self):
+            _check_value(getattr(self, f.name), float, _FIELD_RULE[("tissue", f.name)], f"TissueParams.{f.name}")
+
+
+@dataclass(frozen=True)
+class PressParams:
+    """The press protocol (DESIGN.md, evaluation protocol), in SI units."""
+
+    depth: float = 10.0e-3
+    """Indentation depth [m]: how far the contact vertex is driven along the inward surface normal."""
+    ramp: float = 0.1
+    """Ramp time [s] from rest to full depth."""
+    hold: float = 0.2
+    """Hold time [s] at full depth."""
+    settle: float = 1.0
+    """Settle window [s] after release; the recovery error is measured at its end."""
+
+    def __post_init__(self):
+        for f in fields(self):
+            _check_value(getattr(self, f.name), float, _FIELD_RULE[("press", f.name)], f"PressParams.{f.name}")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """An organ mesh and the parameters to simulate it with (SI units)."""
+
+    path: Path | None
+    """The scene file, or None for a scene made from a bare mesh file."""
+    mesh_path: Path
+    """The mesh file (absolute)."""
+    scale_mm: float = 1.0
+    """Millimetres per mesh file unit (1.0 for a file in mm, 10.0 for cm, 1000.0 for m)."""
+    tissue: TissueParams = field(default_factory=TissueParams)
+    """Mass, spring and damper parameters."""
+    rings: int = 4
+    """Rings grown from the contact vertex along mesh edges; the outermost ring is fixed."""
+    press: PressParams = field(default_factory=PressParams)
+    """The press protocol."""
+
+    def __post_init__(self):
+        object.__setattr__(self, "mesh_path", Path(self.mesh_path))
+        if self.path is not None:
+            object.__setattr__(self, "path", Path(self.path))
+        object.__setattr__(self, "scale_mm", _check_value(self.scale_mm, float, "> 0", "Scene.scale_mm"))
+        _check_value(self.rings, int, ">= 1", "Scene.rings")
+
+    @property
+    def name(self) -> str:
+        """The scene file's stem, or the mesh file's for a bare mesh."""
+        return (self.path or self.mesh_path).stem
+
+    def load_mesh(self) -> TissueMesh:
+        """Read, validate and repair the scene's mesh (metres); raises InputError."""
+        from .io import load_mesh
+
+        return load_mesh(self.mesh_path, scale=self.scale_mm)
+
+    def as_dict(self) -> dict:
+        """The scene in interface units, keyed as in a scene file (for JSON records)."""
+        out: dict = {"scene": str(self.path) if self.path else None}
+        for section, keys in SCHEMA.items():
+            out[section] = {}
+            for key, (attr, _kind, factor, _rule) in keys.items():
+                value = _get(self, section, attr)
+                if section == "mesh" and attr == "path":
+                    value = str(self.mesh_path)
+                elif factor != 1.0:
+                    value = value * factor
+                out[section][key] = value
+        return out
+
+    def summary(self) -> str:
+        """One line: the scene, its mesh and the parameters people ask about first."""
+        t, p = self.tissue, self.press
+        return (
+            f"scene {self.name}: mesh {self.mesh_path.name} (x{self.scale_mm:g} mm), {self.rings} rings, "
+            f"k_ij {t.edge_stiffness:g} N/m, k_i {t.anchor_stiffness:g} N/m, press {p.depth * 1e3:g} mm"
+        )
+
+
+# -- the schema ------------------------------------------------------------------------------
+# section -> key -> (attribute, type, file units per SI unit (1000 for mm), rule)
+# rules: "path", "> 0", ">= 0", ">= 1" (integers)
+SCHEMA: dict[str, dict[str, tuple[str, type, float, str]]] = {
+    "mesh": {
+        "path": ("path", str, 1.0, "path"),
+        "scale_mm": ("scale_mm", float, 1.0, "> 0"),
+    },
+    "tissue": {
+        "density_kg_per_m3": ("density", float, 1.0, "> 0"),
+        "thickness_mm": ("thickness", float, 1000.0, "> 0"),
+        "edge_stiffness_N_per_m": ("edge_stiffness", float, 1.0, "> 0"),
+        "edge_damping_Ns_per_m": ("edge_damping", float, 1.0, ">= 0"),
+        "anchor_stiffness_N_per_m": ("anchor_stiffness", float, 1.0, ">= 0"),
+        "anchor_damping_Ns_per_m": ("anchor_damping", float, 1.0, ">= 0"),
+    },
+    "region": {
+        "rings": ("rings", int, 1.0, ">= 1"),
+    },
+    "press": {
+        "depth_mm": ("depth", float, 1000.0, "> 0"),
+        "ramp_s": ("ramp", float, 1.0, "> 0"),
+        "hold_s": ("hold", float, 1.0, ">= 0"),
+        "settle_s": ("settle", float, 1.0, "> 0"),
+    },
+}
+"""Every section and key a scene file may hold: attribute, type, file units per SI unit, rule."""
+
+_FIELD_RULE = {(section, attr): rule for section, keys in SCHEMA.items() for attr, _k, _f, rule in keys.values()}
+_TOML_TYPE = {str: "a string", float: "a number", int: "an integer"}
+
+
+def _get(scene: Scene, section: str, attr: str):
+    if section == "tissue":
+        return getattr(scene.tissue, attr)
+    if section == "press":
+        return getattr(scene.press, attr)
+    return getattr(scene, attr)
+
+
+def _describe(value) -> str:
+    """A TOML value as the user wrote it, with its TOML type."""
+    if isinstance(value, bool):
+        return f"boolean {str(value).lower()}"
+    if isinstance(value, str):
+        return f"string {value!r}"
+    if isinstance(value, int):
+        return f"integer {value}"
+    if isinstance(value, float):
+        return f"float {value!r}"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return "an array"
+    return f"{type(value).__name__} {value!r}"  # dates and times
+
+
+def _check_value(value, kind: type, rule: str, name: str):
+    """The value converted to `kind`, or InputError('<name> must ...'); `name` says where."""
+    if kind is str:
+        if not isinstance(value, str):
+            raise InputError(f"{name} must be a string, got {_describe(value)}")
+        if not value.strip():
+            raise InputError(f"{name} must not be empty")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"{name} must be {_TOML_TYPE[kind]}, got {_describe(value)}")
+    if kind is int:
+        if not isinstance(value, int):
+            raise InputError(f"{name} must be an integer, got {_describe(value)}")
+    else:
+        value = float(value)
+        if not math.isfinite(value):
+            raise InputError(f"{name} must be finite, got {value!r}")
+    if rule == "> 0" and not value > 0:
+        raise InputError(f"{name} must be > 0, got {value!r}")
+    if rule == ">= 0" and not value >= 0:
+        raise InputError(f"{name} must be >= 0, got {value!r}")
+    if rule == ">= 1" and not value >= 1:
+        raise InputError(f"{name} must be >= 1, got {value!r}")
+    return value
+
+
+# -- loading ---------------------------------------------------------------------------------
+def load_scene(path) -> Scene:
+    """Read and check a scene file (TOML); returns a :class:`Scene` in SI units.
+
+    Keys left out take the defaults (the stomach scene's values), except ``[mesh] path``,
+    which is required and is relative to the scene file. Raises InputError, one line naming
+    the file: no such file, a TOML syntax error (with line and column), an unknown section or
+    key (with the allowed ones), a value of the wrong type, a non-finite or out-of-range value,
+    a missing mesh file.
+    """
+    where = str(path)
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{where}: no such scene file")
+    if p.is_dir():
+        raise InputError(f"{where}: is a directory, not a scene file")
+    try:
+        with open(p, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{where}: TOML syntax error: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{where}: not a UTF-8 text file (TOML), byte {exc.start} is 0x{exc.object[exc.start]:02x}") from exc
+    except PermissionError as exc:
+        raise InputError(f"{where}: permission denied, cannot read the scene file") from exc
+    except OSError as exc:
+        raise InputError(f"{where}: cannot read the scene file: {exc.strerror or exc}") from exc
+
+    allowed_sections = ", ".join(f"[{s}]" for s in SCHEMA)
+    values: dict[str, dict[str, object]] = {section: {} for section in SCHEMA}
+    for section, table in data.items():
+        if section not in SCHEMA:
+            what = "section" if isinstance(table, dict) else "top-level key"
+            raise InputError(
+                f"{where}: unknown {what} {section!r}{_did_you_mean(section, SCHEMA, '[{}]')}; "
+                f"allowed sections: {allowed_sections}"
+            )
+        if not isinstance(table, dict):
+            raise InputError(f"{where}: [{section}] must be a table (a [{section}] section), got {_describe(table)}")
+        keys = SCHEMA[section]
+        for key, value in table.items():
+            if key not in keys:
+                raise InputError(
+                    f"{where}: unknown key {key!r} in [{section}]{_did_you_mean(key, keys, '{}')}; "
+                    f"allowed: {', '.join(keys)}"
+                )
+            attr, kind, factor, rule = keys[key]
+            try:
+                value = _check_value(value, kind, rule, f"[{section}] {key}")
+            except InputError as exc:
+                raise InputError(f"{where}: {exc}") from None
+            if kind is float and factor != 1.0:
+                value = value / factor  # mm -> m: divide (correctly rounded: 10 mm is exactly 0.01)
+            values[section][attr] = value
+
+    raw_mesh = values["mesh"].get("path")
+    if raw_mesh is None:
+        raise InputError(f"{where}: missing [mesh] path (the mesh file, relative to the scene file)")
+    mesh_path = Path(os.path.abspath(p.parent / Path(str(raw_mesh)).expanduser()))
+    if not mesh_path.exists():
+        raise InputError(f"{where}: mesh file not found: {mesh_path} ([mesh] path = {raw_mesh!r})")
+    if mesh_path.is_dir():
+        raise InputError(f"{where}: [mesh] path = {raw_mesh!r} is a directory, not a mesh file ({mesh_path})")
+
+    return Scene(
+        path=Path(os.path.abspath(p)),
+        mesh_path=mesh_path,
+        scale_mm=values["mesh"].get("scale_mm", 1.0),
+        tissue=TissueParams(**values["tissue"]),
+        rings=values["region"].get("rings", Scene.rings),
+        press=PressParams(**values["press"]),
+    )
+
+
+def _did_you_mean(word: str, choices, fmt: str) -> str:
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f" (did you mean {fmt.format(close[0])}?)" if close else ""
+
+
+# -- the scenes shipped with the package -----------------------------------------------------
+def scenes_dir() -> Path:
+    """The folder of the scenes shipped with the package.
+
+    Installed: ``almsdm_warp/scenes`` inside the package (where pyproject maps ``scenes/``).
+    Source checkout: ``scenes/`` next to the package folder.
+    """
+    here = Path(__file__).resolve().parent
+    candidates = [here / "scenes", here.parent / "scenes"]
+    for folder in candidates:
+        if (folder / f"{DEFAULT_SCENE}.toml").is_file():
+            return folder
+    tried = ", ".join(str(c) for c in candidates)
+    raise InputError(f"the package's scenes are missing (looked in {tried}); reinstall almsdm_warp")
+
+
+def scene_names() -> list[str]:
+    """The names of the scenes shipped with the package (sorted)."""
+    return sorted(p.stem for p in scenes_dir().glob("*.toml"))
+
+
+def default_scene_path(name: str = DEFAULT_SCENE) -> Path:
+    """The path of a scene shipped with the package: ``stomach`` (the default) or ``liver``."""
+    stem = name[:-5] if name.lower().endswith(".toml") else name
+    path = scenes_dir() / f"{stem}.toml"
+    if not path.is_file():
+        raise InputError(f"no scene named {name!r}; the package has: {', '.join(scene_names())}")
+    return path
+
+
+def resolve_scene_or_mesh(arg=None, *, scale_mm: float = 1.0) -> Scene:
+    """A scene from what a user typed.
+
+    None: the default scene (stomach). A path ending in ``.toml``: that scene file. The name
+    of a shipped scene (``liver``) that is not a file here: that scene. Anything else: a mesh
+    file, with the default tissue, region and press parameters, read at `scale_mm`
+    millimetres per file unit.
+    """
+    if arg is None:
+        return load_scene(default_scene_path())
+    p = Path(arg)
+    if p.suffix.lower() == ".toml":
+        return load_scene(p)
+    if not p.exists() and p.suffix == "" and p.name == str(arg):
+        try:
+            scene = default_scene_path(p.name)
+        except InputError:
+            scene = None
+        if scene is not None:
+            return load_scene(scene)
+    if not p.exists():
+        hint = f", or one of the scenes: {', '.join(scene_names())}" if p.suffix == "" else ""
+        raise InputError(f"{arg}: no such file (give a scene .toml or a mesh file{hint})")
+    if p.is_dir():
+        raise InputError(f"{arg}: is a directory, not a scene or mesh file")
+    scale_mm = _check_value(scale_mm, float, "> 0", "scale_mm")
+    return Scene(path=None, mesh_path=Path(os.path.abspath(p)), scale_mm=scale_mm)

@@ -1,0 +1,72 @@
+"""The command line: the main job on the default scene, and bad input as one line with exit code 2."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+from conftest import ROOT, SHARED_MESHES
+
+from almsdm_warp.cli import main
+
+
+def run_cli(*args, cwd=None):
+    """Run `python -m almsdm_warp.cli` in a fresh process, as a user would."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.run(
+        [sys.executable, "-m", "almsdm_warp.cli", *args], capture_output=True, text=True, cwd=cwd or ROOT, env=env, timeout=300
+    )
+
+
+def test_touch_default_scene_writes_json(tmp_path):
+    out = tmp_path / "touch.json"
+    r = run_cli("touch", "--rings", "3", "--json", str(out))
+    assert r.returncode == 0, r.stderr
+    data = json.loads(out.read_text())
+    assert data["mesh"]["vertices"] > 0 and data["contact"]["vertex"] >= 0
+    regions = data["regions"]
+    assert [row["rings"] for row in regions] == [1, 2, 3]
+    sizes = [row["region_vertices"] for row in regions]
+    assert sizes == sorted(sizes) and sizes[0] >= 4
+    assert "region at vertex" in r.stdout
+    assert not [p for p in tmp_path.iterdir() if p.name != "touch.json"]  # no temporary left behind
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["touch", "no/such/mesh.obj"], "no such file"),
+        (["touch", "--rings", "-1"], "--rings must be >= 0"),
+        (["touch", "--rings", "two"], "invalid int value"),
+        (["touch", "--json", "/no/such/folder/out.json"], "does not exist"),
+        (["touch", "--device", "tpu:7"], "unknown device"),
+        (["touch", "--probe-mm", "nan", "0", "0"], "--probe-mm must be finite"),
+        (["frobnicate"], "invalid choice"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(args, message, capsys):
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_broken_mesh_file_from_a_real_process(tmp_path):
+    bad = tmp_path / "broken.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
+    out = tmp_path / "out.json"
+    r = run_cli("touch", str(bad), "--json", str(out))
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and "broken.obj" in r.stderr and "Traceback" not in r.stderr
+    assert not out.exists() and list(tmp_path.iterdir()) == [bad]
+
+
+def test_touch_a_shared_volume_mesh(tmp_path, capsys):
+    path = SHARED_MESHES / "sofa_liver2_tets.vtu"
+    if not path.exists():
+        pytest.skip(f"{path} absent")
+    out = tmp_path / "liver.json"
+    assert main(["touch", str(path), "--rings", "2", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["mesh"]["tetrahedra"] == 1493 and data["mesh"]["vertices"] == 507
