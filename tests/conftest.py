@@ -6,7 +6,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_MESHES = ROOT.parent / "shared" / "meshes"
+# ../shared/meshes beside the checkout; ALMSDM_SHARED_MESHES points elsewhere (a copy carried to a GPU box)
+SHARED_MESHES = Path(os.environ.get("ALMSDM_SHARED_MESHES", ROOT.parent / "shared" / "meshes"))
 SCENES = ROOT / "scenes"
 
 # a project-local kernel cache unless the caller chose one (CI sets it too)

@@ -13,7 +13,7 @@ from almsdm_warp.cli import main
 
 def run_cli(*args, cwd=None):
     """Run `python -m almsdm_warp.cli` in a fresh process, as a user would."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
     return subprocess.run(
         [sys.executable, "-m", "almsdm_warp.cli", *args], capture_output=True, text=True, cwd=cwd or ROOT, env=env, timeout=300
     )

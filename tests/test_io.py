@@ -17,7 +17,7 @@ from almsdm_warp.errors import InputError
 from almsdm_warp.io import KNOWN_FORMATS, load_mesh
 from almsdm_warp.validate import build_mesh
 
-MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
+from conftest import SHARED_MESHES as MESHES  # noqa: E402
 EXTENT_MM = np.array([20.0, 30.0, 10.0])  # the test box
 GRID = (2, 3, 1)  # cells per axis of the tetrahedralized box
 
