@@ -123,15 +123,15 @@ def test_shipped_scenes_load_in_si_units():
     assert stomach.path == SCENES / "stomach.toml" and stomach.mesh_path == SCENES / "stomach.obj"
     assert stomach.name == "stomach"
     assert stomach.scale_mm == 1.0 and stomach.rings == 4
-    assert stomach.press.depth == 0.01 and stomach.tissue.thickness == 0.003
+    assert stomach.press.depth == 0.01 and stomach.tissue.thickness == pytest.approx(0.025)
     assert (stomach.press.ramp, stomach.press.hold, stomach.press.settle) == (0.1, 0.2, 1.0)
     assert stomach.tissue.density == 1000.0
-    assert stomach.tissue.edge_stiffness == 100.0 and stomach.tissue.anchor_stiffness == 10.0
-    assert stomach.tissue.edge_damping == 1.0 and stomach.tissue.anchor_damping == 1.0
+    assert stomach.tissue.edge_stiffness == 62.0 and stomach.tissue.anchor_stiffness == 124.0
+    assert stomach.tissue.edge_damping == 0.02 and stomach.tissue.anchor_damping == 0.1
     # the defaults are the stomach scene's
     assert TissueParams() == stomach.tissue and PressParams() == stomach.press
     assert stomach.as_dict()["press"]["depth_mm"] == 10.0
-    assert stomach.as_dict()["tissue"]["thickness_mm"] == 3.0
+    assert stomach.as_dict()["tissue"]["thickness_mm"] == 25.0
     liver = load_scene(default_scene_path("liver"))
     assert liver.mesh_path == SCENES / "liver.vtu"
 

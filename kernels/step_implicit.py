@@ -1,0 +1,207 @@
+"""Implicit (backward) Euler on the region's free vertices, with a matrix-free CG solve.
+
+Linearized once per step (Baraff & Witkin): (M + dt C + dt^2 K) dv = dt (f0 - dt K v0), with
+K = -df/dx (spring blocks made positive semi-definite where a spring is compressed) and
+C = -df/dv. Block-Jacobi preconditioned conjugate gradients, warm-started from the previous
+step's dv. One thread per region does the whole solve in one launch: its sums run in a fixed
+order, so a rerun gives the same bits on any device, and on the CPU a step is a single call.
+The driven vertex is a known velocity (moved to the right-hand side); the fixed ring has dv = 0.
+"""
+
+import warp as wp
+
+from .forces import edge_direction, gather_vertex_force
+
+
+@wp.func
+def spring_block(ke: float, kd: float, L0: float, r: wp.vec3, dt: float):
+    # dt C_e + dt^2 K_e for one spring: K_e = ke (d d^T + max(1 - L0/l, 0) (I - d d^T)), C_e = kd d d^T
+    l = wp.length(r)
+    d = edge_direction(r)
+    ddt = wp.outer(d, d)
+    geo = float(0.0)
+    if l > 1.0e-9:
+        geo = wp.max(1.0 - L0 / l, 0.0)
+    Kb = ke * (ddt + geo * (wp.identity(n=3, dtype=float) - ddt))
+    return dt * kd * ddt + dt * dt * Kb, Kb
+
+
+@wp.func
+def free_index(j: int, vertex_local: wp.array(dtype=wp.int32), free_count: int, driven: int):
+    # local index of vertex j if it is an unknown of the solve, else -1 (fixed ring, outside, driven)
+    lj = vertex_local[j]
+    if lj < 0 or lj >= free_count or j == driven:
+        return -1
+    return lj
+
+
+@wp.kernel
+def integrate_region_implicit(
+    free_vertex: wp.array(dtype=wp.int32),
+    free_count: int,
+    vertex_local: wp.array(dtype=wp.int32),
+    adj_offsets: wp.array(dtype=wp.int32),
+    adj_vertex: wp.array(dtype=wp.int32),
+    adj_edge: wp.array(dtype=wp.int32),
+    q_rest: wp.array(dtype=wp.vec3),
+    particle_mass: wp.array(dtype=wp.float32),
+    anchor_ke: wp.array(dtype=wp.float32),
+    anchor_kd: wp.array(dtype=wp.float32),
+    anchor_scale: float,
+    spring_ke: wp.array(dtype=wp.float32),
+    spring_kd: wp.array(dtype=wp.float32),
+    spring_rest_length: wp.array(dtype=wp.float32),
+    probe_vertex: wp.array(dtype=wp.int32),
+    probe_mode: wp.array(dtype=wp.int32),
+    probe_target: wp.array(dtype=wp.vec3),
+    probe_force: wp.array(dtype=wp.vec3),
+    dt: float,
+    max_iterations: int,
+    tolerance: float,
+    q_in: wp.array(dtype=wp.vec3),
+    qd_in: wp.array(dtype=wp.vec3),
+    dv: wp.array(dtype=wp.vec3),
+    cg_r: wp.array(dtype=wp.vec3),
+    cg_p: wp.array(dtype=wp.vec3),
+    cg_Ap: wp.array(dtype=wp.vec3),
+    block_diag: wp.array(dtype=wp.mat33),
+    block_diag_inv: wp.array(dtype=wp.mat33),
+    csr_block: wp.array(dtype=wp.mat33),
+    q_out: wp.array(dtype=wp.vec3),
+    qd_out: wp.array(dtype=wp.vec3),
+    probe_reaction: wp.array(dtype=wp.vec3),
+    cg_stats: wp.array(dtype=wp.float32),
+):
+    pv = probe_vertex[0]
+    mode = probe_mode[0]
+    driven = int(-1)
+    dv_driven = wp.vec3(0.0)
+    if mode == 1 and pv >= 0:
+        driven = pv
+        dv_driven = (probe_target[0] - q_in[pv]) / dt - qd_in[pv]
+
+    # 1) forces, diagonal blocks and right-hand side b = dt (f0 - dt K v0) - A_ic dv_c
+    b_norm2 = float(0.0)
+    for i in range(free_count):
+        v = free_vertex[i]
+        x = q_in[v]
+        u = qd_in[v]
+        f = gather_vertex_force(
+            v, x, u, adj_offsets, adj_vertex, adj_edge, q_rest, anchor_ke, anchor_kd, anchor_scale,
+            spring_ke, spring_kd, spring_rest_length, q_in, qd_in,
+        )
+        if v == pv and mode != 0:
+            probe_reaction[0] = f  # the feedback force: internal forces on the probe's vertex
+        if v == pv and mode == 2:
+            f += probe_force[0]
+        ka = anchor_scale * anchor_ke[v]
+        kda = anchor_scale * anchor_kd[v]
+        D = (particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
+        Kv = ka * u
+        correction = wp.vec3(0.0)
+        for k in range(adj_offsets[v], adj_offsets[v + 1]):
+            j = adj_vertex[k]
+            e = adj_edge[k]
+            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], q_in[j] - x, dt)
+            csr_block[k] = B
+            D += B
+            Kv += Kb * (u - qd_in[j])
+            if j == driven:
+                correction += B * dv_driven  # -A_ic dv_c, with A_ic = -B
+        block_diag[i] = D
+        block_diag_inv[i] = wp.inverse(D)
+        b = dt * (f - dt * Kv) + correction
+        if v == driven:
+            b = wp.vec3(0.0)
+        cg_r[i] = b
+        b_norm2 += wp.dot(b, b)
+
+    # 2) r = b - A dv (warm start), z = P^-1 r, p = z
+    rz = float(0.0)
+    for i in range(free_count):
+        v = free_vertex[i]
+        if v == driven:
+            dv[i] = wp.vec3(0.0)
+        Ax = block_diag[i] * dv[i]
+        for k in range(adj_offsets[v], adj_offsets[v + 1]):
+            j = adj_vertex[k]
+            lj = free_index(j, vertex_local, free_count, driven)
+            if lj >= 0 and v != driven:
+                Ax -= csr_block[k] * dv[lj]
+        r = cg_r[i] - Ax
+        if v == driven:
+            r = wp.vec3(0.0)
+        cg_r[i] = r
+        z = block_diag_inv[i] * r
+        cg_p[i] = z
+        rz += wp.dot(r, z)
+
+    # 3) conjugate gradients
+    iterations = int(0)
+    r_norm2 = float(0.0)
+    for i in range(free_count):
+        r_norm2 += wp.dot(cg_r[i], cg_r[i])
+    threshold = tolerance * tolerance * b_norm2
+    while iterations < max_iterations and r_norm2 > threshold:
+        pAp = float(0.0)
+        for i in range(free_count):
+            v = free_vertex[i]
+            Ap = wp.vec3(0.0)
+            if v != driven:
+                Ap = block_diag[i] * cg_p[i]
+                for k in range(adj_offsets[v], adj_offsets[v + 1]):
+                    lj = free_index(adj_vertex[k], vertex_local, free_count, driven)
+                    if lj >= 0:
+                        Ap -= csr_block[k] * cg_p[lj]
+            cg_Ap[i] = Ap
+            pAp += wp.dot(cg_p[i], Ap)
+        if pAp <= 0.0:
+            break
+        alpha = rz / pAp
+        r_norm2 = float(0.0)
+        rz_new = float(0.0)
+        for i in range(free_count):
+            dv[i] = dv[i] + alpha * cg_p[i]
+            r = cg_r[i] - alpha * cg_Ap[i]
+            cg_r[i] = r
+            r_norm2 += wp.dot(r, r)
+            rz_new += wp.dot(r, block_diag_inv[i] * r)
+        beta = rz_new / rz
+        rz = rz_new
+        for i in range(free_count):
+            cg_p[i] = block_diag_inv[i] * cg_r[i] + beta * cg_p[i]
+        iterations += 1
+
+    # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
+    for i in range(free_count):
+        v = free_vertex[i]
+        x = q_in[v]
+        if v == driven:
+            target = probe_target[0]
+            q_out[v] = target
+            qd_out[v] = (target - x) / dt
+        else:
+            u1 = qd_in[v] + dv[i]
+            q_out[v] = x + dt * u1
+            qd_out[v] = u1
+    cg_stats[0] = float(iterations)
+    cg_stats[1] = wp.sqrt(r_norm2 / wp.max(b_norm2, 1.0e-30))
+
+
+def integrate_implicit(model, region_arrays, anchor_scale, state_in, state_out, control, dt, scratch, max_iterations, tolerance):
+    """Advance the free vertices by one backward-Euler step of `dt` [s] (one launch)."""
+    free_vertex, free_count, vertex_local = region_arrays
+    dm = model.dmesh
+    wp.launch(
+        integrate_region_implicit,
+        dim=1,
+        inputs=[
+            free_vertex, free_count, vertex_local, dm.adj_offsets, dm.adj_vertex, dm.adj_edge, model.particle_q_rest,
+            model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale, model.spring_ke, model.spring_kd,
+            model.spring_rest_length, control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force,
+            dt, max_iterations, tolerance, state_in.particle_q, state_in.particle_qd,
+            scratch.dv, scratch.r, scratch.p, scratch.Ap, scratch.diag, scratch.diag_inv, scratch.csr_block,
+        ],
+        outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction, scratch.stats],
+        device=model.device,
+    )
