@@ -8,6 +8,9 @@ it. Ties go to the lower vertex id, as a brute-force argmin would.
 
 import warp as wp
 
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def query_closest_points(

@@ -2,6 +2,9 @@
 
 import warp as wp
 
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def reset_left_behind(

@@ -10,6 +10,9 @@ the new ring in the array is then made deterministic by a radix sort on vertex i
 
 import warp as wp
 
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def seed_ring(

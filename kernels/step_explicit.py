@@ -1,18 +1,25 @@
 """Semi-implicit (symplectic) Euler on the region's free vertices: the paper's explicit scheme.
 
-One launch per step, one thread per free vertex: gather the forces from `state_in`, integrate,
-write `state_out`. The probe's vertex is driven (displacement mode) or pushed (force mode), and
+One launch per step: gather the forces from `state_in`, integrate, write `state_out`. A
+grid-stride loop over the free vertices: one thread per vertex on CUDA, a single thread on the
+CPU, where each thread's prologue (copying every array descriptor) would otherwise cost more than
+the vertex's physics. The probe's vertex is driven (displacement mode) or pushed (force mode), and
 its thread writes the reaction, so the feedback force needs no second kernel.
 """
 
 import warp as wp
 
-from .forces import gather_vertex_force
+from .forces import EPS_LENGTH
+
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
 
 
 @wp.kernel
 def integrate_region_explicit(
     free_vertex: wp.array(dtype=wp.int32),
+    free_count: int,
+    stride: int,
     adj_offsets: wp.array(dtype=wp.int32),
     adj_vertex: wp.array(dtype=wp.int32),
     adj_edge: wp.array(dtype=wp.int32),
@@ -35,39 +42,50 @@ def integrate_region_explicit(
     qd_out: wp.array(dtype=wp.vec3),
     probe_reaction: wp.array(dtype=wp.vec3),
 ):
-    v = free_vertex[wp.tid()]
-    x = q_in[v]
-    u = qd_in[v]
-    f = gather_vertex_force(
-        v, x, u, adj_offsets, adj_vertex, adj_edge, q_rest, anchor_ke, anchor_kd, anchor_scale,
-        spring_ke, spring_kd, spring_rest_length, q_in, qd_in,
-    )
-    if v == probe_vertex[0]:
-        mode = probe_mode[0]
-        if mode != 0:
+    # written out in the kernel, not in a wp.func: a call would copy every array descriptor
+    pv = probe_vertex[0]
+    mode = probe_mode[0]
+    for i in range(wp.tid(), free_count, stride):
+        v = free_vertex[i]
+        x = q_in[v]
+        u = qd_in[v]
+        # anchor spring and damper to the rest position, eq. (3)
+        f = -anchor_scale * (anchor_ke[v] * (x - q_rest[v]) + anchor_kd[v] * u)
+        for k in range(adj_offsets[v], adj_offsets[v + 1]):
+            j = adj_vertex[k]
+            e = adj_edge[k]
+            r = q_in[j] - x
+            l = wp.length(r)
+            if l > EPS_LENGTH:
+                # elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
+                inv_l = 1.0 / l
+                s = spring_ke[e] * (l - spring_rest_length[e]) + spring_kd[e] * wp.dot(qd_in[j] - u, r) * inv_l
+                f += (s * inv_l) * r
+        if v == pv and mode != 0:
             probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
-        if mode == 1:
+        if v == pv and mode == 1:
             # displacement control: the vertex is where the probe puts it
             target = probe_target[0]
             q_out[v] = target
             qd_out[v] = (target - x) / dt
-            return
-        if mode == 2:
-            f += probe_force[0]
-    # m u'' + d u' + k u = F, eq. (3), by semi-implicit Euler: velocity first, then position
-    u1 = u + dt * f / particle_mass[v]
-    q_out[v] = x + dt * u1
-    qd_out[v] = u1
+        else:
+            if v == pv and mode == 2:
+                f += probe_force[0]
+            # m u'' + d u' + k u = F, eq. (3), by semi-implicit Euler: velocity first, then position
+            u1 = u + dt * f / particle_mass[v]
+            q_out[v] = x + dt * u1
+            qd_out[v] = u1
 
 
 def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, state_out, control, dt):
     """Advance the free vertices by one semi-implicit Euler step of `dt` [s]."""
     dm = model.dmesh
+    threads = 1 if model.device.is_cpu else free_count
     wp.launch(
         integrate_region_explicit,
-        dim=free_count,
+        dim=threads,
         inputs=[
-            free_vertex, dm.adj_offsets, dm.adj_vertex, dm.adj_edge, model.particle_q_rest, model.particle_mass,
+            free_vertex, free_count, threads, dm.adj_offsets, dm.adj_vertex, dm.adj_edge, model.particle_q_rest, model.particle_mass,
             model.anchor_ke, model.anchor_kd, anchor_scale, model.spring_ke, model.spring_kd, model.spring_rest_length,
             control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force, dt,
             state_in.particle_q, state_in.particle_qd,

@@ -10,6 +10,9 @@ The driven vertex is a known velocity (moved to the right-hand side); the fixed 
 
 import warp as wp
 
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
 from .forces import edge_direction, gather_vertex_force
 
 
