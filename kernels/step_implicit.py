@@ -13,7 +13,7 @@ import warp as wp
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
-from .forces import edge_direction, gather_vertex_force
+from .forces import EPS_LENGTH, edge_direction
 
 
 @wp.func
@@ -27,15 +27,6 @@ def spring_block(ke: float, kd: float, L0: float, r: wp.vec3, dt: float):
         geo = wp.max(1.0 - L0 / l, 0.0)
     Kb = ke * (ddt + geo * (wp.identity(n=3, dtype=float) - ddt))
     return dt * kd * ddt + dt * dt * Kb, Kb
-
-
-@wp.func
-def free_index(j: int, vertex_local: wp.array(dtype=wp.int32), free_count: int, driven: int):
-    # local index of vertex j if it is an unknown of the solve, else -1 (fixed ring, outside, driven)
-    lj = vertex_local[j]
-    if lj < 0 or lj >= free_count or j == driven:
-        return -1
-    return lj
 
 
 @wp.kernel
@@ -89,14 +80,8 @@ def integrate_region_implicit(
         v = free_vertex[i]
         x = q_in[v]
         u = qd_in[v]
-        f = gather_vertex_force(
-            v, x, u, adj_offsets, adj_vertex, adj_edge, q_rest, anchor_ke, anchor_kd, anchor_scale,
-            spring_ke, spring_kd, spring_rest_length, q_in, qd_in,
-        )
-        if v == pv and mode != 0:
-            probe_reaction[0] = f  # the feedback force: internal forces on the probe's vertex
-        if v == pv and mode == 2:
-            f += probe_force[0]
+        # anchor spring and damper, eq. (3); springs and dampers along the edges below, eqs. (4)-(6)
+        f = -anchor_scale * (anchor_ke[v] * (x - q_rest[v]) + anchor_kd[v] * u)
         ka = anchor_scale * anchor_ke[v]
         kda = anchor_scale * anchor_kd[v]
         D = (particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
@@ -105,12 +90,22 @@ def integrate_region_implicit(
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             j = adj_vertex[k]
             e = adj_edge[k]
-            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], q_in[j] - x, dt)
+            r = q_in[j] - x
+            l = wp.length(r)
+            if l > EPS_LENGTH:
+                inv_l = 1.0 / l
+                s = spring_ke[e] * (l - spring_rest_length[e]) + spring_kd[e] * wp.dot(qd_in[j] - u, r) * inv_l
+                f += (s * inv_l) * r
+            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], r, dt)
             csr_block[k] = B
             D += B
             Kv += Kb * (u - qd_in[j])
             if j == driven:
                 correction += B * dv_driven  # -A_ic dv_c, with A_ic = -B
+        if v == pv and mode != 0:
+            probe_reaction[0] = f  # the feedback force: internal forces on the probe's vertex
+        if v == pv and mode == 2:
+            f += probe_force[0]
         block_diag[i] = D
         block_diag_inv[i] = wp.inverse(D)
         b = dt * (f - dt * Kv) + correction
@@ -128,8 +123,8 @@ def integrate_region_implicit(
         Ax = block_diag[i] * dv[i]
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             j = adj_vertex[k]
-            lj = free_index(j, vertex_local, free_count, driven)
-            if lj >= 0 and v != driven:
+            lj = vertex_local[j]  # an unknown of the solve: free, not the driven vertex
+            if lj >= 0 and lj < free_count and j != driven and v != driven:
                 Ax -= csr_block[k] * dv[lj]
         r = cg_r[i] - Ax
         if v == driven:
@@ -153,8 +148,9 @@ def integrate_region_implicit(
             if v != driven:
                 Ap = block_diag[i] * cg_p[i]
                 for k in range(adj_offsets[v], adj_offsets[v + 1]):
-                    lj = free_index(adj_vertex[k], vertex_local, free_count, driven)
-                    if lj >= 0:
+                    j = adj_vertex[k]
+                    lj = vertex_local[j]  # (a wp.func here would copy the array descriptor per call)
+                    if lj >= 0 and lj < free_count and j != driven:
                         Ap -= csr_block[k] * cg_p[lj]
             cg_Ap[i] = Ap
             pAp += wp.dot(cg_p[i], Ap)
