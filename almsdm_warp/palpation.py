@@ -7,6 +7,7 @@ no allocation and no extra copy on the CPU (on CUDA, pinned buffers copied insid
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -19,6 +20,33 @@ from .region import Region
 from .solver import SolverALMSDM
 
 GLOBAL_MODELS = ("global", "global-free")
+
+
+def _replayer(graph, device):
+    """A call that replays `graph` (and, on CUDA, waits for it so the pinned outputs are readable).
+
+    On the CPU it binds Warp's native replay of a live capture directly: `wp.capture_launch` checks
+    the graph's kind in Python first, ~0.3-0.8 us a step at these sizes (docs/performance.md).
+    """
+    if device.is_cpu:
+        try:
+            import warp._src.context as wpc
+
+            native = wpc.runtime.core.wp_apic_cpu_replay_state
+            state = graph.apic_state
+            if graph._native_graph is None and state is not None:
+                replay = functools.partial(native, state)
+                replay.graph = graph  # the graph owns `state`: keep it alive as long as the call
+                return replay
+        except AttributeError:  # another Warp version: the public path
+            pass
+        return functools.partial(wp.capture_launch, graph)
+
+    def replay():
+        wp.capture_launch(graph)
+        wp.synchronize_device(device)
+
+    return replay
 
 
 class SimulationDiverged(RuntimeError):
@@ -89,6 +117,7 @@ class Palpation:
         self.dt = float(dt)
         self.solver = SolverALMSDM(self.model, integrator, **solver_kw)
         self.states = [self.model.state(), self.model.state()]
+        self._cur = 0  # states[_cur] is the current state
         self.control = self.model.control()
         self.region = Region(self.model.dmesh) if rings not in GLOBAL_MODELS else None
         self.capture = bool(capture)
@@ -110,6 +139,7 @@ class Palpation:
             self._force = self._pinned["force"].numpy()
             self._mode = self._pinned["mode"].numpy()
             self._reaction = self._pinned["reaction"].numpy()
+        self._force_view = self._reaction[0]  # a view of the reaction buffer: no copy per step
         if self.region is None:
             self.solver.set_global(anchors=(rings == "global"))
 
@@ -117,7 +147,7 @@ class Palpation:
     @property
     def state(self):
         """The current State (the one the last step wrote)."""
-        return self.states[0]
+        return self.states[self._cur]
 
     @property
     def region_vertices(self) -> int:
@@ -167,32 +197,35 @@ class Palpation:
             wp.copy(self._pinned["reaction"], self.control.probe_reaction)
 
     def _capture(self):
-        a, b = self.states
-        graphs = []
-        for s_in, s_out in ((a, b), (b, a)):
+        # two graphs: states[0] -> states[1] and back; replayed by a bound call each, no checks
+        replays = []
+        for i in (0, 1):
             with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
-                self._launch_step(s_in, s_out)
-            graphs.append(cap.graph)
-        self._graphs = graphs
-        self._parity = 0
+                self._launch_step(self.states[i], self.states[1 - i])
+            replays.append(_replayer(cap.graph, self.device))
+        self._graphs = replays
 
     def step(self) -> np.ndarray:
-        """One step of dt; returns the feedback force [N] (a view, valid until the next step)."""
+        """One step of dt; returns the feedback force [N]: a view that every step updates in place."""
+        replays = self._graphs
+        if replays is not None:
+            replay = replays[self._cur]
+            self._cur ^= 1
+            replay()
+            return self._force_view
+        return self._step_setup()
+
+    def _step_setup(self) -> np.ndarray:
         if self.vertex < 0:
             raise RuntimeError("touch(vertex) first: the probe is on no vertex")
+        # the first step runs uncaptured: it compiles and loads the kernels outside any capture
+        self._launch_step(self.states[self._cur], self.states[1 - self._cur])
+        self._cur ^= 1
         if self.capture:
-            if self._graphs is None:
-                self._launch_step(*self.states)  # compiles and loads the kernels outside the capture
-                self.states.reverse()
-                self._capture()
-            wp.capture_launch(self._graphs[self._parity])
-            self._parity ^= 1
-        else:
-            self._launch_step(*self.states)
-        self.states.reverse()
+            self._capture()
         if not self._cpu:
             wp.synchronize_device(self.device)
-        return self._reaction[0]
+        return self._force_view
 
     def set_probe(self, mode: int, target=None) -> None:
         """Probe mode (PROBE_OFF / PROBE_DISPLACEMENT / PROBE_FORCE) and target [m], through host views."""
