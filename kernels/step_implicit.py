@@ -163,12 +163,14 @@ def integrate_region_implicit(
             dv[i] = dv[i] + alpha * cg_p[i]
             r = cg_r[i] - alpha * cg_Ap[i]
             cg_r[i] = r
+            z = block_diag_inv[i] * r
+            cg_Ap[i] = z  # A p is spent: keep the preconditioned residual there
             r_norm2 += wp.dot(r, r)
-            rz_new += wp.dot(r, block_diag_inv[i] * r)
+            rz_new += wp.dot(r, z)
         beta = rz_new / rz
         rz = rz_new
         for i in range(free_count):
-            cg_p[i] = block_diag_inv[i] * cg_r[i] + beta * cg_p[i]
+            cg_p[i] = cg_Ap[i] + beta * cg_p[i]
         iterations += 1
 
     # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
