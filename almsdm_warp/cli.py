@@ -1,4 +1,8 @@
-"""The `almsdm` command line. Bad input ends with one line on stderr and exit code 2."""
+"""The `almsdm` command line. Bad input ends with one line on stderr and exit code 2.
+
+Commands: ``palpate`` (the default: press the probe into a scene, report force, recovery and
+speed) and ``touch`` (print the ring regions at the contact).
+"""
 
 from __future__ import annotations
 
@@ -104,6 +108,7 @@ def cmd_touch(args) -> int:
     return 0
 
 
+# -- palpate ----------------------------------------------------------------------------------
 def _mesh_json(mesh):
     return {
         "path": mesh.path,
@@ -115,6 +120,7 @@ def _mesh_json(mesh):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .cli_palpate import _count_arg, _number_arg, _rings_arg, cmd_palpate
     parser = _Parser(prog="almsdm", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", parser_class=_Parser)
     touch = sub.add_parser("touch", help="touch a scene or mesh with the probe and print the ring region")
@@ -124,18 +130,67 @@ def build_parser() -> argparse.ArgumentParser:
     touch.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
     touch.add_argument("--json", default=None, help="write the result as JSON here")
     touch.set_defaults(func=cmd_touch)
+
+    palpate = sub.add_parser(
+        "palpate",
+        help="press the probe into a scene or mesh; print force, recovery and speed (the default command)",
+        description="Press the probe into a scene or mesh (the local ALMSDM region, or the whole mesh) and print "
+        "the feedback force, the recovery after release and the speed of a step. Defaults come from the scene.",
+    )
+    palpate.add_argument("scene", nargs="?", default=None, metavar="MESH_OR_SCENE", help="scene (.toml), scene name or mesh file; default: the stomach scene")
+    palpate.add_argument("--rings", type=_rings_arg, default=None, metavar="{N,global,global-free}", help="rings of the local region (outermost fixed), or a global model (default: the scene's)")
+    palpate.add_argument("--integrator", choices=("explicit", "implicit"), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
+    palpate.add_argument("--dt-ms", type=_number_arg("> 0"), default=1.0, metavar="MS", help="time step [ms] (default 1)")
+    palpate.add_argument("--depth-mm", "--depth", dest="depth_mm", type=_number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
+    palpate.add_argument("--ramp-s", type=_number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
+    palpate.add_argument("--hold-s", type=_number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
+    palpate.add_argument("--settle-s", type=_number_arg(">= 0"), default=None, metavar="S", help="settle window after release [s] (default: the scene's)")
+    palpate.add_argument("--presses", type=_count_arg, default=1, metavar="N", help="presses at the same spot (default 1)")
+    palpate.add_argument("--scale-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default 1; 10 for cm, 1000 for m)")
+    where = palpate.add_mutually_exclusive_group()
+    where.add_argument("--vertex", type=int, default=None, metavar="V", help="contact vertex (a surface vertex id)")
+    where.add_argument("--probe-mm", type=float, nargs=3, metavar=("X", "Y", "Z"), help="probe position [mm]; the contact is its nearest surface vertex")
+    palpate.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
+    palpate.add_argument("--json", default=None, metavar="PATH", help="write the result as JSON here")
+    palpate.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal, for runs over ~2 s)")
+    palpate.set_defaults(func=cmd_palpate)
     return parser
+
+
+COMMANDS = ("palpate", "touch")
+
+
+def _default_command(argv) -> bool:
+    """True when argv names no command but is meant for palpate: nothing, an option first, or a
+    scene or mesh first (a path, a file name, a shipped scene's name); `almsdm frobnicate` is not."""
+    if not argv:
+        return True
+    first = argv[0]
+    if first in COMMANDS or first in ("-h", "--help"):
+        return False
+    if first.startswith("-") or "/" in first or "\\" in first or "." in first:
+        return True
+    from pathlib import Path
+
+    from .scene import scene_names
+
+    try:
+        return Path(first).exists() or first in scene_names()
+    except (InputError, OSError):
+        return False
 
 
 def main(argv=None) -> int:
     parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if _default_command(argv):
+        argv = ["palpate", *argv]  # `almsdm`, `almsdm --depth-mm 5`, `almsdm liver`, `almsdm my.obj`
     try:
         args = parser.parse_args(argv)
-        if args.command is None:
-            args = parser.parse_args(["touch", *(argv if argv is not None else sys.argv[1:])])
         return args.func(args)
     except InputError as exc:
-        print(f"almsdm: error: {exc}", file=sys.stderr)
+        message = " ".join(str(exc).split())  # one line, whatever the message holds
+        print(f"almsdm: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("almsdm: interrupted", file=sys.stderr)

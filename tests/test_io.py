@@ -6,7 +6,6 @@ the surface of a tet mesh are checked against independent answers (trimesh, clos
 
 import itertools
 import os
-from pathlib import Path
 
 import meshio
 import numpy as np

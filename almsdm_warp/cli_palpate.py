@@ -1,0 +1,241 @@
+"""`almsdm palpate`: press a scene or mesh with the probe and report force, recovery and speed."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import time
+
+import numpy as np
+
+from .cli import _device, _mesh_json, _quiet_warp
+from .errors import InputError
+
+GLOBAL_RINGS = ("global", "global-free")
+TIMING_STEPS = 2000
+"""Steps timed after the presses, in batches (fewer when a step is slow: about 1 s in all)."""
+
+
+def _rings_arg(text):
+    """--rings: an integer >= 1, "global" or "global-free"."""
+    allowed = "an integer >= 1, " + " or ".join(repr(g) for g in GLOBAL_RINGS)
+    if text in GLOBAL_RINGS:
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"unknown value {text!r} (allowed: {allowed})") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1 (ring 0 is the contact vertex alone; allowed: {allowed}), got {value}")
+    return value
+
+
+def _number_arg(rule):
+    """An argparse type: a finite float that is "> 0" or ">= 0"."""
+
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+        if (rule == "> 0" and not value > 0) or (rule == ">= 0" and not value >= 0):
+            raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
+        return value
+
+    parse.__name__ = "number"
+    return parse
+
+
+def _count_arg(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _finite(value):
+    """A float for JSON, or None where it is not finite (JSON has no inf or nan)."""
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _contact(args, mesh, device):
+    """(vertex, point [m], extra JSON) from --vertex, --probe-mm, or the top surface vertex."""
+    if args.vertex is not None:
+        v, n = args.vertex, mesh.vertex_count
+        if not 0 <= v < n:
+            raise InputError(f"--vertex {v} is outside the mesh, which has {n} vertices (0..{n - 1})")
+        if v not in mesh.surface_vertices:
+            raise InputError(f"--vertex {v} is inside the volume, not on the surface: the probe presses a surface vertex")
+        return v, mesh.vertices[v], {}
+    if args.probe_mm is not None:
+        from .contact import find_contacts
+
+        probe = np.asarray(args.probe_mm, dtype=np.float64) * 1e-3
+        if not np.all(np.isfinite(probe)):
+            raise InputError(f"--probe-mm must be finite, got {args.probe_mm}")
+        c = find_contacts(mesh, probe, device=device)
+        extra = {"probe_mm": (probe * 1e3).tolist(), "face": int(c.face), "distance_mm": float(c.distance * 1e3)}
+        return int(c.vertex), np.asarray(c.point, dtype=np.float64), extra
+    # the highest surface vertex: a press from the top
+    v = int(mesh.surface_vertices[np.argmax(mesh.vertices[mesh.surface_vertices, 2])])
+    return v, mesh.vertices[v], {}
+
+
+def _press_steps(dt, ramp, hold, settle):
+    """Steps of one press, counted as Palpation.press counts them (for the progress bar only)."""
+    return max(int(round(ramp / dt)), 1) + int(round(hold / dt)) + max(int(round(settle / dt)), 1)
+
+
+def _time_steps(pal, steps=TIMING_STEPS, budget_s=1.0):
+    """Median wall time per step [s] with the probe off, over batches; and the steps timed."""
+    from .model import PROBE_OFF
+
+    pal.set_probe(PROBE_OFF)
+    t0 = time.perf_counter()
+    for _ in range(5):  # warm-up; also sizes the batches
+        pal.step()
+    first = (time.perf_counter() - t0) / 5
+    batches = 20
+    batch = int(min(max(budget_s / batches / max(first, 1e-9), 1), steps // batches))
+    per_step = []
+    for _ in range(batches):
+        t0 = time.perf_counter()
+        for _ in range(batch):
+            pal.step()
+        per_step.append((time.perf_counter() - t0) / batch)
+    pal.check_finite(batches * batch)
+    return statistics.median(per_step), batches * batch
+
+
+def cmd_palpate(args) -> int:
+    """Press the probe into a scene or mesh, report force, recovery and speed."""
+    from .output import check_writable, write_json
+    from .progress import Progress
+    from .scene import resolve_scene_or_mesh
+
+    if args.json:
+        check_writable(args.json)
+    _quiet_warp()
+    device = _device(args.device)
+    scene = resolve_scene_or_mesh(args.scene, scale_mm=1.0 if args.scale_mm is None else args.scale_mm)
+    if args.scale_mm is not None and scene.path is not None:
+        raise InputError(f"--scale-mm is for a mesh file; the scene {scene.name!r} sets its own ([mesh] scale_mm)")
+    mesh = scene.load_mesh()
+    for note in mesh.notes:
+        print(f"note: {note}", file=sys.stderr)
+
+    from .palpation import Palpation, SimulationDiverged
+
+    rings = scene.rings if args.rings is None else args.rings
+    p = scene.press
+    depth = p.depth if args.depth_mm is None else args.depth_mm * 1e-3
+    ramp = p.ramp if args.ramp_s is None else args.ramp_s
+    hold = p.hold if args.hold_s is None else args.hold_s
+    settle = p.settle if args.settle_s is None else args.settle_s
+    dt = args.dt_ms * 1e-3
+    vertex, point, contact_extra = _contact(args, mesh, device)
+
+    print(mesh.summary())
+    print(
+        f"contact: vertex {vertex} at {np.round(point * 1e3, 2).tolist()} mm; press {depth * 1e3:g} mm "
+        f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s) x {args.presses}"
+    )
+    try:
+        pal = Palpation(mesh, scene.tissue, rings=rings, integrator=args.integrator, dt=dt, device=device)
+        pal.touch(vertex)
+    except ValueError as exc:  # a parameter Palpation rejects (an InputError passes through unchanged)
+        raise InputError(str(exc)) from exc
+    anchored = rings != "global-free"
+    free = pal.region.vertices()[: pal.region.free_count] if pal.region is not None else None
+    critical = pal.model.critical_dt(free, anchors=anchored)
+    free_count = len(free) if free is not None else pal.region_vertices
+    if pal.region is not None:
+        what = f"{rings} rings around vertex {vertex}, {pal.region_vertices} vertices ({free_count} free)"
+    else:
+        kind = "anchored" if anchored else "free, no anchors"
+        what = f"{rings} ({kind}), all {pal.region_vertices} vertices free"
+    beyond = ", dt exceeds it" if args.integrator == "explicit" and dt > critical else ""
+    print(
+        f"model: {what}, {pal.region_springs} springs; {args.integrator} integrator, dt {dt * 1e3:g} ms "
+        f"(explicit critical step {critical * 1e3:.3g} ms{beyond}), device {device}"
+    )
+
+    press_steps = _press_steps(dt, ramp, hold, settle)
+    presses = []
+    original_step = pal.step
+    with Progress(args.presses * press_steps, enabled=args.progress) as bar:
+
+        def counted_step():
+            # counts the steps Palpation.press takes (it calls self.step), for the bar
+            out = original_step()
+            bar.advance()
+            return out
+
+        pal.step = counted_step
+        try:
+            for i in range(args.presses):
+                bar.label = f"press {i + 1}/{args.presses}"
+                try:
+                    result = pal.press(depth, ramp, hold, settle)
+                except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
+                    raise InputError(str(exc)) from exc
+                bar.done = (i + 1) * press_steps
+                presses.append(result)
+                rt = result.recovery_time_s
+                rt_text = f"{rt:.3f} s" if math.isfinite(rt) else f"not within the {settle:g} s settle window"
+                bar.close()
+                print(
+                    f"press {i + 1}: peak force {result.peak_force_N:.3f} N, "
+                    f"recovery error {result.recovery_error_mm:.3f} mm, recovery time {rt_text}"
+                )
+        finally:
+            del pal.step  # back to the class's step, uncounted
+    try:
+        step_s, timed = _time_steps(pal)  # about 1 s at most: no bar
+    except SimulationDiverged as exc:
+        raise InputError(str(exc)) from exc
+    step_us = step_s * 1e6
+    steps_per_s = 1.0 / step_s if step_s > 0 else math.inf
+    print(f"speed: {step_us:.1f} us per step (median of 20 batches, {timed} steps), {steps_per_s:,.0f} steps/s")
+
+    if args.json:
+        write_json(
+            args.json,
+            {
+                "scene": str(scene.path) if scene.path else None,
+                "mesh": _mesh_json(mesh),
+                "device": str(device),
+                "contact": {"vertex": int(vertex), "point_mm": (np.asarray(point) * 1e3).tolist(), **contact_extra},
+                "press": {"depth_mm": depth * 1e3, "ramp_s": ramp, "hold_s": hold, "settle_s": settle},
+                "model": {
+                    "rings": rings,
+                    "region_vertices": int(pal.region_vertices),
+                    "region_springs": int(pal.region_springs),
+                    "free_vertices": int(free_count),
+                    "integrator": args.integrator,
+                    "dt_s": dt,
+                    "critical_dt_s": _finite(critical),
+                },
+                "presses": [
+                    {
+                        "peak_force_N": _finite(r.peak_force_N),
+                        "recovery_error_mm": _finite(r.recovery_error_mm),
+                        "recovery_time_s": _finite(r.recovery_time_s),
+                    }
+                    for r in presses
+                ],
+                "step_us_median": _finite(step_us),
+                "steps_per_s": _finite(steps_per_s),
+                "timing_steps": int(timed),
+            },
+        )
+        print(f"wrote {args.json}")
+    return 0
