@@ -72,6 +72,11 @@ class Model:
         """Spring damping d_ij [N s/m], shape [spring_count], float32, eq. (6)."""
         self.spring_rest_length = dm.edge_rest_length
         """Spring rest length [m], shape [spring_count], float32."""
+        _, _, adj_edge = self.mesh.adjacency
+        per_entry = np.stack([t.edge_stiffness * es, t.edge_damping * es, self.mesh.edge_rest_length], axis=1)[adj_edge]
+        self.adj_spring = wp.array(per_entry, dtype=wp.vec3, device=d)
+        """(k_ij [N/m], d_ij [N s/m], rest length [m]) of the spring of each CSR adjacency entry, shape
+        [2 * spring_count], vec3: the step reads one vector per neighbour, not three arrays by edge id."""
         self.vertex_normal_rest = vertex_normals(self.mesh.vertices, self.mesh.triangles)
         """Outward unit normal of each surface vertex at rest (host, float64): the press direction."""
         self._ke_host = t.edge_stiffness * es

@@ -20,6 +20,7 @@ class _CGScratch:
         self.diag = wp.zeros(n, dtype=wp.mat33, device=device)
         self.diag_inv = wp.zeros(n, dtype=wp.mat33, device=device)
         self.csr_block = wp.zeros(max(csr, 1), dtype=wp.mat33, device=device)
+        self.csr_local = wp.zeros(max(csr, 1), dtype=wp.int32, device=device)
         self.stats = wp.zeros(2, dtype=wp.float32, device=device)
 
 

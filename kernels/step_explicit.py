@@ -22,15 +22,12 @@ def integrate_region_explicit(
     stride: int,
     adj_offsets: wp.array(dtype=wp.int32),
     adj_vertex: wp.array(dtype=wp.int32),
-    adj_edge: wp.array(dtype=wp.int32),
+    adj_spring: wp.array(dtype=wp.vec3),
     q_rest: wp.array(dtype=wp.vec3),
     particle_mass: wp.array(dtype=wp.float32),
     anchor_ke: wp.array(dtype=wp.float32),
     anchor_kd: wp.array(dtype=wp.float32),
     anchor_scale: float,
-    spring_ke: wp.array(dtype=wp.float32),
-    spring_kd: wp.array(dtype=wp.float32),
-    spring_rest_length: wp.array(dtype=wp.float32),
     probe_vertex: wp.array(dtype=wp.int32),
     probe_mode: wp.array(dtype=wp.int32),
     probe_target: wp.array(dtype=wp.vec3),
@@ -53,13 +50,13 @@ def integrate_region_explicit(
         f = -anchor_scale * (anchor_ke[v] * (x - q_rest[v]) + anchor_kd[v] * u)
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             j = adj_vertex[k]
-            e = adj_edge[k]
+            spring = adj_spring[k]  # (k_ij, d_ij, rest length)
             r = q_in[j] - x
             l = wp.length(r)
             if l > EPS_LENGTH:
                 # elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
                 inv_l = 1.0 / l
-                s = spring_ke[e] * (l - spring_rest_length[e]) + spring_kd[e] * wp.dot(qd_in[j] - u, r) * inv_l
+                s = spring[0] * (l - spring[2]) + spring[1] * wp.dot(qd_in[j] - u, r) * inv_l
                 f += (s * inv_l) * r
         if v == pv and mode != 0:
             probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
@@ -85,8 +82,8 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
         integrate_region_explicit,
         dim=threads,
         inputs=[
-            free_vertex, free_count, threads, dm.adj_offsets, dm.adj_vertex, dm.adj_edge, model.particle_q_rest, model.particle_mass,
-            model.anchor_ke, model.anchor_kd, anchor_scale, model.spring_ke, model.spring_kd, model.spring_rest_length,
+            free_vertex, free_count, threads, dm.adj_offsets, dm.adj_vertex, model.adj_spring, model.particle_q_rest,
+            model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale,
             control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force, dt,
             state_in.particle_q, state_in.particle_qd,
         ],

@@ -36,15 +36,12 @@ def integrate_region_implicit(
     vertex_local: wp.array(dtype=wp.int32),
     adj_offsets: wp.array(dtype=wp.int32),
     adj_vertex: wp.array(dtype=wp.int32),
-    adj_edge: wp.array(dtype=wp.int32),
+    adj_spring: wp.array(dtype=wp.vec3),
     q_rest: wp.array(dtype=wp.vec3),
     particle_mass: wp.array(dtype=wp.float32),
     anchor_ke: wp.array(dtype=wp.float32),
     anchor_kd: wp.array(dtype=wp.float32),
     anchor_scale: float,
-    spring_ke: wp.array(dtype=wp.float32),
-    spring_kd: wp.array(dtype=wp.float32),
-    spring_rest_length: wp.array(dtype=wp.float32),
     probe_vertex: wp.array(dtype=wp.int32),
     probe_mode: wp.array(dtype=wp.int32),
     probe_target: wp.array(dtype=wp.vec3),
@@ -61,6 +58,7 @@ def integrate_region_implicit(
     block_diag: wp.array(dtype=wp.mat33),
     block_diag_inv: wp.array(dtype=wp.mat33),
     csr_block: wp.array(dtype=wp.mat33),
+    csr_local: wp.array(dtype=wp.int32),
     q_out: wp.array(dtype=wp.vec3),
     qd_out: wp.array(dtype=wp.vec3),
     probe_reaction: wp.array(dtype=wp.vec3),
@@ -89,15 +87,20 @@ def integrate_region_implicit(
         correction = wp.vec3(0.0)
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             j = adj_vertex[k]
-            e = adj_edge[k]
+            spring = adj_spring[k]  # (k_ij, d_ij, rest length)
             r = q_in[j] - x
             l = wp.length(r)
             if l > EPS_LENGTH:
                 inv_l = 1.0 / l
-                s = spring_ke[e] * (l - spring_rest_length[e]) + spring_kd[e] * wp.dot(qd_in[j] - u, r) * inv_l
+                s = spring[0] * (l - spring[2]) + spring[1] * wp.dot(qd_in[j] - u, r) * inv_l
                 f += (s * inv_l) * r
-            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], r, dt)
+            B, Kb = spring_block(spring[0], spring[1], spring[2], r, dt)
             csr_block[k] = B
+            # the neighbour's local index where it is an unknown of the solve (free, not driven), else -1
+            lj = vertex_local[j]
+            if lj >= free_count or j == driven or v == driven:
+                lj = -1
+            csr_local[k] = lj
             D += B
             Kv += Kb * (u - qd_in[j])
             if j == driven:
@@ -122,9 +125,8 @@ def integrate_region_implicit(
             dv[i] = wp.vec3(0.0)
         Ax = block_diag[i] * dv[i]
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
-            j = adj_vertex[k]
-            lj = vertex_local[j]  # an unknown of the solve: free, not the driven vertex
-            if lj >= 0 and lj < free_count and j != driven and v != driven:
+            lj = csr_local[k]
+            if lj >= 0:
                 Ax -= csr_block[k] * dv[lj]
         r = cg_r[i] - Ax
         if v == driven:
@@ -148,9 +150,8 @@ def integrate_region_implicit(
             if v != driven:
                 Ap = block_diag[i] * cg_p[i]
                 for k in range(adj_offsets[v], adj_offsets[v + 1]):
-                    j = adj_vertex[k]
-                    lj = vertex_local[j]  # (a wp.func here would copy the array descriptor per call)
-                    if lj >= 0 and lj < free_count and j != driven:
+                    lj = csr_local[k]  # (a wp.func here would copy the array descriptor per call)
+                    if lj >= 0:
                         Ap -= csr_block[k] * cg_p[lj]
             cg_Ap[i] = Ap
             pAp += wp.dot(cg_p[i], Ap)
@@ -197,11 +198,11 @@ def integrate_implicit(model, region_arrays, anchor_scale, state_in, state_out, 
         integrate_region_implicit,
         dim=1,
         inputs=[
-            free_vertex, free_count, vertex_local, dm.adj_offsets, dm.adj_vertex, dm.adj_edge, model.particle_q_rest,
-            model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale, model.spring_ke, model.spring_kd,
-            model.spring_rest_length, control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force,
+            free_vertex, free_count, vertex_local, dm.adj_offsets, dm.adj_vertex, model.adj_spring, model.particle_q_rest,
+            model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale, control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force,
             dt, max_iterations, tolerance, state_in.particle_q, state_in.particle_qd,
             scratch.dv, scratch.r, scratch.p, scratch.Ap, scratch.diag, scratch.diag_inv, scratch.csr_block,
+            scratch.csr_local,
         ],
         outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction, scratch.stats],
         device=model.device,
