@@ -193,7 +193,6 @@ class UsdRecorder:
 
     def frame(self, step: int) -> None:
         """Record the palpation's current state at time code `step` (steps taken so far)."""
-        Vt = self._Vt
         pal = self.pal
         code = self._Usd.TimeCode(float(step))
         q_dev = pal.state.particle_q
@@ -201,6 +200,17 @@ class UsdRecorder:
         self.normals.update_region(q_dev, region)
         q = q_dev.numpy()
         n = self.normals.vertex_normal.numpy()
+        with np.errstate(all="ignore"):  # a diverging run is recorded as it is, then discarded
+            self._write_frame(code, q, n)
+        self._frames += 1
+        self._last_code = max(step, self._last_code or 0)
+        if self._frames % self.flush_every == 0:
+            self.stage.SetEndTimeCode(self._last_code)
+            self._layer.Save()  # crate layers save incrementally: the written samples leave memory
+
+    def _write_frame(self, code, q, n):
+        Vt = self._Vt
+        pal = self.pal
         pts = (q[self.point_vertex] * 1e3).astype(np.float32)
         self._points.Set(Vt.Vec3fArray.FromNumpy(pts), code)
         self._normals.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(n[self.point_vertex], dtype=np.float32)), code)
@@ -221,11 +231,6 @@ class UsdRecorder:
         f = np.asarray(pal.feedback_force, dtype=np.float64) if in_contact else np.zeros(3)
         self._force.Set(tuple(float(c) for c in f), code)
         self._force_mag.Set(float(np.linalg.norm(f)), code)
-        self._frames += 1
-        self._last_code = max(step, self._last_code or 0)
-        if self._frames % self.flush_every == 0:
-            self.stage.SetEndTimeCode(self._last_code)
-            self._layer.Save()  # crate layers save incrementally: the written samples leave memory
 
     def _write_region(self, code):
         # ring colours and springs: written when the region changes (a new contact, more rings)
