@@ -6,8 +6,6 @@ the presses run exactly as before (no per-step hook).
 
 from __future__ import annotations
 
-import argparse
-
 from .errors import InputError
 
 
@@ -18,7 +16,7 @@ def add_record_args(parser) -> None:
     g = parser.add_argument_group("recording")
     g.add_argument("--usd", default=None, metavar="PATH", help="record the presses to a USD stage (.usda text, .usdc or .usd crate)")
     g.add_argument("--usd-every", type=_count_arg, default=1, metavar="N", help="record every Nth step (default 1)")
-    g.add_argument("--normals", choices=("global", "search", "precomputed"), default="precomputed", help=argparse.SUPPRESS)
+    g.add_argument("--normals", choices=("global", "search", "precomputed"), default="precomputed", help="how the recorded normals are updated (default precomputed: the region's vertices from the vertex-to-face incidence)")
     g.add_argument("--png", default=None, metavar="PATH", help="draw one frame to a PNG: displacement, region outline, probe")
     g.add_argument("--png-at-s", type=_number_arg(">= 0"), default=None, metavar="S", help="time of that frame [s] from the first step (default: the end of the first press's hold, the deepest)")
 

@@ -13,7 +13,7 @@ The stage, in millimetres (metersPerUnit 0.001), Z up, one time code per simulat
 
 A volume mesh exports its surface (its surface vertices, in mesh order, as the points). Frames go
 to the layer as they are recorded and nothing else keeps them; the layer is a crate (.usdc) file
-saved every `flush_every` frames, so the samples already written live on disk, not in memory (a
+saved every `flush_every` frames (256), so the samples already written live on disk, not in memory (a
 crate layer saves incrementally). A .usda target is exported from that crate at the end. All of
 it is written under a temporary name beside the target and renamed when complete.
 """
@@ -80,7 +80,7 @@ class UsdRecorder:
             pal.press(0.01, record=rec.on_press_step, record_every=rec.every)
     """
 
-    def __init__(self, path, palpation, *, every: int = 1, normals: str = "precomputed", probe_radius: float = 2.5e-3, flush_every: int = 64):
+    def __init__(self, path, palpation, *, every: int = 1, normals: str = "precomputed", probe_radius: float = 2.5e-3, flush_every: int = 256):
         from pxr import Sdf, Usd, UsdGeom, Vt  # usd-core: only here
 
         from .normals import SurfaceNormals
