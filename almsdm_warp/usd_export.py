@@ -13,8 +13,10 @@ The stage, in millimetres (metersPerUnit 0.001), Z up, one time code per simulat
 
 A volume mesh exports its surface (its surface vertices, in mesh order, as the points). Frames go
 to the layer as they are recorded and nothing else keeps them; the layer is a crate (.usdc) file
-saved every `flush_every` frames (256), so the samples already written live on disk, not in memory (a
-crate layer saves incrementally). A .usda target is exported from that crate at the end. All of
+saved whenever about `flush_mb` (64 MB) of samples have gathered, so the samples already written
+live on disk, not in memory (a crate layer saves incrementally; each save also rewrites the
+layer's tables, so saving often costs time and file size: 64 MB is a few saves an hour of
+recording). A .usda target is exported from that crate at the end. All of
 it is written under a temporary name beside the target and renamed when complete.
 """
 
@@ -80,7 +82,7 @@ class UsdRecorder:
             pal.press(0.01, record=rec.on_press_step, record_every=rec.every)
     """
 
-    def __init__(self, path, palpation, *, every: int = 1, normals: str = "precomputed", probe_radius: float = 2.5e-3, flush_every: int = 256):
+    def __init__(self, path, palpation, *, every: int = 1, normals: str = "precomputed", probe_radius: float = 2.5e-3, flush_every: int | None = None, flush_mb: float = 64.0):
         from pxr import Sdf, Usd, UsdGeom, Vt  # usd-core: only here
 
         from .normals import SurfaceNormals
@@ -91,7 +93,8 @@ class UsdRecorder:
         self.path = check_usd_path(path)
         self.pal = pal = palpation
         self.every = int(every)
-        self.flush_every = int(flush_every)
+        self._flush_every = flush_every
+        self._flush_bytes = flush_mb * 1e6
         self.probe_radius = float(probe_radius)
         mesh = pal.mesh
         self.normals = SurfaceNormals(pal.model.dmesh, pal.device, normals)
@@ -102,6 +105,7 @@ class UsdRecorder:
         self._rest_mm = (mesh.vertices[self.point_vertex] * 1e3).astype(np.float32)
         self._base = 0  # steps taken by the presses before this one
         self._frames = 0
+        self._unsaved = 0
         self._last_code = None
         self._region_key = None
         self._spring_ends = None
@@ -180,6 +184,16 @@ class UsdRecorder:
         self._outward = -np.asarray(pal.inward_normal(), dtype=np.float64)
 
     @property
+    def flush_every(self) -> int:
+        """Frames between saves: as given, or those that fill `flush_mb` (points, normals and
+        displacement per surface vertex, two points per spring, at the current region's size)."""
+        if self._flush_every is not None:
+            return int(self._flush_every)
+        springs = len(self._spring_ends) // 2 if self._spring_ends is not None else 0
+        frame_bytes = 28 * len(self.point_vertex) + 24 * springs + 64
+        return max(1, int(self._flush_bytes // frame_bytes))
+
+    @property
     def frames(self) -> int:
         """Frames recorded so far."""
         return self._frames
@@ -203,8 +217,10 @@ class UsdRecorder:
         with np.errstate(all="ignore"):  # a diverging run is recorded as it is, then discarded
             self._write_frame(code, q, n)
         self._frames += 1
+        self._unsaved += 1
         self._last_code = max(step, self._last_code or 0)
-        if self._frames % self.flush_every == 0:
+        if self._unsaved >= self.flush_every:
+            self._unsaved = 0
             self.stage.SetEndTimeCode(self._last_code)
             self._layer.Save()  # crate layers save incrementally: the written samples leave memory
 
