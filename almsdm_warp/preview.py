@@ -131,7 +131,7 @@ def render_png(path, mesh, snap: Snapshot, *, title: str = "") -> Path:
     vmax = max(float(disp.max()), 1.0)  # at least 1 mm: float32 rounding at rest stays pale
     cmap = matplotlib.colormaps["magma_r"]
     norm = matplotlib.colors.Normalize(0.0, vmax)
-    fig = Figure(figsize=(10, 4.8), dpi=90)
+    fig = Figure(figsize=(10.5, 4.8), dpi=90)
     FigureCanvasAgg(fig)
     everything = np.arange(mesh.triangle_count)
     # the close-up: faces with a corner within 1.2x the region's radius of the contact, seen lower
@@ -145,9 +145,10 @@ def render_png(path, mesh, snap: Snapshot, *, title: str = "") -> Path:
     ax1 = fig.add_subplot(1, 2, 1, projection="3d")
     _draw(ax1, mesh, snap, everything, rest, cmap, norm, "whole organ", shaft_mm=25.0, elev=35.0)
     ax2 = fig.add_subplot(1, 2, 2, projection="3d")
-    _draw(ax2, mesh, snap, close, rest, cmap, norm, "region (outlined) and probe", shaft_mm=0.6 * radius * 1e3, elev=20.0)
+    close_title = "region (outlined) and probe" if snap.vertex_ring is not None else "around the probe"
+    _draw(ax2, mesh, snap, close, rest, cmap, norm, close_title, shaft_mm=0.6 * radius * 1e3, elev=20.0)
     sm = matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap)
-    fig.colorbar(sm, ax=[ax1, ax2], shrink=0.7, pad=0.06, label="displacement [mm]")
+    fig.colorbar(sm, ax=[ax1, ax2], shrink=0.7, pad=0.09, label="displacement [mm]")
     state = f"probe force {snap.force_N:.3f} N" if snap.in_contact else "probe lifted"
     fig.suptitle(f"{title}  t = {snap.time_s:.3f} s, {state}".strip(), fontsize=10)
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp.png", dir=p.parent if str(p.parent) else ".")
