@@ -107,6 +107,7 @@ class UsdRecorder:
         self._frames = 0
         self._unsaved = 0
         self._last_code = None
+        self._colors = None
         self._region_key = None
         self._spring_ends = None
         parent = self.path.parent if str(self.path.parent) else Path(".")
@@ -181,7 +182,6 @@ class UsdRecorder:
         prim = probe.GetPrim()
         self._force = prim.CreateAttribute("almsdm:feedback_force_N", Sdf.ValueTypeNames.Float3, custom=True)
         self._force_mag = prim.CreateAttribute("almsdm:feedback_force_magnitude_N", Sdf.ValueTypeNames.Float, custom=True)
-        self._outward = -np.asarray(pal.inward_normal(), dtype=np.float64)
 
     @property
     def flush_every(self) -> int:
@@ -242,7 +242,8 @@ class UsdRecorder:
         # the probe: its tip on the contact vertex while it presses, at the rest surface once lifted
         in_contact = pal.probe_mode != PROBE_OFF
         tip = q[pal.vertex].astype(np.float64) if in_contact else pal.rest_position()
-        center = (tip + self._outward * self.probe_radius) * 1e3
+        outward = -np.asarray(pal.inward_normal(), dtype=np.float64)  # per frame: the probe may have moved
+        center = (tip + outward * self.probe_radius) * 1e3
         self._translate.Set(tuple(float(c) for c in center), code)
         f = np.asarray(pal.feedback_force, dtype=np.float64) if in_contact else np.zeros(3)
         self._force.Set(tuple(float(c) for c in f), code)
@@ -265,7 +266,12 @@ class UsdRecorder:
         else:
             colors = ring_colors(np.ones(mesh.vertex_count, dtype=np.int32), 2)  # all free
             spring_edges = np.arange(mesh.edge_count)
-        self._color.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(colors[self.point_vertex])), code)
+        colors = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(colors[self.point_vertex]))
+        if self._colors is not None and self._last_code is not None:
+            # USD interpolates between samples: hold the old colours up to the last frame before
+            self._color.Set(self._colors, self._Usd.TimeCode(float(self._last_code)))
+        self._colors = colors
+        self._color.Set(colors, code)
         self._spring_ends = mesh.edges[spring_edges].reshape(-1)
         self._curve_counts.Set(Vt.IntArray.FromNumpy(np.full(len(spring_edges), 2, dtype=np.int32)), code)
 

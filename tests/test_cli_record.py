@@ -2,9 +2,12 @@
 bad paths and values end with exit code 2 and leave nothing behind. CPU; no timing asserts."""
 
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
+from conftest import ROOT
 from test_cli import run_cli
 
 from almsdm_warp.cli import main
@@ -105,3 +108,19 @@ def test_recording_does_not_change_the_physics(tmp_path, capsys):
     recorded = [line for line in capsys.readouterr().out.splitlines() if line.startswith("press 1:")]
     assert plain == recorded and len(plain) == 1
     assert np.isfinite(float(plain[0].split("peak force ")[1].split(" N")[0]))
+
+
+def test_usd_and_matplotlib_are_imported_only_when_asked_for(tmp_path):
+    code = (
+        "import sys; from almsdm_warp.cli import main; "
+        "rc = main(['palpate', '--settle-s', '0.05'] + sys.argv[1:]); "
+        "print('modules', rc, 'pxr' in sys.modules, 'matplotlib' in sys.modules)"
+    )
+
+    def loaded(*args):
+        r = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert r.returncode == 0, r.stderr
+        return r.stdout.splitlines()[-1]
+
+    assert loaded() == "modules 0 False False"
+    assert loaded("--usd", str(tmp_path / "a.usdc"), "--png", str(tmp_path / "a.png")) == "modules 0 True True"

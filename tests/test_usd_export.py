@@ -201,6 +201,38 @@ def test_two_presses_continue_the_time_codes(tmp_path):
     assert stage.GetEndTimeCode() == 2 * total
 
 
+def test_a_new_contact_between_presses_is_recorded(tmp_path):
+    _, mesh = scene_and_mesh(None)
+    pal = palpation(None)
+    path = tmp_path / "two.usdc"
+    sv = mesh.surface_vertices
+    low = int(sv[np.argmin(mesh.vertices[sv, 2])])
+    with UsdRecorder(path, pal, every=20) as rec:
+        rec.frame(0)
+        first = pal.vertex
+        pal.press(8e-3, RAMP, HOLD, SETTLE, record=rec.on_press_step, record_every=20)
+        pal.touch(low)  # the region moves to the bottom
+        pal.press(8e-3, RAMP, HOLD, SETTLE, record=rec.on_press_step, record_every=20)
+    stage = Usd.Stage.Open(str(path))
+    organ = UsdGeom.Mesh(stage.GetPrimAtPath("/Palpation/Organ"))
+    color = UsdGeom.PrimvarsAPI(organ).GetPrimvar("displayColor")
+    # written when the region changed, and the old colours once more at the frame before (USD
+    # interpolates between samples: the colours blend only between those two frames)
+    assert color.GetTimeSamples() == [0.0, 60.0, 80.0]
+    for code, seed in ((0, first), (30, first), (60, first), (80, low), (120, low)):
+        c = np.asarray(color.Get(code))
+        np.testing.assert_allclose(c[seed], CONTACT_COLOR, atol=1e-6)
+        hops = ring_hops(mesh, seed, pal.rings)
+        np.testing.assert_allclose(c[hops < 0], np.tile(PLAIN_COLOR, ((hops < 0).sum(), 1)), atol=1e-6)
+    curves = UsdGeom.BasisCurves(stage.GetPrimAtPath("/Palpation/RegionSprings"))
+    assert len(curves.GetCurveVertexCountsAttr().Get(120)) == pal.region.spring_count
+    # during the second press the probe sits over the new contact, along its outward normal
+    probe = UsdGeom.Sphere(stage.GetPrimAtPath("/Palpation/Probe"))
+    (translate,) = probe.GetOrderedXformOps()
+    lifted = (pal.rest_position() - pal.inward_normal() * probe.GetRadiusAttr().Get() * 1e-3) * 1e3
+    np.testing.assert_allclose(translate.Get(120), lifted, atol=1e-3)
+
+
 def test_frames_reach_the_disk_while_recording_and_an_error_leaves_nothing(tmp_path):
     pal = palpation(None)
     path = tmp_path / "long.usdc"
