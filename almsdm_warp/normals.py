@@ -145,7 +145,7 @@ def benchmark_strategies(mesh, rings, device=None, *, frames: int = 200, blocks:
     for strategy in STRATEGIES:
         normals = SurfaceNormals(dm, dev, strategy)
 
-        def update():
+        def update(normals=normals):
             normals.update(q, vertices, count if vertices is not None else None)
 
         update()  # compiles and loads the module outside the capture
