@@ -71,7 +71,7 @@ def test_validators_catch_a_stage_without_metadata(tmp_path):
     assert len(validation_errors(stage)) >= 1
 
 
-@pytest.mark.parametrize("suffix", [".usda", ".usdc"])
+@pytest.mark.parametrize("suffix", [".usda", ".usdc", ".usd"])
 def test_stage_reopens_with_samples_metadata_and_no_validation_errors(tmp_path, suffix, device):
     path, pal, seen = record(tmp_path, suffix=suffix, device=device)
     _, mesh = scene_and_mesh(None)
