@@ -121,6 +121,7 @@ def _mesh_json(mesh):
 
 def build_parser() -> argparse.ArgumentParser:
     from .cli_palpate import _count_arg, _number_arg, _rings_arg, cmd_palpate
+    from .cli_record import add_record_args
     parser = _Parser(prog="almsdm", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", parser_class=_Parser)
     touch = sub.add_parser("touch", help="touch a scene or mesh with the probe and print the ring region")
@@ -153,6 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     palpate.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
     palpate.add_argument("--json", default=None, metavar="PATH", help="write the result as JSON here")
     palpate.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal, for runs over ~2 s)")
+    add_record_args(palpate)
     palpate.set_defaults(func=cmd_palpate)
     return parser
 

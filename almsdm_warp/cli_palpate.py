@@ -121,8 +121,11 @@ def cmd_palpate(args) -> int:
     from .progress import Progress
     from .scene import resolve_scene_or_mesh
 
+    from .cli_record import Recording, check_record_args
+
     if args.json:
         check_writable(args.json)
+    check_record_args(args)
     _quiet_warp()
     device = _device(args.device)
     scene = resolve_scene_or_mesh(args.scene, scale_mm=1.0 if args.scale_mm is None else args.scale_mm)
@@ -171,7 +174,10 @@ def cmd_palpate(args) -> int:
     press_steps = _press_steps(dt, ramp, hold, settle)
     presses = []
     original_step = pal.step
-    with Progress(args.presses * press_steps, enabled=args.progress) as bar:
+    deepest = _press_steps(dt, ramp, hold, 0) - 1  # the end of the first hold
+    label = f"{mesh.name}, {rings} {'rings' if pal.region is not None else 'model'}, {depth * 1e3:g} mm press"
+    recording = Recording(args, pal, args.presses, press_steps, deepest, label)
+    with recording, Progress(args.presses * press_steps, enabled=args.progress) as bar:
 
         def counted_step():
             # counts the steps Palpation.press takes (it calls self.step), for the bar
@@ -184,7 +190,7 @@ def cmd_palpate(args) -> int:
             for i in range(args.presses):
                 bar.label = f"press {i + 1}/{args.presses}"
                 try:
-                    result = pal.press(depth, ramp, hold, settle)
+                    result = pal.press(depth, ramp, hold, settle, **recording.press_kwargs())
                 except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
                     raise InputError(str(exc)) from exc
                 bar.done = (i + 1) * press_steps
@@ -198,6 +204,8 @@ def cmd_palpate(args) -> int:
                 )
         finally:
             del pal.step  # back to the class's step, uncounted
+        for line in recording.finish():
+            print(line)
     try:
         step_s, timed = _time_steps(pal)  # about 1 s at most: no bar
     except SimulationDiverged as exc:

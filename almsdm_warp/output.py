@@ -43,3 +43,13 @@ def atomic_write_text(path, text: str) -> Path:
 def write_json(path, data) -> Path:
     """Write `data` as indented JSON, atomically."""
     return atomic_write_text(path, json.dumps(data, indent=2) + "\n")
+
+
+def publish(tmp, path) -> Path:
+    """Rename the finished temporary file `tmp` to `path`, with the mode a new file gets (umask
+    applied; mkstemp makes it owner-only)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    os.chmod(tmp, 0o666 & ~mask)
+    os.replace(tmp, path)
+    return Path(path)

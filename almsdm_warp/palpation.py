@@ -238,6 +238,16 @@ class Palpation:
         self._mode[0] = PROBE_FORCE
         self._force[0] = force
 
+    @property
+    def probe_mode(self) -> int:
+        """PROBE_OFF / PROBE_DISPLACEMENT / PROBE_FORCE, as the next step will see it."""
+        return int(self._mode[0])
+
+    @property
+    def feedback_force(self) -> np.ndarray:
+        """The last step's feedback force [N], a view every step updates (stale while the probe is off)."""
+        return self._force_view
+
     def rest_position(self, vertex=None) -> np.ndarray:
         """Rest position [m] as the device holds it (float32), so that full recovery reads 0."""
         v = self.vertex if vertex is None else vertex
@@ -269,12 +279,18 @@ class Palpation:
             )
 
     # -- the press protocol --------------------------------------------------------------------
-    def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50) -> PressResult:
+    def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Displacement-controlled press at the touched vertex: ramp to `depth` [m] along the inward
-        normal over `ramp` [s], hold `hold` [s], release and settle `settle` [s]."""
+        normal over `ramp` [s], hold `hold` [s], release and settle `settle` [s].
+
+        record: called as ``record(k, total)`` after step k (1..total) of the press when k is a
+        multiple of `record_every`, and after the last step; it reads the state itself (a USD
+        recorder, say). None (the default) costs one test per step."""
         for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"press {name} must be >= 0, got {value}")
+        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
+            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
         dt = self.dt
         ramp_n = max(int(round(ramp / dt)), 1)
         hold_n = int(round(hold / dt))
@@ -303,16 +319,21 @@ class Palpation:
                     self.check_finite(s + 1)
             else:
                 disp[s] = depth * min((s + 1) / ramp_n, 1.0)
+            if record is not None and ((s + 1) % record_every == 0 or s + 1 == total):
+                record(s + 1, total)
         self.check_finite(total)
         return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=ramp_n + hold_n, force=force, displacement=disp)
 
-    def press_force(self, force=2.4, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50) -> PressResult:
+    def press_force(self, force=2.4, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Force-controlled press: push the touched vertex along the inward normal with a force
         ramped to `force` [N] over `ramp` [s], held `hold` [s], then released for `settle` [s].
-        The result's `force` is the applied force; its `depth` the deepest displacement reached."""
+        The result's `force` is the applied force; its `depth` the deepest displacement reached.
+        record, record_every: as in :meth:`press`."""
         for name, value in (("force", force), ("ramp", ramp), ("hold", hold), ("settle", settle)):
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"press {name} must be >= 0, got {value}")
+        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
+            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
         dt = self.dt
         ramp_n = max(int(round(ramp / dt)), 1)
         hold_n = int(round(hold / dt))
@@ -335,6 +356,8 @@ class Palpation:
             disp[s] = float(np.linalg.norm(pos - rest))
             if not math.isfinite(disp[s]) or (s % check_every == 0 and s):
                 self.check_finite(s + 1)
+            if record is not None and ((s + 1) % record_every == 0 or s + 1 == total):
+                record(s + 1, total)
         self.check_finite(total)
         depth = float(disp[: ramp_n + hold_n].max(initial=0.0))
         return PressResult(vertex=v, depth=depth, dt=dt, release_step=ramp_n + hold_n, force=applied, displacement=disp)

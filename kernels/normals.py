@@ -1,0 +1,141 @@
+"""Area-weighted vertex normals of the surface, three ways (paper section 1.3, Table 2).
+
+A vertex normal is the normalized sum of its incident triangles' normals, each weighted by its
+area: n_i = sum_f (x_b - x_a) x (x_c - x_a) over faces f = (a, b, c) around i (the cross product
+is twice the area times the unit face normal), then n_i / |n_i|. Vertices on no triangle (inside
+a tet mesh) get a zero normal.
+
+- *global*: every face's normal, then every vertex gathers its faces' (the paper's first column);
+- *local by search*: only the given vertices, each finding its faces by scanning every triangle
+  (the paper's second column: no incidence kept);
+- *local precomputed*: only the given vertices, each reading its faces from the vertex-to-face
+  CSR built once at load (the paper's third column).
+
+All three add the same face normals in the same order (faces by id), so they agree to the bit;
+sums are gathers per vertex, never float atomics.
+"""
+
+import warp as wp
+
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
+EPS_NORMAL = wp.constant(1.0e-30)
+"""Below this squared length a summed normal counts as zero (guards the 1/|n|)."""
+
+
+@wp.func
+def normalize_or_zero(n: wp.vec3):
+    l2 = wp.dot(n, n)
+    if l2 > EPS_NORMAL:
+        return n / wp.sqrt(l2)
+    return wp.vec3(0.0)
+
+
+@wp.func
+def face_area_normal(q: wp.array(dtype=wp.vec3), a: int, b: int, c: int):
+    # area-weighted face normal: (x_b - x_a) x (x_c - x_a) = 2 A n_f
+    x_a = q[a]
+    return wp.cross(q[b] - x_a, q[c] - x_a)
+
+
+@wp.kernel
+def eval_face_normals(
+    q: wp.array(dtype=wp.vec3),
+    triangles: wp.array2d(dtype=wp.int32),
+    face_normal: wp.array(dtype=wp.vec3),
+):
+    # global, pass 1: one thread per triangle
+    f = wp.tid()
+    face_normal[f] = face_area_normal(q, triangles[f, 0], triangles[f, 1], triangles[f, 2])
+
+
+@wp.kernel
+def gather_vertex_normals(
+    face_offsets: wp.array(dtype=wp.int32),
+    vertex_face: wp.array(dtype=wp.int32),
+    face_normal: wp.array(dtype=wp.vec3),
+    vertex_normal: wp.array(dtype=wp.vec3),
+):
+    # global, pass 2: one thread per vertex sums its faces' normals (a gather, no atomics)
+    i = wp.tid()
+    n = wp.vec3(0.0)
+    for k in range(face_offsets[i], face_offsets[i + 1]):
+        n += face_normal[vertex_face[k]]
+    vertex_normal[i] = normalize_or_zero(n)
+
+
+@wp.kernel
+def search_vertex_normals(
+    q: wp.array(dtype=wp.vec3),
+    triangles: wp.array2d(dtype=wp.int32),
+    triangle_count: int,
+    vertices: wp.array(dtype=wp.int32),
+    vertex_normal: wp.array(dtype=wp.vec3),
+):
+    # local by search: one thread per listed vertex scans every triangle for the ones it is on
+    i = vertices[wp.tid()]
+    n = wp.vec3(0.0)
+    for f in range(triangle_count):
+        a = triangles[f, 0]
+        b = triangles[f, 1]
+        c = triangles[f, 2]
+        if a == i or b == i or c == i:
+            n += face_area_normal(q, a, b, c)
+    vertex_normal[i] = normalize_or_zero(n)
+
+
+@wp.kernel
+def gather_incident_normals(
+    q: wp.array(dtype=wp.vec3),
+    triangles: wp.array2d(dtype=wp.int32),
+    face_offsets: wp.array(dtype=wp.int32),
+    vertex_face: wp.array(dtype=wp.int32),
+    vertices: wp.array(dtype=wp.int32),
+    vertex_normal: wp.array(dtype=wp.vec3),
+):
+    # local precomputed: one thread per listed vertex reads its faces from the incidence CSR
+    i = vertices[wp.tid()]
+    n = wp.vec3(0.0)
+    for k in range(face_offsets[i], face_offsets[i + 1]):
+        f = vertex_face[k]
+        n += face_area_normal(q, triangles[f, 0], triangles[f, 1], triangles[f, 2])
+    vertex_normal[i] = normalize_or_zero(n)
+
+
+def eval_vertex_normals_global(dmesh, q, face_normal, vertex_normal):
+    """Every vertex's normal from every face's: two launches (faces, then a gather per vertex)."""
+    d = dmesh.device
+    if dmesh.triangles.shape[0]:
+        wp.launch(eval_face_normals, dim=dmesh.triangles.shape[0], inputs=[q, dmesh.triangles], outputs=[face_normal], device=d)
+    wp.launch(
+        gather_vertex_normals,
+        dim=dmesh.vertex_count,
+        inputs=[dmesh.vertex_face_offsets, dmesh.vertex_face, face_normal],
+        outputs=[vertex_normal],
+        device=d,
+    )
+
+
+def eval_vertex_normals_search(dmesh, q, vertices, count, vertex_normal):
+    """The normals of `vertices[:count]`, each found by scanning every triangle."""
+    if count:
+        wp.launch(
+            search_vertex_normals,
+            dim=count,
+            inputs=[q, dmesh.triangles, dmesh.triangles.shape[0], vertices],
+            outputs=[vertex_normal],
+            device=dmesh.device,
+        )
+
+
+def eval_vertex_normals_incident(dmesh, q, vertices, count, vertex_normal):
+    """The normals of `vertices[:count]` from their incident faces (the precomputed CSR)."""
+    if count:
+        wp.launch(
+            gather_incident_normals,
+            dim=count,
+            inputs=[q, dmesh.triangles, dmesh.vertex_face_offsets, dmesh.vertex_face, vertices],
+            outputs=[vertex_normal],
+            device=dmesh.device,
+        )
