@@ -249,3 +249,15 @@ def test_progress_bar_draws_and_ends_its_line():
         for _ in range(10):
             bar.advance()
     assert silent.getvalue() == ""
+
+
+def test_json_output_gets_the_mode_of_a_new_file(tmp_path):
+    # written through a private temporary file, published with the umask's mode (not owner-only)
+    import os
+
+    from almsdm_warp.output import write_json
+
+    out = write_json(tmp_path / "r.json", {"a": 1})
+    mask = os.umask(0)
+    os.umask(mask)
+    assert (out.stat().st_mode & 0o777) == (0o666 & ~mask)
