@@ -50,6 +50,8 @@ def plot_recovery(rec, path):
         ax.axhline(value, color="grey", lw=0.8, ls=":")
         ax.text(1.02, value, text, fontsize=7, va="bottom", color="grey")
     ax.set_yscale("symlog", linthresh=1e-3)
+    ax.set_ylim(bottom=0)
+    ax.xaxis.get_major_locator().set_params(integer=True)
     ax.set_xlabel("press at the same spot")
     ax.set_ylabel(f"residual of the contact vertex after {rec['settle_s']:g} s [mm]")
     ax.set_title("Recovery after repeated 10 mm presses (stomach; paper Fig. 9)")
@@ -70,12 +72,12 @@ def plot_force_displacement(rec, table1, path):
         ax.plot(d, f, label=row["label"].split(", ", 1)[1], ls="--" if "global" in row["label"] else "-")
     for ax, name, paper in ((axes[0], "stomach (surface)", 2.402), (axes[1], "liver (volume)", 2.312)):
         ax.axhline(paper, color="grey", lw=0.8, ls=":")
-        ax.text(0.2, paper, f"paper, 4 rings at 10 mm: {paper} N", fontsize=7, va="bottom", color="grey")
+        ax.text(5.0, paper, f"paper, 4 rings at 10 mm: {paper} N", fontsize=7, va="bottom", color="grey")
         ax.set_title(name)
         ax.set_xlabel("displacement of the contact vertex [mm]")
         ax.set_ylabel("feedback force [N]")
-        ax.legend(fontsize=7)
-    fig.suptitle("Force against displacement during the ramp and hold (paper Fig. 10)")
+        ax.legend(fontsize=7, loc="upper left")
+    fig.suptitle("Force against displacement during the ramp and hold (paper Fig. 10)", y=1.02)
     return _save(fig, path)
 
 

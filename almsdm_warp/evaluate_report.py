@@ -129,9 +129,12 @@ def _fig10(r) -> list[str]:
         "",
         f"![force against displacement]({r['figures']['force_displacement']})",
         "",
-        "Force rises almost linearly with depth (the anchor springs of eq. (3) carry most of the reaction, docs/calibration.md); "
-        "one ring is stiffer than the rest (its fixed outer ring is one edge away from the probe), from 2 rings on the curves "
-        "lie on the global anchored model's. The unanchored models carry almost no force: the mesh moves as a whole.",
+        "On the stomach (a surface) the force stiffens with depth: the anchor springs of eq. (3) carry the reaction at "
+        "first, and the edge springs add theirs as they stretch (second order in the depth, docs/calibration.md); on the "
+        "liver (a volume, springs on tet edges at every angle) it is close to linear. One ring is stiffer than the rest "
+        "(its fixed outer ring is one edge from the probe); from 2 rings on, the curves lie on the global anchored model's. "
+        "The unanchored models carry almost no force: the probe pushes the mesh as a whole. The paper's Fig. 10 curves "
+        "are not given as numbers; its 10 mm forces are marked.",
         "",
     ]
 
