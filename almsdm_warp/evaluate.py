@@ -95,12 +95,19 @@ def run_evaluation(out_dir, settings: Settings | str = "full", device="cpu", *, 
     }
     with Progress(total, enabled=progress, label="evaluate") as bar:
         tasks = Tasks(bar)
-        results["recovery"] = evaluate_paper.run_recovery(settings, device, tasks)
-        results["table1"] = evaluate_paper.run_table1(settings, device, tasks)
-        results["table2"] = evaluate_paper.run_table2(settings, device, tasks, normals)
-        results["accuracy"] = evaluate_accuracy.run_accuracy(settings, device, tasks, auto_factory)
-        results["stability"] = evaluate_stability.run_stability(settings, device, tasks)
-        results["anatomy"] = evaluate_anatomy.run_anatomy(settings, device, tasks, meshes_dir)
+        parts = (
+            ("recovery", lambda: evaluate_paper.run_recovery(settings, device, tasks)),
+            ("table1", lambda: evaluate_paper.run_table1(settings, device, tasks)),
+            ("table2", lambda: evaluate_paper.run_table2(settings, device, tasks, normals)),
+            ("accuracy", lambda: evaluate_accuracy.run_accuracy(settings, device, tasks, auto_factory)),
+            ("stability", lambda: evaluate_stability.run_stability(settings, device, tasks)),
+            ("anatomy", lambda: evaluate_anatomy.run_anatomy(settings, device, tasks, meshes_dir)),
+        )
+        results["part_s"] = {}
+        for name, run in parts:
+            t0 = time.perf_counter()
+            results[name] = run()
+            results["part_s"][name] = round(time.perf_counter() - t0, 1)
     extra = evaluate_accuracy.join_extra_points(evaluate_accuracy.read_extra_points(extra_json), results["accuracy"]["rows"]) if extra_json else []
     results["accuracy"]["extra"] = extra
     results["machine"]["load_average_after"] = [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None

@@ -93,6 +93,8 @@ def run_accuracy(settings, device, tasks, auto_factory=None) -> dict:
             )
             tasks.step(f"speed-accuracy: {name} {integrator} {rings}")
     missing = ["auto"] if "auto" in settings.accuracy_rings and auto_factory is None else []
+    if missing:
+        tasks.step("speed-accuracy: auto not available", len(SERIES))
     return {"contacts": settings.accuracy_contacts, "rows": rows, "not_available": missing}
 
 

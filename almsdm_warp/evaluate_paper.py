@@ -6,6 +6,7 @@ strategies of almsdm_warp.normals).
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -55,7 +56,7 @@ def _curve(result):
 def run_recovery(settings, device, tasks) -> dict:
     """Fig. 9: `settings.presses` presses at the top of the stomach, 10 mm, explicit, dt 1 ms;
     the contact vertex's residual after each, for rings 1..4 and the unanchored global model."""
-    from .palpation import Palpation
+    from .palpation import Palpation, SimulationDiverged
 
     scene, mesh = _scene("stomach")
     vertex = top_vertex(mesh)
@@ -63,14 +64,24 @@ def run_recovery(settings, device, tasks) -> dict:
     for rings in RECOVERY_RINGS:
         pal = Palpation(mesh, scene.tissue, rings=rings, integrator="explicit", dt=DT, device=device)
         pal.touch(vertex)
-        presses = [pal.press(DEPTH, RAMP, HOLD, settings.settle_s) for _ in range(settings.presses)]
+        presses, ran_away = [], None
+        for k in range(settings.presses):
+            try:
+                presses.append(pal.press(DEPTH, RAMP, HOLD, settings.settle_s))
+            except SimulationDiverged:
+                # the unanchored mesh, yanked back by the next press, flies off (Palpation's guard:
+                # more than twice the mesh's size from rest); the presses after it are not run
+                ran_away = k + 1
+                break
+        missing = [math.inf] * (settings.presses - len(presses))
         rows.append(
             {
                 "rings": rings,
                 "region_vertices": pal.region_vertices,
                 "region_springs": pal.region_springs,
-                "residual_mm": [p.recovery_error_mm for p in presses],
-                "peak_force_N": [p.peak_force_N for p in presses],
+                "residual_mm": [p.recovery_error_mm for p in presses] + missing,
+                "peak_force_N": [p.peak_force_N for p in presses] + missing,
+                "ran_away_at_press": ran_away,
             }
         )
         curves[str(rings)] = _curve(presses[0])

@@ -3,6 +3,7 @@ takes an experiment's result dict and a path, and writes one PNG through a tempo
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -42,20 +43,29 @@ def _save(fig, path) -> Path:
 def plot_recovery(rec, path):
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    top = 10.0
     for row in rec["rows"]:
-        res = row["residual_mm"]
+        res = [x for x in row["residual_mm"] if x is not None and math.isfinite(x)]
         label = f"{row['rings']} ring{'s' if row['rings'] != 1 else ''}" if isinstance(row["rings"], int) else "global, no anchors"
-        ax.plot(range(1, len(res) + 1), res, marker="o", label=label)
+        line = ax.plot(range(1, len(res) + 1), res, marker="o", label=label)
+        top = max([top] + [x * 10 for x in res])
+        if row.get("ran_away_at_press"):
+            k = row["ran_away_at_press"]
+            y = max(res + [1.0]) * 3
+            ax.plot([k], [y], marker="x", ms=9, color=line[0].get_color())
+            ax.annotate(f"ran away at press {k}", (k, y), fontsize=7, xytext=(-105, 4), textcoords="offset points")
+            top = max(top, y * 10)
     for value, text in ((0.11, "paper rings 1-2 < 0.11"), (0.48, "paper ring 3 ~0.48"), (1.15, "paper ring 4 ~1.15")):
         ax.axhline(value, color="grey", lw=0.8, ls=":")
         ax.text(1.02, value, text, fontsize=7, va="bottom", color="grey")
     ax.set_yscale("symlog", linthresh=1e-3)
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(0, top)
+    ax.set_xlim(0.7, len(rec["rows"][0]["residual_mm"]) + 0.3)
     ax.xaxis.get_major_locator().set_params(integer=True)
     ax.set_xlabel("press at the same spot")
     ax.set_ylabel(f"residual of the contact vertex after {rec['settle_s']:g} s [mm]")
     ax.set_title("Recovery after repeated 10 mm presses (stomach; paper Fig. 9)")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="center right")
     return _save(fig, path)
 
 
@@ -109,7 +119,10 @@ def plot_speed_accuracy(acc, extra, path):
         ax.set_xlabel("time per step [us] (paper: per rendered frame)")
         ax.set_ylabel(label)
         ax.legend(fontsize=7, loc="upper right")
-    fig.suptitle("Speed against accuracy: rings 1..N against the global anchored reference (numbers: rings)")
+    fig.suptitle(
+        "Speed against accuracy: rings 1..N against the global anchored reference "
+        f"(numbers: rings; errors below {FLOOR:g} drawn at {FLOOR:g})"
+    )
     return _save(fig, path)
 
 
