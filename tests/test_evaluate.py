@@ -238,3 +238,35 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys):
         assert code == 2 and words in err and len(err.strip().splitlines()) == 1, (args, err)
         assert "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.json"]
+
+
+def test_hold_press_errors_against_the_global_reference(device):
+    """The speed-accuracy measurement on each device: the global model against itself is exact, and
+    the error of a local model falls with its rings (anchors damp the deformation within a few rings)
+    and stays inside its region's reach: outside the region nothing moves, so the largest
+    displacement error is at most the global model's largest displacement outside the region."""
+    from almsdm_warp.evaluate_common import hold_press, top_vertex
+    from almsdm_warp.evaluate_paper import _scene
+    from almsdm_warp.palpation import Palpation
+
+    scene, mesh = _scene("stomach")
+    v = top_vertex(mesh)
+    glob = Palpation(mesh, scene.tissue, rings="global", integrator="explicit", device=device)
+    glob.touch(v)
+    f_ref, peak_ref, q_ref, force, target = hold_press(glob, hold=0.1)
+    assert target[-1] == pytest.approx(0.01) and force[-1] == f_ref and peak_ref == force.max()
+    rest = mesh.vertices
+    errors = []
+    for rings in (1, 2, 4):
+        pal = Palpation(mesh, scene.tissue, rings=rings, integrator="explicit", device=device)
+        pal.touch(v)
+        _, peak, q, _, _ = hold_press(pal, hold=0.1)
+        inside = np.zeros(mesh.vertex_count, bool)
+        inside[pal.region.vertices()] = True
+        np.testing.assert_allclose(q[~inside], rest[~inside].astype(np.float32), atol=1e-7)  # untouched outside
+        err = np.linalg.norm(q - q_ref, axis=1)
+        outside_ref = np.linalg.norm(q_ref - rest, axis=1)[~inside].max()
+        assert err[~inside].max() == pytest.approx(outside_ref, abs=1e-6)
+        errors.append((abs(peak - peak_ref), err.max()))
+    assert errors[0][0] > errors[1][0] > errors[2][0] and errors[0][1] > errors[1][1] > errors[2][1]
+    assert errors[2][0] < 1e-3 * peak_ref and errors[2][1] < 1e-4  # 4 rings: within 0.1% and 0.1 mm
