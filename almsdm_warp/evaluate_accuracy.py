@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .evaluate_common import DT, hold_press, spread_vertices, time_per_step
+from .evaluate_common import DT, hold_press, reset_to_rest, spread_vertices, time_per_step
 
 SERIES = (
     # (scene, integrator): the liver's explicit critical step is below 1 ms (docs/calibration.md)
@@ -68,6 +68,7 @@ def run_accuracy(settings, device, tasks, auto_factory=None) -> dict:
             force_err, disp_err, sizes = [], [], []
             for v in contacts:
                 pal.touch(v)
+                reset_to_rest(pal)
                 f_end, f_peak, q, _, _ = hold_press(pal)
                 if rings == "global":
                     reference[v] = (f_end, f_peak, q)

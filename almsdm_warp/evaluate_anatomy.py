@@ -27,7 +27,7 @@ def run_anatomy(settings, device, tasks, folder=None) -> dict:
     """Per mesh: 4-ring presses (peak force, residual after each), the unanchored global model's
     residual (up to `settings.anatomy_free_max_vertices`), the anchored global force, and the time
     of a step of the 4-ring and the global model."""
-    from .evaluate_paper import _scene
+    from .evaluate_paper import _curve, _scene
     from .io import load_mesh
     from .palpation import Palpation, SimulationDiverged
 
@@ -58,9 +58,7 @@ def run_anatomy(settings, device, tasks, folder=None) -> dict:
         row["global_peak_force_N"] = peak
         row["global_curve"] = ((target[::5] * 1e3).round(4).tolist(), force[::5].round(5).tolist())
         row["global_step_us"] = time_per_step(glob, settings.timing_budget_s) * 1e6
-        local.touch(vertex)
-        _, _, _, force, target = hold_press(local)
-        row["local_curve"] = ((target[::5] * 1e3).round(4).tolist(), force[::5].round(5).tolist())
+        row["local_curve"] = _curve(presses[0])
         row["free_residual_mm"] = None
         if mesh.vertex_count <= settings.anatomy_free_max_vertices:
             free = Palpation(mesh, tissue, rings="global-free", integrator="implicit", dt=DT, device=device)

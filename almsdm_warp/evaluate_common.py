@@ -155,6 +155,18 @@ def scaled_tissue(tissue, scale: float):
     return replace(tissue, edge_stiffness=tissue.edge_stiffness * scale, anchor_stiffness=tissue.anchor_stiffness * scale)
 
 
+def reset_to_rest(pal) -> None:
+    """Put every vertex of both of the palpation's states back at rest, in place (captured graphs
+    keep their arrays): each contact of a sweep then starts from the undeformed organ. Touching a
+    new vertex alone resets only the vertices the old region leaves behind (and, for the global
+    models, none)."""
+    import warp as wp
+
+    for state in pal.states:
+        wp.copy(state.particle_q, pal.model.particle_q_rest)
+        state.particle_qd.zero_()
+
+
 def hold_press(pal, depth=DEPTH, ramp=RAMP, hold=HOLD):
     """Ramp the touched vertex to `depth` [m] along the inward normal and hold it (no release).
 
