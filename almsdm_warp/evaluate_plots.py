@@ -140,7 +140,7 @@ def plot_stability(stab, path):
     for ax, integrator in ((axes[0], "explicit"), (axes[1], "implicit")):
         for c in stab["cells"]:
             if c["integrator"] == integrator:
-                ax.scatter([c["dt_ms"]], [c["scale"]], marker="s", s=180, color=STATE_COLOURS[c["state"]], edgecolors="k", linewidths=0.3)
+                ax.scatter([c["dt_ms"]], [c["scale"]], marker="s", s=100, color=STATE_COLOURS[c["state"]], edgecolors="k", linewidths=0.3)
         ax.plot([stab["critical_dt_ms"][s] for s in scales], ys, "k-", lw=1.2)
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -152,7 +152,7 @@ def plot_stability(stab, path):
     ax = axes[2]
     for c in stab["global_free_cells"]:
         y = 1 if c["integrator"] == "explicit" else 0
-        ax.scatter([c["dt_ms"]], [y], marker="s", s=180, color=STATE_COLOURS[c["state"]], edgecolors="k", linewidths=0.3)
+        ax.scatter([c["dt_ms"]], [y], marker="s", s=100, color=STATE_COLOURS[c["state"]], edgecolors="k", linewidths=0.3)
     if stab.get("global_free_critical_dt_ms"):
         ax.axvline(stab["global_free_critical_dt_ms"], color="k", lw=1.2)
     ax.set_xscale("log")
