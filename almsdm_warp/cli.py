@@ -156,10 +156,13 @@ def build_parser() -> argparse.ArgumentParser:
     palpate.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal, for runs over ~2 s)")
     add_record_args(palpate)
     palpate.set_defaults(func=cmd_palpate)
+    from .cli_evaluate import add_parser as add_evaluate
+
+    add_evaluate(sub)
     return parser
 
 
-COMMANDS = ("palpate", "touch")
+COMMANDS = ("palpate", "touch", "evaluate")
 
 
 def _default_command(argv) -> bool:
