@@ -118,12 +118,11 @@ def run_table1(settings, device, tasks) -> dict:
 
 
 def find_normals_strategies():
-    """Hook for Table 2: ``(names, timer)`` from almsdm_warp.normals, or None while it is absent.
+    """Table 2's normals strategies: ``(names, timer)`` from almsdm_warp.normals, or None.
 
-    Expected of that module: ``STRATEGIES`` (names, e.g. global / local / precomputed local) and
-    ``time_strategy(palpation, name, budget_s) -> seconds per normals update`` for the touched,
-    pressed palpation. Anything else there (or no module) leaves the table's normals columns as
-    "not available"; the lead wires the real function here once the normals issue lands.
+    ``normals.STRATEGIES`` (global / search / precomputed) and ``normals.time_strategy(palpation,
+    name, budget_s) -> seconds per normals update`` of the touched, pressed palpation. Without
+    them the table's normals columns read "not available".
     """
     try:
         from . import normals  # noqa: F401 - the usd engineer's module (issue 4)

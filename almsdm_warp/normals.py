@@ -100,6 +100,44 @@ class SurfaceNormals:
         return self.vertex_normal.numpy().copy()
 
 
+def _replay_times(update, device, frames: int, blocks: int) -> list:
+    """Seconds per call of `update` captured in a graph and replayed `frames` times, per block."""
+    with wp.ScopedCapture(device=device, force_module_load=False) as cap:
+        update()
+    graph = cap.graph
+    for _ in range(10):
+        wp.capture_launch(graph)
+    per_frame = []
+    for _ in range(blocks):
+        wp.synchronize_device(device)
+        t0 = time.perf_counter()
+        for _ in range(frames):
+            wp.capture_launch(graph)
+        wp.synchronize_device(device)
+        per_frame.append((time.perf_counter() - t0) / frames)
+    return per_frame
+
+
+def time_strategy(palpation, strategy: str, budget_s: float = 0.2, blocks: int = 9) -> float:
+    """Median seconds of one normals update with `strategy` for a touched `palpation`: the vertices
+    its step can move (its region, or every vertex for a global model), from its current state;
+    graph-replayed blocks that take about `budget_s` in all (a benchmark, not a test)."""
+    normals = SurfaceNormals(palpation.model.dmesh, palpation.device, strategy)
+    q = palpation.state.particle_q
+
+    def update():
+        normals.update_region(q, palpation.region)
+
+    update()  # compiles, loads and settles the region key outside the capture
+    wp.synchronize_device(palpation.device)
+    t0 = time.perf_counter()
+    update()
+    wp.synchronize_device(palpation.device)
+    first = max(time.perf_counter() - t0, 1e-7)
+    frames = int(min(max(budget_s / blocks / first, 1), 5000))
+    return statistics.median(_replay_times(update, palpation.device, frames, blocks))
+
+
 def _moved_vertices(mesh, rings, device):
     """(vertex id array, count, region or None) of the vertices a step can move, with their one ring."""
     from .region import Region
@@ -156,19 +194,7 @@ def benchmark_strategies(mesh, rings, device=None, *, frames: int = 200, blocks:
             update()
             wp.synchronize_device(dev)
             launch.append(time.perf_counter() - t0)
-        with wp.ScopedCapture(device=dev, force_module_load=False) as cap:
-            update()
-        graph = cap.graph
-        for _ in range(10):
-            wp.capture_launch(graph)
-        per_frame = []
-        for _ in range(blocks):
-            wp.synchronize_device(dev)
-            t0 = time.perf_counter()
-            for _ in range(frames):
-                wp.capture_launch(graph)
-            wp.synchronize_device(dev)
-            per_frame.append((time.perf_counter() - t0) / frames)
+        per_frame = _replay_times(update, dev, frames, blocks)
         result["strategies"][strategy] = {
             "frame_us_median": statistics.median(per_frame) * 1e6,
             "frame_us_best": min(per_frame) * 1e6,
