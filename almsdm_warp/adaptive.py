@@ -75,7 +75,8 @@ class AdaptivePalpation(Palpation):
         """The most rings the region had since the last touch()."""
         self.auto_reason = "not pressed yet"
         self.events = []
-        """(step, what, rings, estimate [m]) for each expansion and retirement since touch()."""
+        """dict(step, event ("+k" rings or "retired"), rings, estimate_mm) for each since touch(): the
+        fixed ring's estimated displacement that made it grow, or the region's largest at retirement."""
         self._countdown = self.check_steps
         self._steps = 0
         self._k1 = 0.0
@@ -88,6 +89,8 @@ class AdaptivePalpation(Palpation):
             self._motion_pinned = wp.zeros(slots, dtype=wp.float32, device="cpu", pinned=True)
             self._motion_host = self._motion_pinned.numpy()
         self._zero_force = np.zeros(3, dtype=np.float32)
+        self.press_log = []
+        """Per press(): dict(rings, reason, events): the rings it grew to and why."""
 
     # -- the region ----------------------------------------------------------------------------
     def touch(self, vertex: int) -> None:
@@ -111,6 +114,14 @@ class AdaptivePalpation(Palpation):
         super().expand(rings)
         self._motion_graphs = None
         self.rings_chosen = max(self.rings_chosen, self.region.outer_ring)
+
+    def rebuild(self, rings: int, *, retire: bool | None = None) -> None:
+        """Touch the same vertex again with a region of `rings` rings (and set `retire`)."""
+        self.touch(self.vertex)
+        if rings > self.region.outer_ring:
+            self.expand(rings - self.region.outer_ring)
+        if retire is not None:
+            self.retire = bool(retire)
 
     def retire_region(self) -> None:
         """Put the region's vertices at rest in both states and integrate nothing until the next touch."""
@@ -184,7 +195,7 @@ class AdaptivePalpation(Palpation):
         if self._mode[0] == PROBE_OFF:
             moved = float(m[1 : n + 1].max(initial=0.0)) if n else float(m[1])
             if self.retire and moved <= self.tol:
-                self.events.append((self._steps, "retired", n, moved))
+                self._event("retired", n, moved)
                 self.retire_region()
             return
         est, ferr, lam = self.estimate(m)
@@ -206,25 +217,30 @@ class AdaptivePalpation(Palpation):
         grow = min(grow, self.max_rings - n)
         size = region.vertex_count
         self.expand(grow)
-        self.events.append((self._steps, f"+{grow}", self.region.outer_ring, est))
+        self._event(f"+{grow}", self.region.outer_ring, est)
         if self.region.vertex_count == size:
             self.auto_reason = f"the region covers the mesh component ({size} vertices)"
             self.max_rings = self.region.outer_ring  # nothing more to grow into
         else:
             self.auto_reason = f"grew to {self.region.outer_ring} rings: ring {n} would have moved {est * 1e3:.3g} mm"
 
+    def _event(self, what, rings, length):
+        self.events.append({"step": self._steps, "event": what, "rings": int(rings), "estimate_mm": round(length * 1e3, 6) if math.isfinite(length) else None})
+
     # -- the press protocol --------------------------------------------------------------------
     def press(self, *args, **kw):
         """Palpation.press, on a region rebuilt from `start_rings` if the last one was retired."""
-        if self.vertex < 0:
-            raise RuntimeError("touch(vertex) first: the probe is on no vertex")
-        if self.retired:
-            self.touch(self.vertex)
-        return super().press(*args, **kw)
+        return self._logged(super().press, args, kw)
 
     def press_force(self, *args, **kw):
+        """Palpation.press_force, on a region rebuilt from `start_rings` if the last one was retired."""
+        return self._logged(super().press_force, args, kw)
+
+    def _logged(self, press, args, kw):
         if self.vertex < 0:
             raise RuntimeError("touch(vertex) first: the probe is on no vertex")
         if self.retired:
             self.touch(self.vertex)
-        return super().press_force(*args, **kw)
+        result = press(*args, **kw)
+        self.press_log.append({"rings": int(self.rings_chosen), "reason": self.auto_reason, "events": list(self.events)})
+        return result

@@ -116,5 +116,5 @@ def auto_point(mesh, tissue=None, tol=1e-4, device=None, *, vertex=None, integra
     if reference is None:
         reference = global_reference(mesh, tissue, device, vertex=v, integrator=integrator, dt=dt, **prot)
     point = _point(pal, reference, prot, time_steps)
-    point.update(tol_mm=tol * 1e3, reason=pal.auto_reason, events=[list(e) for e in pal.events], vertex=int(v))
+    point.update(tol_mm=tol * 1e3, reason=pal.auto_reason, events=list(pal.events), vertex=int(v))
     return point
