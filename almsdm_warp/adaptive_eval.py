@@ -95,14 +95,15 @@ def fixed_point(mesh, tissue, rings, device=None, *, vertex=None, integrator="im
 
 
 def auto_point(mesh, tissue=None, tol=1e-4, device=None, *, vertex=None, integrator="implicit", dt=5e-3, reference=None,
-               time_steps=False, **protocol):
+               time_steps=False, options=None, **protocol):
     """The adaptive region at tolerance `tol` [m], pressed by the protocol and compared to the global
     anchored model: dict(rings, region_vertices, region_springs, peak_force_N, force_error (relative),
     displacement_error_mm, tol_mm, reason, events, reference_peak_force_N[, step_us]).
 
     mesh: a TissueMesh (SI) or a path; vertex: the contact (default: the highest surface vertex);
     reference: a global_reference() result to reuse across tolerances; time_steps: also time a step
-    of the grown region (median of 10 batches of 20, the probe held).
+    of the grown region (median of 10 batches of 20, the probe held); options: more keyword
+    arguments of AdaptivePalpation (margin, force_tol, start_rings, ...).
     """
     from .adaptive import AdaptivePalpation
     from .io import load_mesh
@@ -110,7 +111,7 @@ def auto_point(mesh, tissue=None, tol=1e-4, device=None, *, vertex=None, integra
     if isinstance(mesh, (str, bytes)) or hasattr(mesh, "__fspath__"):
         mesh = load_mesh(mesh)
     prot = {**PROTOCOL, **protocol}
-    pal = AdaptivePalpation(mesh, tissue, tol=tol, integrator=integrator, dt=dt, device=device, retire=False)
+    pal = AdaptivePalpation(mesh, tissue, tol=tol, integrator=integrator, dt=dt, device=device, retire=False, **(options or {}))
     v = top_vertex(pal.mesh) if vertex is None else vertex
     pal.touch(v)
     if reference is None:

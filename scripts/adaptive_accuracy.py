@@ -46,12 +46,15 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=3, help="contact vertices per mesh")
     ap.add_argument("--max-rings", type=int, default=8)
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--margin", type=float, default=None, help="safety factor on the fixed-ring estimate (default: adaptive.MARGIN)")
+    ap.add_argument("--force-tol", type=float, default=None, help="AdaptivePalpation's force_tol (default: adaptive.FORCE_TOL)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     from almsdm_warp.adaptive_eval import auto_point, fixed_point, global_reference, top_vertex
     from almsdm_warp.warp_init import init_warp
 
     init_warp()
+    options = {k: v for k, v in (("margin", args.margin), ("force_tol", args.force_tol)) if v is not None}
     names = args.meshes or ["stomach", "liver"] + sorted(str(p) for p in SHARED.glob("*") if p.suffix in (".obj", ".vtu"))
     rows, records = [], []
     print("| mesh | contacts | tol (mm) | auto rings | N* (fixed) | auto meets tol | auto vertices <= N*'s | worst force error auto | worst disp error auto / T |")
@@ -65,7 +68,7 @@ def main(argv=None):
             ref = global_reference(mesh, tissue, args.device, vertex=v)
             fixed = {n: fixed_point(mesh, tissue, n, args.device, vertex=v, reference=ref) for n in range(1, args.max_rings + 1)}
             for t in args.tol_mm:
-                a = auto_point(mesh, tissue, t * 1e-3, args.device, vertex=v, reference=ref)
+                a = auto_point(mesh, tissue, t * 1e-3, args.device, vertex=v, reference=ref, options=options)
                 meets = [n for n, p in fixed.items() if p["force_error"] <= 0.01 and p["displacement_error_mm"] <= t]
                 n_star = min(meets) if meets else None
                 ok = a["force_error"] <= 0.01 and a["displacement_error_mm"] <= t
