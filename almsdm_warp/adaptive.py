@@ -7,7 +7,8 @@ model (measured: equal to 4 digits on the stomach and the liver). Every few step
 estimate u_J of the fixed ring's (each fixed vertex freed alone, its neighbours held). For a chain
 with anchors the Jacobi ratio rho = u_J / u_(N-1) is lambda / (1 + lambda^2), lambda the decay per
 ring, and freeing the whole far field multiplies u_J by (1 + lambda^2) / (1 - lambda^2): that is
-the estimate e_N of ring N's displacement (within 0.87-1.04 of the true value on the scenes). The
+the estimate e_N of ring N's displacement (0.77-1.05 of the true value on the scenes and the
+shared meshes). The
 region grows while e_N * MARGIN > tol, or while the probe force error it implies, k_1 e_N^2 / u_1
 (the error ring 1 inherits, times the probe's spring stiffness), is over half the force tolerance.
 """
@@ -25,7 +26,7 @@ from .model import PROBE_OFF
 from .palpation import Palpation, _replayer
 
 MARGIN = 1.2
-"""Safety factor on the fixed-ring estimate (it read 0.87-1.04 of the true value: docs/adaptive.md)."""
+"""Safety factor on the fixed-ring estimate (it read 0.77-1.05 of the true value: docs/adaptive.md)."""
 FORCE_TOL = 0.01
 """Relative peak-force error the region is grown to stay under (the estimate is held to half of it)."""
 
@@ -73,13 +74,15 @@ class AdaptivePalpation(Palpation):
         self.retired = False
         self.rings_chosen = 0
         """The most rings the region had since the last touch()."""
-        self.auto_reason = "not pressed yet"
+        self._reason = "not pressed yet"
+        self._within = None
         self.events = []
         """dict(step, event ("+k" rings or "retired"), rings, estimate_mm) for each since touch(): the
         fixed ring's estimated displacement that made it grow, or the region's largest at retirement."""
         self._countdown = self.check_steps
         self._steps = 0
         self._k1 = 0.0
+        self._outer = 0
         self._motion_graphs = None
         slots = self.max_rings + 2
         self._motion = wp.zeros(slots, dtype=wp.float32, device=self.device)
@@ -98,8 +101,10 @@ class AdaptivePalpation(Palpation):
         self.rings = self.start_rings
         super().touch(vertex)
         self.retired = False
-        self.rings_chosen = self.region.outer_ring
+        self._outer = self.region.outer_ring  # Region.outer_ring scans the ring sizes: kept here
+        self.rings_chosen = self._outer
         self.auto_reason = "not pressed yet"
+
         self.events = []
         self._countdown = self.check_steps
         self._steps = 0
@@ -113,7 +118,24 @@ class AdaptivePalpation(Palpation):
     def expand(self, rings: int = 1) -> None:
         super().expand(rings)
         self._motion_graphs = None
-        self.rings_chosen = max(self.rings_chosen, self.region.outer_ring)
+        self._outer = self.region.outer_ring
+        self.rings_chosen = max(self.rings_chosen, self._outer)
+
+    @property
+    def auto_reason(self) -> str:
+        """Why the region has the size it has: the last check's verdict, in words (mm)."""
+        if self._within is not None:
+            n, est, ferr = self._within
+            return (
+                f"ring {n} (fixed) would move {est * 1e3:.3g} mm if freed (estimated; x{self.margin:g} <= tol "
+                f"{self.tol * 1e3:g} mm) and the force error it implies is {ferr:.2%} (<= {0.5 * self.force_tol:.2%})"
+            )
+        return self._reason
+
+    @auto_reason.setter
+    def auto_reason(self, text: str) -> None:
+        self._reason = text
+        self._within = None
 
     def rebuild(self, rings: int, *, retire: bool | None = None) -> None:
         """Touch the same vertex again with a region of `rings` rings (and set `retire`)."""
@@ -135,17 +157,25 @@ class AdaptivePalpation(Palpation):
         self._graphs = None
         self._motion_graphs = None
         self.retired = True
+        self._outer = 0
 
     # -- stepping ------------------------------------------------------------------------------
     def step(self) -> np.ndarray:
         """One step of dt (nothing once retired); every `check_steps` steps, the ring check."""
         if self.retired:
             return self._zero_force
-        force = Palpation.step(self)
-        self._steps += 1
+        replays = self._graphs
+        if replays is None:
+            force = self._step_setup()
+        else:  # Palpation.step written out: one Python call less per step
+            replay = replays[self._cur]
+            self._cur ^= 1
+            replay()
+            force = self._force_view
         self._countdown -= 1
         if self._countdown <= 0:
             self._countdown = self.check_steps
+            self._steps += self.check_steps
             self._check()
         return force
 
@@ -178,11 +208,12 @@ class AdaptivePalpation(Palpation):
     def estimate(self, motion=None):
         """(e_N [m], force error estimate (relative), lambda) of the current region and state."""
         m = self.ring_motion() if motion is None else motion
-        n = self.region.outer_ring
+        n = self._outer
         if n == 0:  # the region is its seed alone: nothing fixed
             return 0.0, 0.0, 0.0
         est, lam = fixed_ring_estimate(float(m[0]), float(m[n]))
-        f = float(np.linalg.norm(self._force_view))
+        fx, fy, fz = (float(c) for c in self._force_view)
+        f = math.sqrt(fx * fx + fy * fy + fz * fz)
         u1 = est if n == 1 else float(m[2])
         e1 = est if n == 1 else (est * est / u1 if u1 > 0 else 0.0)
         ferr = self._k1 * e1 / f if f > 0 else 0.0
@@ -191,7 +222,7 @@ class AdaptivePalpation(Palpation):
     def _check(self) -> None:
         m = self.ring_motion()
         region = self.region
-        n = region.outer_ring
+        n = self._outer
         if self._mode[0] == PROBE_OFF:
             moved = float(m[1 : n + 1].max(initial=0.0)) if n else float(m[1])
             if self.retire and moved <= self.tol:
@@ -201,10 +232,7 @@ class AdaptivePalpation(Palpation):
         est, ferr, lam = self.estimate(m)
         tol, half = self.tol, 0.5 * self.force_tol
         if est * self.margin <= tol and ferr <= half:
-            self.auto_reason = (
-                f"ring {n} (fixed) would move {est * 1e3:.3g} mm if freed (estimated; x{self.margin:g} <= tol "
-                f"{tol * 1e3:g} mm) and the force error it implies is {ferr:.2%} (<= {half:.2%})"
-            )
+            self._within = (n, est, ferr)  # formatted only when auto_reason is read
             return
         if n >= self.max_rings:
             self.auto_reason = f"stopped at max_rings {self.max_rings}: ring {n} would move {est * 1e3:.3g} mm"
