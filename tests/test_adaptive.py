@@ -140,10 +140,33 @@ def test_auto_meets_tolerance_with_the_fewest_rings(device, name, tol_mm):
 
 
 def test_tighter_tolerance_grows_more_rings(device):
+    """Rings grow as the tolerance tightens; the chart point also times a step (a positive median)."""
     scene, mesh = scene_and_mesh()
     ref = reference(None, device)
-    rings = [auto_point(mesh, scene.tissue, t * 1e-3, device, reference=ref)["rings"] for t in (1.0, 0.1, 0.01)]
+    points = [auto_point(mesh, scene.tissue, t * 1e-3, device, reference=ref, time_steps=(t == 0.1)) for t in (1.0, 0.1, 0.01)]
+    rings = [p["rings"] for p in points]
     assert rings[0] < rings[1] < rings[2], rings
+    sizes = [p["region_vertices"] for p in points]
+    assert sizes[0] < sizes[1] < sizes[2], sizes
+    assert math.isfinite(points[1]["step_us"]) and points[1]["step_us"] > 0
+    assert "step_us" not in points[0]
+
+
+@pytest.mark.parametrize("integrator", ["explicit", "implicit"])
+def test_force_controlled_press_grows_like_a_displacement_press(device, integrator):
+    """A force-controlled press (2.4 N) also grows the region, to the rings at which a fixed-ring
+    force press reaches the same depth (within 0.5%)."""
+    scene, mesh = scene_and_mesh()
+    auto = AdaptivePalpation(mesh, scene.tissue, tol=5e-5, integrator=integrator, dt=1e-3, device=device)
+    auto.touch(top_vertex(mesh))
+    got = auto.press_force(2.4, ramp=0.1, hold=0.1, settle=0.2)
+    rings = auto.press_log[0]["rings"]
+    assert rings >= 3 and auto.retired
+    fixed = Palpation(mesh, scene.tissue, rings=rings, integrator=integrator, dt=1e-3, device=device)
+    fixed.touch(top_vertex(mesh))
+    expected = fixed.press_force(2.4, ramp=0.1, hold=0.1, settle=0.2)
+    np.testing.assert_allclose(got.depth, expected.depth, rtol=5e-3)
+    assert 5e-3 < got.depth < 20e-3
 
 
 @pytest.mark.parametrize("integrator", ["explicit", "implicit"])
