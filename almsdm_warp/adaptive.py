@@ -104,7 +104,6 @@ class AdaptivePalpation(Palpation):
         self._outer = self.region.outer_ring  # Region.outer_ring scans the ring sizes: kept here
         self.rings_chosen = self._outer
         self.auto_reason = "not pressed yet"
-
         self.events = []
         self._countdown = self.check_steps
         self._steps = 0

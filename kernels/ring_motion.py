@@ -38,7 +38,7 @@ def eval_ring_motion(
         v = region_vertex[i]
         x = q[v]
         if region_boundary[i] == 0:
-            slot = 1 + region_ring[i]
+            slot = wp.min(1 + region_ring[i], slots - 1)  # rings past the array share its last entry
             motion[slot] = wp.max(motion[slot], wp.length(x - q_rest[v]))
         else:
             # one Jacobi step of the static equilibrium K u = f at v: anchor and springs, eqs. (3)-(5),

@@ -155,6 +155,40 @@ def test_adaptive_regions_merge_when_they_grow_into_each_other(device):
     assert all(r.peak_force_N > 1.0 and np.isfinite(r.force).all() for r in results)
 
 
+@pytest.mark.parametrize("integrator", ["explicit", "implicit"])
+def test_one_probe_released_while_the_other_holds(device, integrator):
+    """Probe 0 released, probe 1 held: probe 0's region relaxes and is retired alone (its vertices
+    exactly at rest) while probe 1's goes on; pressed again, probe 0 gets a fresh region and the
+    same forces as its first press."""
+    scene, mesh = scene_and_mesh()
+    dt = 1e-3 if integrator == "explicit" else 5e-3
+    multi = MultiPalpation(mesh, scene.tissue, tol=1e-4, integrator=integrator, dt=dt, device=device)
+    multi.touch(far_pair(mesh))
+    rest, normal = multi.rest_positions(), multi.inward_normals()
+    ramp = int(round(0.05 / dt))
+
+    def press0(steps):
+        out = []
+        for s in range(steps):
+            multi.set_probes([PROBE_DISPLACEMENT, PROBE_DISPLACEMENT], rest + normal * DEPTH * min((s + 1) / ramp, 1.0))
+            out.append(multi.step()[0].copy())
+        return np.array(out)
+
+    first = press0(2 * ramp)
+    region0 = multi.patch_of(0).vertices()
+    for _ in range(int(round(0.3 / dt))):
+        multi.set_probes([0, PROBE_DISPLACEMENT], rest + normal * DEPTH)
+        held = multi.step()[1].copy()
+    assert multi.patch_of(0) is None and multi.patch_of(1) is not None
+    assert [r["probes"] for r in multi.retired] == [[0]]
+    q0 = multi.model.particle_q_rest.numpy()
+    for state in multi.states:
+        np.testing.assert_array_equal(state.particle_q.numpy()[region0], q0[region0])
+    assert np.linalg.norm(held) > 1.0  # probe 1 still pressing
+    again = press0(2 * ramp)
+    np.testing.assert_allclose(again, first, rtol=1e-6, atol=1e-7)
+
+
 def test_bad_probe_sets(device):
     scene, mesh = scene_and_mesh()
     multi = MultiPalpation(mesh, scene.tissue, device=device)
