@@ -194,7 +194,15 @@ class AdaptivePalpation(Palpation):
     def _capture_motion(self):
         self._launch_motion(self.state)  # loads the module outside any capture
         if not self.capture:
-            self._motion_graphs = [lambda s=s: self._launch_motion(s) or (self._cpu or wp.synchronize_device(self.device)) for s in self.states]
+            def launcher(state):
+                def launch():
+                    self._launch_motion(state)
+                    if not self._cpu:
+                        wp.synchronize_device(self.device)
+
+                return launch
+
+            self._motion_graphs = [launcher(s) for s in self.states]
             return self._motion_graphs
         graphs = []
         for s in self.states:
@@ -252,7 +260,8 @@ class AdaptivePalpation(Palpation):
             self.auto_reason = f"grew to {self.region.outer_ring} rings: ring {n} would have moved {est * 1e3:.3g} mm"
 
     def _event(self, what, rings, length):
-        self.events.append({"step": self._steps, "event": what, "rings": int(rings), "estimate_mm": round(length * 1e3, 6) if math.isfinite(length) else None})
+        estimate = round(length * 1e3, 6) if math.isfinite(length) else None
+        self.events.append({"step": self._steps, "event": what, "rings": int(rings), "estimate_mm": estimate})
 
     # -- the press protocol --------------------------------------------------------------------
     def press(self, *args, **kw):

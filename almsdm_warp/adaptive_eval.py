@@ -83,7 +83,8 @@ def global_reference(mesh, tissue=None, device=None, *, vertex=None, integrator=
     return hold_press(pal, **prot)
 
 
-def fixed_point(mesh, tissue, rings, device=None, *, vertex=None, integrator="implicit", dt=5e-3, reference=None, time_steps=False, **protocol):
+def fixed_point(mesh, tissue, rings, device=None, *, vertex=None, integrator="implicit", dt=5e-3, reference=None,
+                time_steps=False, **protocol):
     """The same as auto_point for a fixed ring count (the chart's other points, and the comparison)."""
     prot = {**PROTOCOL, **protocol}
     pal = Palpation(mesh, tissue, rings=rings, integrator=integrator, dt=dt, device=device)

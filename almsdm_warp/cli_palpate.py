@@ -166,7 +166,10 @@ def cmd_palpate(args) -> int:
     critical = pal.model.critical_dt(free, anchors=anchored)
     free_count = len(free) if free is not None else pal.region_vertices
     if tol is not None:
-        what = f"auto rings (tol {tol * 1e3:g} mm) around vertex {vertex}, grown from {pal.region.outer_ring} ring(s) of {pal.region_vertices} vertices"
+        what = (
+            f"auto rings (tol {tol * 1e3:g} mm) around vertex {vertex}, grown from "
+            f"{pal.region.outer_ring} ring(s) of {pal.region_vertices} vertices"
+        )
     elif pal.region is not None:
         what = f"{rings} rings around vertex {vertex}, {pal.region_vertices} vertices ({free_count} free)"
     else:

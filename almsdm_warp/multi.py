@@ -222,7 +222,8 @@ class MultiPalpation:
                         pa, pb = self.patches[a], self.patches[b]
                         rings = max(pa.region.outer_ring, pb.region.outer_ring)
                         both = Patch(self, pa.probes + pb.probes, rings)
-                        both.events = pa.events + pb.events + [{"step": self._steps, "event": "merged", "rings": int(rings), "probes": both.probes}]
+                        merge = {"step": self._steps, "event": "merged", "rings": int(rings), "probes": both.probes}
+                        both.events = pa.events + pb.events + [merge]
                         both.rings_chosen = max(pa.rings_chosen, pb.rings_chosen, rings)
                         self.patches = [p for p in self.patches if p is not pa and p is not pb] + [both]
                         merged = True
@@ -290,7 +291,9 @@ class MultiPalpation:
             if not pressed:
                 moved = float(m[1 : n + 1].max(initial=0.0)) if n else float(m[1])
                 if self.retire and moved <= self.tol:
-                    patch.events.append({"step": self._steps, "event": "retired", "rings": int(n), "estimate_mm": round(moved * 1e3, 6)})
+                    patch.events.append(
+                        {"step": self._steps, "event": "retired", "rings": int(n), "estimate_mm": round(moved * 1e3, 6)}
+                    )
                     self.retired.append({"probes": patch.probes, "rings": int(patch.rings_chosen), "events": patch.events})
                     self._retire(patch)
                 continue
@@ -349,6 +352,8 @@ class MultiPalpation:
         if not np.all(np.isfinite(force)) or not np.all(np.isfinite(disp)):
             raise FloatingPointError(f"the {self.integrator} integrator diverged: use a smaller dt or the implicit one")
         return [
-            PressResult(vertex=int(v), depth=float(depth), dt=self.dt, release_step=ramp_n + hold_n, force=force[i], displacement=disp[i])
+            PressResult(
+                vertex=int(v), depth=float(depth), dt=self.dt, release_step=ramp_n + hold_n, force=force[i], displacement=disp[i]
+            )
             for i, v in enumerate(self.vertices)
         ]

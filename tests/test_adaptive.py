@@ -220,3 +220,17 @@ def test_auto_command_line(tmp_path):
         target = tmp_path / "bad.json"
         assert main([*bad, "--json", str(target)]) == 2
         assert not target.exists()
+
+
+def test_uncaptured_steps_and_checks_are_the_same(device):
+    """capture=False (every launch from Python) grows the same region and gives the same bits."""
+    scene, mesh = scene_and_mesh()
+    results = []
+    for capture in (True, False):
+        p = AdaptivePalpation(mesh, scene.tissue, tol=3e-5, integrator="implicit", dt=5e-3, device=device, capture=capture)
+        p.touch(top_vertex(mesh))
+        results.append((p.press(0.01, ramp=0.1, hold=0.1, settle=0.2), p.press_log[0]))
+    (a, log_a), (b, log_b) = results
+    assert log_a == log_b and log_a["rings"] >= 3
+    np.testing.assert_array_equal(a.force, b.force)
+    np.testing.assert_array_equal(a.displacement, b.displacement)
