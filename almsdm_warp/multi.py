@@ -178,7 +178,12 @@ class MultiPalpation:
 
     def set_probes(self, modes, targets=None) -> None:
         """Every probe's mode (PROBE_OFF / PROBE_DISPLACEMENT; one or one per probe) and target [m]."""
-        self.probes.mode[:] = modes
+        mode = self.probes.mode
+        mode[:] = modes
+        if not np.all((mode == PROBE_OFF) | (mode == PROBE_DISPLACEMENT)):
+            bad = mode[(mode != PROBE_OFF) & (mode != PROBE_DISPLACEMENT)]
+            mode[:] = PROBE_OFF
+            raise ValueError(f"probe modes are PROBE_OFF (0) or PROBE_DISPLACEMENT (1) here, got {bad.tolist()}")
         if targets is not None:
             self.probes.target[:] = targets
         driven = self.probes.mode == PROBE_DISPLACEMENT

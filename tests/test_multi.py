@@ -198,3 +198,6 @@ def test_bad_probe_sets(device):
         multi.touch([mesh.vertex_count])
     with pytest.raises(ValueError):
         MultiPalpation(mesh, scene.tissue, tol=0.0, device=device)
+    multi.touch([5, 6])
+    with pytest.raises(ValueError, match="PROBE_OFF"):
+        multi.set_probes([1, 2])
