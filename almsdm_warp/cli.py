@@ -139,7 +139,8 @@ def build_parser() -> argparse.ArgumentParser:
         "the feedback force, the recovery after release and the speed of a step. Defaults come from the scene.",
     )
     palpate.add_argument("scene", nargs="?", default=None, metavar="MESH_OR_SCENE", help="scene (.toml), scene name or mesh file; default: the stomach scene")
-    palpate.add_argument("--rings", type=_rings_arg, default=None, metavar="{N,global,global-free}", help="rings of the local region (outermost fixed), or a global model (default: the scene's)")
+    palpate.add_argument("--rings", type=_rings_arg, default=None, metavar="{N,auto,global,global-free}", help="rings of the local region (outermost fixed), auto (sized to --tol-mm), or a global model (default: the scene's)")
+    palpate.add_argument("--tol-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="--rings auto: grow the region until its fixed ring would move less than this [mm] (default 0.1)")
     palpate.add_argument("--integrator", choices=("explicit", "implicit"), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
     palpate.add_argument("--dt-ms", type=_number_arg("> 0"), default=1.0, metavar="MS", help="time step [ms] (default 1)")
     palpate.add_argument("--depth-mm", "--depth", dest="depth_mm", type=_number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")

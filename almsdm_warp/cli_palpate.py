@@ -14,14 +14,16 @@ from .cli import _device, _mesh_json, _quiet_warp
 from .errors import InputError
 
 GLOBAL_RINGS = ("global", "global-free")
+AUTO_TOL_MM = 0.1
+"""--tol-mm when --rings auto is given without it [mm]."""
 TIMING_STEPS = 2000
 """Steps timed after the presses, in batches (fewer when a step is slow: about 1 s in all)."""
 
 
 def _rings_arg(text):
-    """--rings: an integer >= 1, "global" or "global-free"."""
-    allowed = "an integer >= 1, " + " or ".join(repr(g) for g in GLOBAL_RINGS)
-    if text in GLOBAL_RINGS:
+    """--rings: an integer >= 1, "auto", "global" or "global-free"."""
+    allowed = "an integer >= 1, 'auto', " + " or ".join(repr(g) for g in GLOBAL_RINGS)
+    if text in GLOBAL_RINGS or text == "auto":
         return text
     try:
         value = int(text)
@@ -145,6 +147,7 @@ def cmd_palpate(args) -> int:
     settle = p.settle if args.settle_s is None else args.settle_s
     dt = args.dt_ms * 1e-3
     vertex, point, contact_extra = _contact(args, mesh, device)
+    tol = _auto_tol(args, rings)
 
     print(mesh.summary())
     print(
@@ -152,7 +155,12 @@ def cmd_palpate(args) -> int:
         f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s) x {args.presses}"
     )
     try:
-        pal = Palpation(mesh, scene.tissue, rings=rings, integrator=args.integrator, dt=dt, device=device)
+        if tol is not None:
+            from .adaptive import AdaptivePalpation
+
+            pal = AdaptivePalpation(mesh, scene.tissue, tol=tol, integrator=args.integrator, dt=dt, device=device)
+        else:
+            pal = Palpation(mesh, scene.tissue, rings=rings, integrator=args.integrator, dt=dt, device=device)
         pal.touch(vertex)
     except ValueError as exc:  # a parameter Palpation rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
@@ -160,12 +168,18 @@ def cmd_palpate(args) -> int:
     free = pal.region.vertices()[: pal.region.free_count] if pal.region is not None else None
     critical = pal.model.critical_dt(free, anchors=anchored)
     free_count = len(free) if free is not None else pal.region_vertices
-    if pal.region is not None:
+    if tol is not None:
+        what = (
+            f"auto rings (tol {tol * 1e3:g} mm) around vertex {vertex}, grown from "
+            f"{pal.region.outer_ring} ring(s) of {pal.region_vertices} vertices"
+        )
+    elif pal.region is not None:
         what = f"{rings} rings around vertex {vertex}, {pal.region_vertices} vertices ({free_count} free)"
     else:
         kind = "anchored" if anchored else "free, no anchors"
         what = f"{rings} ({kind}), all {pal.region_vertices} vertices free"
-    beyond = ", dt exceeds it" if args.integrator == "explicit" and dt > critical else ""
+    beyond = ", at the start" if tol is not None else ""
+    beyond += ", dt exceeds it" if args.integrator == "explicit" and dt > critical else ""
     print(
         f"model: {what}, {pal.region_springs} springs; {args.integrator} integrator, dt {dt * 1e3:g} ms "
         f"(explicit critical step {critical * 1e3:.3g} ms{beyond}), device {device}"
@@ -195,17 +209,22 @@ def cmd_palpate(args) -> int:
                     raise InputError(str(exc)) from exc
                 bar.done = (i + 1) * press_steps
                 presses.append(result)
+                auto = f", {pal.rings_chosen} rings ({pal.auto_reason})" if tol is not None else ""
                 rt = result.recovery_time_s
                 rt_text = f"{rt:.3f} s" if math.isfinite(rt) else f"not within the {settle:g} s settle window"
                 bar.close()
                 print(
                     f"press {i + 1}: peak force {result.peak_force_N:.3f} N, "
-                    f"recovery error {result.recovery_error_mm:.3f} mm, recovery time {rt_text}"
+                    f"recovery error {result.recovery_error_mm:.3f} mm, recovery time {rt_text}{auto}"
                 )
         finally:
             del pal.step  # back to the class's step, uncounted
         for line in recording.finish():
             print(line)
+    if tol is not None:  # time the region as the presses grew it, not a retired one
+        pal.rebuild(max(r["rings"] for r in pal.press_log), retire=False)
+        critical = pal.model.critical_dt(pal.region.vertices()[: pal.region.free_count])
+        free_count = pal.region.free_count
     try:
         step_s, timed = _time_steps(pal)  # about 1 s at most: no bar
     except SimulationDiverged as exc:
@@ -225,6 +244,7 @@ def cmd_palpate(args) -> int:
                 "press": {"depth_mm": depth * 1e3, "ramp_s": ramp, "hold_s": hold, "settle_s": settle},
                 "model": {
                     "rings": rings,
+                    **(_auto_json(pal, tol) if tol is not None else {}),
                     "region_vertices": int(pal.region_vertices),
                     "region_springs": int(pal.region_springs),
                     "free_vertices": int(free_count),
@@ -237,8 +257,9 @@ def cmd_palpate(args) -> int:
                         "peak_force_N": _finite(r.peak_force_N),
                         "recovery_error_mm": _finite(r.recovery_error_mm),
                         "recovery_time_s": _finite(r.recovery_time_s),
+                        **({"rings_chosen": log["rings"]} if tol is not None else {}),
                     }
-                    for r in presses
+                    for r, log in zip(presses, pal.press_log if tol is not None else [None] * len(presses))
                 ],
                 "step_us_median": _finite(step_us),
                 "steps_per_s": _finite(steps_per_s),
@@ -247,3 +268,23 @@ def cmd_palpate(args) -> int:
         )
         print(f"wrote {args.json}")
     return 0
+
+
+def _auto_tol(args, rings):
+    """--tol-mm [m] for --rings auto (default AUTO_TOL_MM), None for the others; an error otherwise."""
+    if rings != "auto":
+        if args.tol_mm is not None:
+            raise InputError(f"--tol-mm is for --rings auto (the region sized to a tolerance), not --rings {rings}")
+        return None
+    return (AUTO_TOL_MM if args.tol_mm is None else args.tol_mm) * 1e-3
+
+
+def _auto_json(pal, tol):
+    """The adaptive region's keys of the JSON's model: what it chose, why, and how it grew."""
+    chosen = max(r["rings"] for r in pal.press_log)
+    return {
+        "tol_mm": tol * 1e3,
+        "rings_chosen": int(chosen),
+        "auto_reason": pal.press_log[-1]["reason"],
+        "auto_events": [r["events"] for r in pal.press_log],
+    }

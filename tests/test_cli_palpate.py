@@ -160,7 +160,7 @@ def test_implicit_is_stable_where_explicit_diverges(tmp_path_factory):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--rings", "glob"], "allowed: an integer >= 1, 'global' or 'global-free'"),
+        (["--rings", "glob"], "allowed: an integer >= 1, 'auto', 'global' or 'global-free'"),
         (["--rings", "0"], "must be >= 1"),
         (["--rings", "-2"], "must be >= 1"),
         (["--presses", "0"], "--presses: must be >= 1"),

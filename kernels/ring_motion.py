@@ -1,0 +1,75 @@
+"""How far each ring of a region has moved, and how far its fixed ring would move if freed.
+
+The adaptive region (almsdm_warp.adaptive) checks these every few steps instead of the whole
+state: one launch and a read-back of a few floats. One thread walks the region (a few hundred
+vertices at most between checks), so the maxima need no atomics and the launch no clearing.
+"""
+
+import warp as wp
+
+from .forces import EPS_LENGTH
+
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.kernel
+def eval_ring_motion(
+    region_vertex: wp.array(dtype=wp.int32),
+    region_ring: wp.array(dtype=wp.int32),
+    region_boundary: wp.array(dtype=wp.int32),
+    count: int,
+    slots: int,
+    adj_offsets: wp.array(dtype=wp.int32),
+    adj_vertex: wp.array(dtype=wp.int32),
+    adj_edge: wp.array(dtype=wp.int32),
+    q_rest: wp.array(dtype=wp.vec3),
+    anchor_ke: wp.array(dtype=wp.float32),
+    spring_ke: wp.array(dtype=wp.float32),
+    spring_rest_length: wp.array(dtype=wp.float32),
+    q: wp.array(dtype=wp.vec3),
+    motion: wp.array(dtype=wp.float32),
+):
+    # motion[0]: the largest displacement a fixed-ring vertex would take if it alone were freed;
+    # motion[1 + r]: the largest displacement |q - q_rest| on ring r (free rings; 0 on the fixed one)
+    for s in range(slots):
+        motion[s] = 0.0
+    for i in range(count):
+        v = region_vertex[i]
+        x = q[v]
+        if region_boundary[i] == 0:
+            slot = wp.min(1 + region_ring[i], slots - 1)  # rings past the array share its last entry
+            motion[slot] = wp.max(motion[slot], wp.length(x - q_rest[v]))
+        else:
+            # one Jacobi step of the static equilibrium K u = f at v: anchor and springs, eqs. (3)-(5),
+            # linearized at the current state, with v's neighbours held where they are
+            ka = anchor_ke[v]
+            f = -ka * (x - q_rest[v])
+            D = ka * wp.identity(n=3, dtype=float)
+            for k in range(adj_offsets[v], adj_offsets[v + 1]):
+                j = adj_vertex[k]
+                e = adj_edge[k]
+                r = q[j] - x
+                l = wp.length(r)
+                if l > EPS_LENGTH:
+                    d = r / l
+                    f += spring_ke[e] * (l - spring_rest_length[e]) * d
+                    D += spring_ke[e] * wp.outer(d, d)
+            if wp.determinant(D) > 0.0:
+                motion[0] = wp.max(motion[0], wp.length(wp.inverse(D) * f))
+
+
+def eval_region_motion(model, region, state, motion):
+    """Fill `motion` (float32, >= rings + 2 entries) for `region` at `state`: see eval_ring_motion."""
+    dm = model.dmesh
+    wp.launch(
+        eval_ring_motion,
+        dim=1,
+        inputs=[
+            region.region_vertex, region.region_ring, region.region_boundary, region.vertex_count, motion.shape[0],
+            dm.adj_offsets, dm.adj_vertex, dm.adj_edge, model.particle_q_rest, model.anchor_ke, model.spring_ke,
+            model.spring_rest_length, state.particle_q,
+        ],
+        outputs=[motion],
+        device=model.device,
+    )

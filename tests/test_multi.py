@@ -1,0 +1,203 @@
+"""Several probes at once (issue 7, item 2): a region each, merged where they touch, retired at rest.
+Against independent answers: single-probe palpations (far probes do not interact), breadth-first
+distances from scipy (the merged region), and a float64 Newton solve of the static equilibrium
+with both probes held (the merged region's reactions)."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.csgraph import shortest_path
+from scipy.sparse.linalg import spsolve
+from test_simulation_press import internal_forces, scene_and_mesh, top_vertex
+
+from almsdm_warp.adaptive import AdaptivePalpation
+from almsdm_warp.model import PROBE_DISPLACEMENT
+from almsdm_warp.multi import MultiPalpation, MultiRegion
+
+DEPTH = 10.0e-3
+
+
+def hops(mesh, seeds):
+    """Hop distance of every vertex to the nearest seed (scipy breadth-first), inf if unreachable."""
+    n = mesh.vertex_count
+    e = mesh.edges.astype(np.int64)
+    a = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+    return shortest_path(a, unweighted=True, directed=False, indices=list(seeds)).min(axis=0)
+
+
+def far_pair(mesh):
+    a = top_vertex(mesh)
+    sv = mesh.surface_vertices
+    return a, int(sv[np.argmax(np.linalg.norm(mesh.vertices[sv] - mesh.vertices[a], axis=1))])
+
+
+def near_pair(mesh, apart=3):
+    a = top_vertex(mesh)
+    d = hops(mesh, [a])
+    sv = mesh.surface_vertices
+    return a, int(sv[np.flatnonzero(d[sv] == apart)[0]])
+
+
+def test_region_from_several_seeds_is_breadth_first(device):
+    _, mesh = scene_and_mesh()
+    a, b = near_pair(mesh, apart=5)
+    region = MultiRegion(mesh, device).build_seeds([b, a], 3)
+    d = hops(mesh, [a, b])
+    np.testing.assert_array_equal(np.sort(region.vertices()), np.flatnonzero(d <= 3))
+    np.testing.assert_array_equal(np.sort(region.boundary()), np.flatnonzero(d == 3))
+    np.testing.assert_array_equal(region.vertex_ring.numpy()[np.flatnonzero(d <= 3)], d[d <= 3])
+    region.expand(1)
+    np.testing.assert_array_equal(np.sort(region.vertices()), np.flatnonzero(d <= 4))
+
+
+@pytest.mark.parametrize("integrator", ["explicit", "implicit"])
+def test_far_probes_are_two_single_palpations(device, integrator):
+    """Two probes far apart: two regions that never merge, each growing and pressing as one
+    AdaptivePalpation alone at its vertex (same rings, same force; implicit: within 2% at the
+    ramp's corner, 0.1% at the peak), both retired at the end."""
+    scene, mesh = scene_and_mesh()
+    dt = 1e-3 if integrator == "explicit" else 5e-3
+    pair = far_pair(mesh)
+    multi = MultiPalpation(mesh, scene.tissue, tol=1e-4, integrator=integrator, dt=dt, device=device)
+    multi.touch(pair)
+    assert len(multi.patches) == 2
+    results = multi.press(DEPTH, ramp=0.1, hold=0.1, settle=0.3)
+    assert multi.patches == [] and len(multi.retired) == 2
+    for i, v in enumerate(pair):
+        alone = AdaptivePalpation(mesh, scene.tissue, tol=1e-4, integrator=integrator, dt=dt, device=device)
+        alone.touch(v)
+        expected = alone.press(DEPTH, ramp=0.1, hold=0.1, settle=0.3)
+        retired = next(r for r in multi.retired if r["probes"] == [i])
+        assert retired["rings"] == alone.press_log[0]["rings"]
+        if integrator == "explicit":  # the same step, the reaction summed in another order
+            np.testing.assert_allclose(results[i].force, expected.force, rtol=1e-5, atol=1e-6)
+            np.testing.assert_allclose(results[i].displacement, expected.displacement, rtol=1e-5, atol=1e-8)
+        else:  # backward Euler sees a held vertex at its last velocity: off for a few steps at the ramp's end
+            np.testing.assert_allclose(results[i].force, expected.force, rtol=0.02, atol=1e-6)
+            np.testing.assert_allclose(results[i].peak_force_N, expected.peak_force_N, rtol=1e-3)
+            hold_end = expected.release_step - 1
+            np.testing.assert_allclose(results[i].force[hold_end], expected.force[hold_end], rtol=1e-4)
+    rest = multi.model.particle_q_rest.numpy()
+    for state in multi.states:
+        np.testing.assert_array_equal(state.particle_q.numpy(), rest)
+
+
+def static_reactions(mesh, tissue, vertices, targets, free):
+    """Forces on `vertices` held at `targets` with the other `free` vertices in static equilibrium
+    (float64 Newton with the exact spring Jacobian; the rest of the mesh at rest)."""
+    n = mesh.vertex_count
+    e = mesh.edges.astype(np.int64)
+    x = mesh.vertices.copy()
+    x[vertices] = targets
+    unknown = np.setdiff1d(np.asarray(free, dtype=np.int64), vertices)
+    dof = (3 * unknown[:, None] + np.arange(3)).ravel()
+    eye = np.eye(3)
+    for _ in range(30):
+        g = internal_forces(mesh, tissue, x).ravel()[dof]
+        if np.linalg.norm(g) < 1e-12:
+            break
+        r = x[e[:, 1]] - x[e[:, 0]]
+        length = np.linalg.norm(r, axis=1)
+        d = r / length[:, None]
+        ddt = d[:, :, None] * d[:, None, :]
+        blocks = tissue.edge_stiffness * (ddt + (1.0 - mesh.edge_rest_length / length)[:, None, None] * (eye - ddt))
+        rows, cols, vals = [np.arange(3 * n)], [np.arange(3 * n)], [np.full(3 * n, tissue.anchor_stiffness)]
+        for a, b, sign in ((0, 0, 1.0), (1, 1, 1.0), (0, 1, -1.0), (1, 0, -1.0)):
+            for i in range(3):
+                for j in range(3):
+                    rows.append(3 * e[:, a] + i)
+                    cols.append(3 * e[:, b] + j)
+                    vals.append(sign * blocks[:, i, j])
+        K = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
+        x.ravel()[dof] += spsolve(K[dof][:, dof].tocsc(), g)
+    else:
+        raise AssertionError("Newton did not converge")
+    return internal_forces(mesh, tissue, x)[vertices]
+
+
+def test_touching_regions_merge_and_hold_both_probes(device):
+    """Two probes 3 hops apart with 2 rings each: their regions share vertices, so they are one
+    region grown from both (scipy's breadth-first set). Both pressed 10 mm and held (implicit,
+    quasi-static): the reactions match a float64 static solve with both vertices held."""
+    scene, mesh = scene_and_mesh()
+    pair = near_pair(mesh, apart=3)
+    multi = MultiPalpation(mesh, scene.tissue, rings=2, integrator="implicit", dt=5e-3, device=device)
+    multi.touch(pair)
+    assert len(multi.patches) == 1 and multi.patches[0].probes == [0, 1]
+    d = hops(mesh, pair)
+    region = multi.patches[0].region
+    np.testing.assert_array_equal(np.sort(region.vertices()), np.flatnonzero(d <= 2))
+    rest, normal = multi.rest_positions(), multi.inward_normals()
+    for s in range(200):
+        targets = rest + normal * DEPTH * min((s + 1) / 20, 1.0)
+        multi.set_probes(PROBE_DISPLACEMENT, targets)
+        forces = multi.step().copy()
+    free = np.flatnonzero(d < 2)
+    expected = static_reactions(mesh, scene.tissue, np.asarray(pair), targets.astype(np.float32).astype(np.float64), free)
+    np.testing.assert_allclose(forces, expected, rtol=2e-4, atol=1e-4)
+    # the probes push each other: each reaction differs from its probe's alone
+    alone = static_reactions(mesh, scene.tissue, np.asarray(pair[:1]), targets[:1], np.flatnonzero(hops(mesh, pair[:1]) < 2))
+    assert np.linalg.norm(alone[0] - expected[0]) > 1e-3 * np.linalg.norm(expected[0])
+
+
+def test_adaptive_regions_merge_when_they_grow_into_each_other(device):
+    """Probes 5 hops apart start with separate 1-ring regions; growing to the tolerance they meet
+    and become one, which then holds both probes and retires after the release."""
+    scene, mesh = scene_and_mesh()
+    pair = near_pair(mesh, apart=5)
+    multi = MultiPalpation(mesh, scene.tissue, tol=3e-5, integrator="implicit", dt=5e-3, device=device)
+    multi.touch(pair)
+    assert len(multi.patches) == 2
+    results = multi.press(DEPTH, ramp=0.1, hold=0.1, settle=0.3)
+    assert len(multi.retired) == 1 and multi.retired[0]["probes"] == [0, 1]
+    events = [e["event"] for e in multi.retired[0]["events"]]
+    assert "merged" in events and events[-1] == "retired"
+    assert all(r.peak_force_N > 1.0 and np.isfinite(r.force).all() for r in results)
+
+
+@pytest.mark.parametrize("integrator", ["explicit", "implicit"])
+def test_one_probe_released_while_the_other_holds(device, integrator):
+    """Probe 0 released, probe 1 held: probe 0's region relaxes and is retired alone (its vertices
+    exactly at rest) while probe 1's goes on; pressed again, probe 0 gets a fresh region and the
+    same forces as its first press."""
+    scene, mesh = scene_and_mesh()
+    dt = 1e-3 if integrator == "explicit" else 5e-3
+    multi = MultiPalpation(mesh, scene.tissue, tol=1e-4, integrator=integrator, dt=dt, device=device)
+    multi.touch(far_pair(mesh))
+    rest, normal = multi.rest_positions(), multi.inward_normals()
+    ramp = int(round(0.05 / dt))
+
+    def press0(steps):
+        out = []
+        for s in range(steps):
+            multi.set_probes([PROBE_DISPLACEMENT, PROBE_DISPLACEMENT], rest + normal * DEPTH * min((s + 1) / ramp, 1.0))
+            out.append(multi.step()[0].copy())
+        return np.array(out)
+
+    first = press0(2 * ramp)
+    region0 = multi.patch_of(0).vertices()
+    for _ in range(int(round(0.3 / dt))):
+        multi.set_probes([0, PROBE_DISPLACEMENT], rest + normal * DEPTH)
+        held = multi.step()[1].copy()
+    assert multi.patch_of(0) is None and multi.patch_of(1) is not None
+    assert [r["probes"] for r in multi.retired] == [[0]]
+    q0 = multi.model.particle_q_rest.numpy()
+    for state in multi.states:
+        np.testing.assert_array_equal(state.particle_q.numpy()[region0], q0[region0])
+    assert np.linalg.norm(held) > 1.0  # probe 1 still pressing
+    again = press0(2 * ramp)
+    np.testing.assert_allclose(again, first, rtol=1e-6, atol=1e-7)
+
+
+def test_bad_probe_sets(device):
+    scene, mesh = scene_and_mesh()
+    multi = MultiPalpation(mesh, scene.tissue, device=device)
+    with pytest.raises(ValueError, match="distinct"):
+        multi.touch([5, 5])
+    with pytest.raises(ValueError):
+        multi.touch([mesh.vertex_count])
+    with pytest.raises(ValueError):
+        MultiPalpation(mesh, scene.tissue, tol=0.0, device=device)
+    multi.touch([5, 6])
+    with pytest.raises(ValueError, match="PROBE_OFF"):
+        multi.set_probes([1, 2])
