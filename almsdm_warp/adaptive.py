@@ -280,3 +280,8 @@ class AdaptivePalpation(Palpation):
         result = press(*args, **kw)
         self.press_log.append({"rings": int(self.rings_chosen), "reason": self.auto_reason, "events": list(self.events)})
         return result
+
+
+def make_auto_palpation(mesh, tissue=None, *, integrator="explicit", dt=1e-3, device=None, tol=1e-4):
+    """An AdaptivePalpation at tolerance `tol` [m]: the "auto" points of `almsdm evaluate`."""
+    return AdaptivePalpation(mesh, tissue, tol=tol, integrator=integrator, dt=dt, device=device)

@@ -26,29 +26,31 @@ SERIES = (
 
 
 def find_auto_factory():
-    """Hook for the rings "auto" points: a callable, or None while the adaptive region is absent.
-
-    Expected: ``almsdm_warp.adaptive.make_auto_palpation(mesh, tissue, *, integrator, dt, device,
-    tol) -> Palpation`` (tol [m]: the displacement tolerance the region is sized to). Until that
-    exists, "auto" entries of the rings list are reported as not available; the lead wires it.
-    """
+    """The "auto:T" points' factory: ``almsdm_warp.adaptive.make_auto_palpation(mesh, tissue, *,
+    integrator, dt, device, tol)``, or None where the adaptive region is absent (those points are
+    then reported as not available)."""
     try:
-        from . import adaptive  # noqa: F401 - the adaptive engineer's module (issue 7)
+        from . import adaptive
     except ImportError:
         return None
     factory = getattr(adaptive, "make_auto_palpation", None)
     return factory if callable(factory) else None
 
 
-AUTO_TOL = 0.5e-3
-"""Tolerance [m] the "auto" points are asked for (the adaptive region's --tol-mm 0.5)."""
+def is_auto(rings) -> bool:
+    return isinstance(rings, str) and rings.startswith("auto")
+
+
+def auto_tol(rings) -> float:
+    """Tolerance [m] of an "auto:T" entry (T in mm)."""
+    return float(rings.split(":", 1)[1]) * 1e-3
 
 
 def _make(mesh, tissue, rings, integrator, device, auto_factory):
     from .palpation import Palpation
 
-    if rings == "auto":
-        return auto_factory(mesh, tissue, integrator=integrator, dt=DT, device=device, tol=AUTO_TOL)
+    if is_auto(rings):
+        return auto_factory(mesh, tissue, integrator=integrator, dt=DT, device=device, tol=auto_tol(rings))
     return Palpation(mesh, tissue, rings=rings, integrator=integrator, dt=DT, device=device)
 
 
@@ -57,7 +59,7 @@ def run_accuracy(settings, device, tasks, auto_factory=None) -> dict:
     the region's size and the median time of a step (timed at the first contact)."""
     from .evaluate_paper import _scene
 
-    rings_list = [r for r in settings.accuracy_rings if r != "auto" or auto_factory is not None]
+    rings_list = [r for r in settings.accuracy_rings if not is_auto(r) or auto_factory is not None]
     rows = []
     for name, integrator in SERIES:
         scene, mesh = _scene(name)
@@ -93,9 +95,9 @@ def run_accuracy(settings, device, tasks, auto_factory=None) -> dict:
                 }
             )
             tasks.step(f"speed-accuracy: {name} {integrator} {rings}")
-    missing = ["auto"] if "auto" in settings.accuracy_rings and auto_factory is None else []
+    missing = [r for r in settings.accuracy_rings if is_auto(r)] if auto_factory is None else []
     if missing:
-        tasks.step("speed-accuracy: auto not available", len(SERIES))
+        tasks.step("speed-accuracy: auto not available", len(SERIES) * len(missing))
     return {"contacts": settings.accuracy_contacts, "rows": rows, "not_available": missing}
 
 

@@ -57,6 +57,7 @@ class Settings:
     settle_s: float
     """Settle window after each press [s]."""
     accuracy_rings: tuple
+    """Fixed ring counts, "global", and "auto:T" (the adaptive region at tolerance T mm)."""
     accuracy_contacts: int
     """Contact vertices (spread over the surface) the speed-accuracy errors are taken over."""
     timing_budget_s: float
@@ -88,7 +89,7 @@ SETTINGS = {
         name="full",
         presses=6,
         settle_s=1.0,
-        accuracy_rings=(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, "auto", "global"),
+        accuracy_rings=(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, "auto:0.5", "auto:0.1", "auto:0.02", "global"),
         accuracy_contacts=16,
         timing_budget_s=1.0,
         stability_dt_ms=(0.1, 0.2, 0.5, 1.0, 1.5, 2.0, 5.0, 10.0, 20.0),
@@ -100,7 +101,7 @@ SETTINGS = {
         name="quick",
         presses=3,
         settle_s=0.5,
-        accuracy_rings=(1, 2, 3, 4, 6, 8, "auto", "global"),
+        accuracy_rings=(1, 2, 3, 4, 6, 8, "auto:0.5", "auto:0.05", "global"),
         accuracy_contacts=2,
         timing_budget_s=0.1,
         stability_dt_ms=(0.5, 1.0, 2.0, 5.0, 20.0),
@@ -118,7 +119,7 @@ SETTINGS = {
         name="tiny",
         presses=2,
         settle_s=0.3,
-        accuracy_rings=(1, 3, "auto", "global"),
+        accuracy_rings=(1, 3, "auto:0.1", "global"),
         accuracy_contacts=1,
         timing_budget_s=0.03,
         stability_dt_ms=(1.0, 20.0),

@@ -13,6 +13,8 @@ from .evaluate_stability import OSCILLATING, STABLE, explicit_boundary
 def _rings_label(rings) -> str:
     if rings == "global-free":
         return "global, no anchors"
+    if isinstance(rings, str) and rings.startswith("auto:"):
+        return f"auto, tol {rings.split(':', 1)[1]} mm"
     if rings in ("global", "auto"):
         return str(rings)
     return f"{rings} ring{'s' if rings != 1 else ''}"
