@@ -4,11 +4,10 @@ takes an experiment's result dict and a path, and writes one PNG through a tempo
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from pathlib import Path
 
 from .evaluate_common import PAPER
+from .output import atomic_path
 
 FLOOR = 1e-6
 """Errors of exactly zero (the reference against itself) are drawn at this floor on log axes."""
@@ -27,17 +26,9 @@ def _plt():
 
 def _save(fig, path) -> Path:
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=110, bbox_inches="tight")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it 0600; a figure is for anyone to read
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        with atomic_path(path, ".png") as tmp:
+            fig.savefig(tmp, dpi=110, bbox_inches="tight")
     finally:
         _plt().close(fig)
     return path

@@ -7,15 +7,13 @@ on the left, a close-up of the region on the right. matplotlib is imported only 
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError
-from .output import check_writable, publish
+from .output import atomic_path, check_writable
 
 PNG_SUFFIXES = (".png",)
 
@@ -151,15 +149,6 @@ def render_png(path, mesh, snap: Snapshot, *, title: str = "") -> Path:
     fig.colorbar(sm, ax=[ax1, ax2], shrink=0.7, pad=0.09, label="displacement [mm]")
     state = f"probe force {snap.force_N:.3f} N" if snap.in_contact else "probe lifted"
     fig.suptitle(f"{title}  t = {snap.time_s:.3f} s, {state}".strip(), fontsize=10)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp.png", dir=p.parent if str(p.parent) else ".")
-    os.close(fd)
-    try:
+    with atomic_path(p, ".tmp.png") as tmp:
         fig.savefig(tmp, format="png")
-        publish(tmp, p)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
     return p

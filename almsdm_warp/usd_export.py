@@ -30,7 +30,7 @@ import numpy as np
 
 from .errors import InputError
 from .model import PROBE_OFF
-from .output import publish
+from .output import atomic_path, publish
 
 USD_SUFFIXES = (".usda", ".usdc", ".usd")
 
@@ -284,15 +284,9 @@ class UsdRecorder:
             self.stage.SetEndTimeCode(self._last_code or 0)
             self._layer.Save()
             if self.path.suffix.lower() == ".usda":
-                fd, text_tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp.usda", dir=self._tmp.parent)
-                os.close(fd)
-                try:
+                with atomic_path(self.path, ".tmp.usda") as text_tmp:
                     if not self._layer.Export(text_tmp):
                         raise OSError(f"USD could not write {text_tmp}")
-                    publish(text_tmp, self.path)
-                except BaseException:
-                    _unlink(text_tmp)
-                    raise
                 self._discard()
             else:
                 self._release()

@@ -170,14 +170,14 @@ def test_stability_map_agrees_with_the_critical_step(quick):
 
 def test_table2_and_anatomy(quick):
     _, results, md, _ = quick
-    try:
-        import almsdm_warp.normals  # noqa: F401
+    from almsdm_warp.normals import STRATEGIES
 
-        normals = True
-    except ImportError:
-        normals = False
-    if not normals:
-        assert "Normals strategies not available" in md
+    # a frame is a step and a normals update: slower than the step alone, with every strategy
+    assert results["table2"]["strategies"] == list(STRATEGIES)
+    for row in results["table2"]["rows"]:
+        assert set(row["fps"]) == set(STRATEGIES)
+        assert all(0 < fps < row["steps_per_s"] for fps in row["fps"].values())
+    assert "Normals strategies not available" not in md
     assert [r["region_vertices"] for r in results["table2"]["rows"][:4]] == sorted(r["region_vertices"] for r in results["table2"]["rows"][:4])
     rows = results["anatomy"]["rows"]
     if not SHARED_MESHES.is_dir():

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import shortest_path
-from scipy.sparse.linalg import spsolve
-from test_simulation_press import internal_forces, scene_and_mesh, top_vertex
+from test_simulation_press import scene_and_mesh, static_reactions, top_vertex
 
 from almsdm_warp.adaptive import AdaptivePalpation
 from almsdm_warp.model import PROBE_DISPLACEMENT
@@ -80,39 +79,6 @@ def test_far_probes_are_two_single_palpations(device, integrator):
     rest = multi.model.particle_q_rest.numpy()
     for state in multi.states:
         np.testing.assert_array_equal(state.particle_q.numpy(), rest)
-
-
-def static_reactions(mesh, tissue, vertices, targets, free):
-    """Forces on `vertices` held at `targets` with the other `free` vertices in static equilibrium
-    (float64 Newton with the exact spring Jacobian; the rest of the mesh at rest)."""
-    n = mesh.vertex_count
-    e = mesh.edges.astype(np.int64)
-    x = mesh.vertices.copy()
-    x[vertices] = targets
-    unknown = np.setdiff1d(np.asarray(free, dtype=np.int64), vertices)
-    dof = (3 * unknown[:, None] + np.arange(3)).ravel()
-    eye = np.eye(3)
-    for _ in range(30):
-        g = internal_forces(mesh, tissue, x).ravel()[dof]
-        if np.linalg.norm(g) < 1e-12:
-            break
-        r = x[e[:, 1]] - x[e[:, 0]]
-        length = np.linalg.norm(r, axis=1)
-        d = r / length[:, None]
-        ddt = d[:, :, None] * d[:, None, :]
-        blocks = tissue.edge_stiffness * (ddt + (1.0 - mesh.edge_rest_length / length)[:, None, None] * (eye - ddt))
-        rows, cols, vals = [np.arange(3 * n)], [np.arange(3 * n)], [np.full(3 * n, tissue.anchor_stiffness)]
-        for a, b, sign in ((0, 0, 1.0), (1, 1, 1.0), (0, 1, -1.0), (1, 0, -1.0)):
-            for i in range(3):
-                for j in range(3):
-                    rows.append(3 * e[:, a] + i)
-                    cols.append(3 * e[:, b] + j)
-                    vals.append(sign * blocks[:, i, j])
-        K = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
-        x.ravel()[dof] += spsolve(K[dof][:, dof].tocsc(), g)
-    else:
-        raise AssertionError("Newton did not converge")
-    return internal_forces(mesh, tissue, x)[vertices]
 
 
 def test_touching_regions_merge_and_hold_both_probes(device):

@@ -97,14 +97,14 @@ def internal_forces(mesh, tissue, x):
     return f
 
 
-def static_reaction(mesh, tissue, vertex, target, free):
-    """The force on `vertex` held at `target` when the other `free` vertices are in equilibrium
-    (the rest fixed at rest): Newton with the exact spring Jacobian, sparse direct solves."""
+def static_reactions(mesh, tissue, vertices, targets, free):
+    """Forces on `vertices` held at `targets` with the other `free` vertices in static equilibrium
+    (float64 Newton with the exact spring Jacobian; the rest of the mesh at rest)."""
     n = mesh.vertex_count
     e = mesh.edges.astype(np.int64)
     x = mesh.vertices.copy()
-    x[vertex] = target
-    unknown = np.setdiff1d(np.asarray(free, dtype=np.int64), [vertex])
+    x[vertices] = targets
+    unknown = np.setdiff1d(np.asarray(free, dtype=np.int64), vertices)
     dof = (3 * unknown[:, None] + np.arange(3)).ravel()
     eye = np.eye(3)
     for _ in range(30):
@@ -127,7 +127,12 @@ def static_reaction(mesh, tissue, vertex, target, free):
         x.ravel()[dof] += spsolve(K[dof][:, dof].tocsc(), g)
     else:
         raise AssertionError("Newton did not converge")
-    return internal_forces(mesh, tissue, x)[vertex]
+    return internal_forces(mesh, tissue, x)[vertices]
+
+
+def static_reaction(mesh, tissue, vertex, target, free):
+    """The force on one `vertex` held at `target` (static_reactions of one vertex)."""
+    return static_reactions(mesh, tissue, [vertex], [target], free)[0]
 
 
 # -- the tests --------------------------------------------------------------------------------
