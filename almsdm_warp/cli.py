@@ -154,10 +154,15 @@ def build_parser() -> argparse.ArgumentParser:
     palpate.add_argument("--json", default=None, metavar="PATH", help="write the result as JSON here")
     palpate.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal, for runs over ~2 s)")
     palpate.set_defaults(func=cmd_palpate)
+    from .cli_bench import add_parser as add_bench
+    from .cli_sweep import add_parser as add_sweep
+
+    add_sweep(sub)
+    add_bench(sub)
     return parser
 
 
-COMMANDS = ("palpate", "touch")
+COMMANDS = ("palpate", "touch", "sweep", "bench")
 
 
 def _default_command(argv) -> bool:
