@@ -78,10 +78,12 @@ class BatchPalpation:
 
     rings: the local model's rings (the outermost fixed). dt [s]. threads: threads per block on
     CUDA (default: enough for the largest region's free vertices, 32..256); the CPU uses one.
+    capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
+    that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
     """
 
-    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, **model_kw):
+    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, **model_kw):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
         self.device = self.model.device
         self.mesh = self.model.mesh
@@ -92,6 +94,7 @@ class BatchPalpation:
             raise ValueError(f"dt must be > 0, got {dt}")
         self.dt = float(dt)
         self._threads = threads
+        self._capacity = capacity
         self.batch_size = 0
         self.regions = None
         self.vertices = np.zeros(0, dtype=np.int64)
@@ -114,8 +117,8 @@ class BatchPalpation:
         B = self.batch_size = len(verts)
         seeds = wp.array(verts.astype(np.int32), dtype=wp.int32, device=self.device)
         k = self.rings
-        cv = _pow2(2 * (3 * k * (k + 1) + 1), 32)
-        ce = _pow2(cv * min(self._max_degree, 8), 64)
+        cv = _pow2(2 * (3 * k * (k + 1) + 1), 32) if self._capacity is None else int(self._capacity)
+        ce = _pow2(cv * min(self._max_degree, 8), 8)
         while True:
             regions = BatchRegions(B, cv, ce, k, self.device)
             br.build_regions(self.model.dmesh, seeds, k, regions)

@@ -226,15 +226,16 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
     """Press the chunks `todo` round-robin over `devices` (each chunk written when it is done)."""
     from .batch import BatchPalpation
 
-    batches = {d: BatchPalpation(model=plan.model(d), rings=plan.rings, dt=plan.dt) for d in devices}
+    models = {d: plan.model(d) for d in devices}
+    batches = [BatchPalpation(model=models[d], rings=plan.rings, dt=plan.dt) for d in devices]
     advance = None if progress is None else progress.advance
     todo = list(todo)
     while todo:
         running = []
-        for d in devices:
+        for batch in batches:
             if todo:
                 i = todo.pop(0)
-                running.append((i, press_chunk(batches[d], plan, *plan.chunks[i], on_launch=advance)))
+                running.append((i, press_chunk(batch, plan, *plan.chunks[i], on_launch=advance)))
         for i, finish in running:
             parts.write(i, finish())
 
