@@ -18,9 +18,13 @@ import warp as wp
 
 from .device_mesh import check_vertex
 from .kernels import batch_explicit as bk
+from .kernels import batch_explicit_cuda as bkc
 from .kernels import batch_region as br
 from .model import Model
 from .region import check_rings
+
+
+KERNELS = ("entries", "vertices")
 
 
 def _pow2(n: int, minimum: int = 1) -> int:
@@ -70,6 +74,8 @@ class BatchRegions:
         """Local index of each CSR neighbour (mesh CSR order), shape [B, entry capacity]."""
         self.local_edge = wp.zeros((B, ce), dtype=wp.int32, device=d)
         """Mesh edge id (spring) of each CSR entry, shape [B, entry capacity]."""
+        self.local_owner = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        """Local index of the free vertex each CSR entry belongs to, shape [B, entry capacity]."""
         self.status = wp.zeros(B, dtype=wp.int32, device=d)
 
 
@@ -78,12 +84,15 @@ class BatchPalpation:
 
     rings: the local model's rings (the outermost fixed). dt [s]. threads: threads per block on
     CUDA (default: enough for the largest region's free vertices, 32..256); the CPU uses one.
+    kernel: "entries" (a block per palpation, its threads sharing the springs: the CUDA default
+    where the regions fit) or "vertices" (a block's threads share the free vertices; a block is
+    one thread on the CPU: the CPU default). Both give the same bits on the CPU.
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
     """
 
-    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, **model_kw):
+    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, kernel=None, **model_kw):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
         self.device = self.model.device
         self.mesh = self.model.mesh
@@ -93,6 +102,7 @@ class BatchPalpation:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
         self.dt = float(dt)
+        self._kernel = kernel
         self._threads = threads
         self._capacity = capacity
         self.batch_size = 0
@@ -140,9 +150,21 @@ class BatchPalpation:
         # the kernel's capacities: the largest region of this batch, not the build's guess
         self.vertex_capacity = _pow2(int(counts.max()), 16)
         self.entry_capacity = _pow2(int(entries.max(initial=1)), 16)
+        self.cuda_plan = self._entries_plan(int(counts.max()), int(free.max()), int(entries.max(initial=1)))
         cuda = self.device.is_cuda
+        kernel = self._kernel or ("entries" if cuda and self.cuda_plan is not None else "vertices")
+        if kernel not in KERNELS:
+            raise ValueError(f"unknown kernel {kernel!r} (known: {', '.join(KERNELS)})")
+        if kernel == "entries" and self.cuda_plan is None:
+            raise ValueError(
+                f"the 'entries' kernel cannot hold these regions ({int(free.max())} free vertices, {int(entries.max())} "
+                f"springs ends: it needs a thread per free vertex, at most 16 spring ends a thread, 40 KiB of shared memory)"
+            )
+        self.kernel = kernel
         self.shared = bool(cuda and bk.shared_bytes(self.vertex_capacity, self.entry_capacity) <= bk.SHARED_BYTES_MAX)
-        if not cuda:
+        if kernel == "entries":
+            self.threads = self.cuda_plan[0]
+        elif not cuda:
             self.threads = 1
         elif self._threads is not None:
             self.threads = int(self._threads)
@@ -165,6 +187,20 @@ class BatchPalpation:
         """Inward unit normal at each contact vertex (float64, as the host computes the target)."""
         br.rest_states(self)
         return self
+
+    def _entries_plan(self, max_vertices, max_free, max_entries):
+        """(threads, entries per thread, vertex capacity) of the "entries" kernel, or None if it cannot hold them."""
+        threads = min(max(_pow2(max_free, 32), 32), 1024) if self._threads is None else int(self._threads)
+        if threads < max_free:
+            return None
+        per_thread = -(-max_entries // threads)
+        while per_thread > 16 and threads < 1024:  # registers are unrolled up to 16 entries a thread
+            threads *= 2
+            per_thread = -(-max_entries // threads)
+        cv = -(-max_vertices // 16) * 16
+        if per_thread > 16 or bkc.shared_bytes(cv, threads * per_thread) > bk.SHARED_BYTES_MAX:
+            return None
+        return threads, per_thread, cv
 
     def region(self, b: int) -> np.ndarray:
         """Mesh ids of palpation b's region vertices in local order (host copy)."""
@@ -195,9 +231,16 @@ class BatchPalpation:
         chunk = total if steps_per_launch is None else max(int(steps_per_launch), 1)
         for begin in range(0, total, chunk):
             count = min(chunk, total - begin)
-            bk.press_batch(self, begin, count)
+            self.launch_steps(begin, count)
             if on_launch is not None:
                 on_launch(count)
+
+    def launch_steps(self, begin: int, count: int) -> None:
+        """Launch steps begin..begin+count of the press scheduled by start_press (no wait)."""
+        if self.kernel == "entries":
+            bkc.press_batch_cuda(self, begin, count)
+        else:
+            bk.press_batch(self, begin, count)
 
     def finish_press(self) -> BatchResult:
         """Wait for the press and read it back (the force magnitudes as Palpation's host code takes them)."""

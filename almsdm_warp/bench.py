@@ -56,24 +56,23 @@ def spread_vertices(mesh, count: int) -> np.ndarray:
     return np.resize(surface, count).astype(np.int64)
 
 
-def measure_batch(mesh, rings, batch, device, *, steps=1000, repeats=5, threads=None, model=None):
-    """Region-steps per second of BatchPalpation: `batch` presses of `steps` steps (10 mm ramp over
-    the first 100 ms, then held), timed between device synchronizations; the median of `repeats`."""
+def measure_batch(mesh, rings, batch, device, *, steps=1000, repeats=5, threads=None, model=None, dt=1e-3, kernel=None):
+    """Region-steps per second of BatchPalpation: `batch` presses of `steps` steps of `dt` (10 mm
+    ramp over the first 100 steps, then held), timed between device synchronizations; the median
+    of `repeats`."""
     from .batch import BatchPalpation
-    from .kernels.batch_explicit import press_batch
-
-    bp = BatchPalpation(mesh, rings=rings, dt=1e-3, device=device, threads=threads, model=model)
+    bp = BatchPalpation(mesh, rings=rings, dt=dt, device=device, threads=threads, model=model, kernel=kernel)
     t0 = time.perf_counter()
     bp.touch(spread_vertices(mesh, batch))
     wp.synchronize_device(bp.device)
     build_s = time.perf_counter() - t0
     bp.depth, bp.ramp_steps, bp.press_steps = 0.01, 100, steps
-    press_batch(bp, 0, 2)  # compile and load
+    bp.launch_steps(0, 2)  # compile and load
     wp.synchronize_device(bp.device)
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        press_batch(bp, 0, steps)
+        bp.launch_steps(0, steps)
         wp.synchronize_device(bp.device)
         times.append(time.perf_counter() - t0)
     t = statistics.median(times)
@@ -84,6 +83,7 @@ def measure_batch(mesh, rings, batch, device, *, steps=1000, repeats=5, threads=
         "region_steps_per_s": batch * steps / t,
         "step_us_median": t / steps * 1e6,
         "threads": bp.threads,
+        "kernel": bp.kernel,
         "shared": bp.shared,
         "build_ms": build_s * 1e3,
         "region_vertices_max": int(bp.region_vertex_counts.max()),

@@ -64,12 +64,16 @@ def cmd_bench(args) -> int:
         row = measure(mesh, "global", integrator, device.alias, max(blocks // 5, 1), max(steps // 10, 20))
         glob.append({"integrator": integrator, "steps_per_s": row["steps_per_s"]})
         print(f"  global {integrator}: {row['step_us_median']:.1f} us/step, {row['steps_per_s']:,.0f} steps/s")
+    from .model import Model
+    from .sweep import auto_dt
+
+    dt = auto_dt(Model(mesh, scene.tissue, "cpu"))  # 1 ms unless the mesh's critical step is shorter
     sizes = args.batch or ([16, 64] if device.is_cpu else [1000, 10000, 100000])
     batch = []
     for b in sizes:
-        row = measure_batch(mesh, args.rings, b, device.alias, steps=(100 if device.is_cpu or args.quick else 1000), repeats=3)
+        row = measure_batch(mesh, args.rings, b, device.alias, steps=(100 if device.is_cpu or args.quick else 1000), repeats=3, dt=dt)
         batch.append({"rings": row["rings"], "batch": b, "region_steps_per_s": row["region_steps_per_s"]})
-        print(f"  batch {b} x {args.rings} rings: {row['region_steps_per_s']:,.0f} region-steps/s ({row['threads']} threads per block, shared memory {row['shared']})")
+        print(f"  batch {b} x {args.rings} rings: {row['region_steps_per_s']:,.0f} region-steps/s (kernel {row['kernel']}, {row['threads']} threads per block, dt {dt * 1e3:g} ms)")
     one = next(r for r in single if r["rings"] == args.rings and r["integrator"] == "explicit")["steps_per_s"]
     ratios = {
         "batch_best_over_single_explicit": max(r["region_steps_per_s"] for r in batch) / one,

@@ -56,6 +56,10 @@ def _work_array(name, dtype, capacity, shared):
 #if defined(__CUDA_ARCH__) && {int(bool(shared))}
     __shared__ {ctype} buf[{capacity}];
     return wp::array_t<{ctype}>(buf, {capacity});
+#elif {int(bool(shared))}
+    // CPU: blocks run one after another and a block's fibers share this (plain bytes: no static-init guard)
+    alignas(16) static unsigned char raw[sizeof({ctype}) * {capacity}];
+    return wp::array_t<{ctype}>(reinterpret_cast<{ctype}*>(raw), {capacity});
 #else
     return wp::array_t<{ctype}>(fallback.data + offset, {capacity});
 #endif
@@ -71,6 +75,8 @@ def _work_array(name, dtype, capacity, shared):
     """
 #if defined(__CUDA_ARCH__)
     __syncthreads();
+#else
+    ::wp::tile_sync<WP_TILE_BLOCK_DIM>();  // a barrier of the block's fibers (none when a block is one thread)
 #endif
 """
 )
@@ -149,7 +155,7 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
     w_off = _work_array("off", wp.int32, cv + 1, shared)
     w_nbr = _work_array("nbr", wp.int32, ce, shared)
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module="unique", enable_backward=False)
     def press_batch_explicit(
         threads: int,
         region_vertex: wp.array2d(dtype=wp.int32),

@@ -43,6 +43,7 @@ def build_batch_regions(
     local_offsets: wp.array2d(dtype=wp.int32),
     local_neighbour: wp.array2d(dtype=wp.int32),
     local_edge: wp.array2d(dtype=wp.int32),
+    local_owner: wp.array2d(dtype=wp.int32),
     status: wp.array(dtype=wp.int32),
 ):
     b = wp.tid()
@@ -98,6 +99,7 @@ def build_batch_regions(
             if slot < entry_capacity:
                 local_neighbour[b, slot] = find_local(region_vertex, b, count, adj_vertex[k])
                 local_edge[b, slot] = adj_edge[k]
+                local_owner[b, slot] = i
             else:
                 flags = flags | 2
             slot += 1
@@ -113,7 +115,7 @@ def build_regions(dmesh, seeds, rings, arrays):
         inputs=[dmesh.adj_offsets, dmesh.adj_vertex, dmesh.adj_edge, seeds, rings],
         outputs=[
             arrays.region_vertex, arrays.ring_offsets, arrays.region_count, arrays.free_count,
-            arrays.local_offsets, arrays.local_neighbour, arrays.local_edge, arrays.status,
+            arrays.local_offsets, arrays.local_neighbour, arrays.local_edge, arrays.local_owner, arrays.status,
         ],
         device=dmesh.device,
     )

@@ -50,9 +50,12 @@ def test_batch_regions_match_region_and_bfs(device, stomach, rings, capacity):
             np.testing.assert_array_equal(local_edge[b, k0:k1], edges[offsets[v] : offsets[v + 1]])
 
 
-def test_batch_press_equals_palpation_bits(device, stomach):
-    # same device, same points: the same force and recovery, bit for bit on the CPU
-    bp = BatchPalpation(stomach, rings=4, device=device).touch(SEEDS)
+@pytest.mark.parametrize("kernel", ["vertices", "entries"])
+def test_batch_press_equals_palpation_bits(device, stomach, kernel):
+    # same device, same points: the same force and recovery, bit for bit on the CPU, with either
+    # kernel ("entries", CUDA's default, runs on the CPU as blocks of fibers with real barriers)
+    bp = BatchPalpation(stomach, rings=4, device=device, kernel=kernel).touch(SEEDS)
+    assert bp.kernel == kernel
     res = bp.press(**SHORT)
     for b, seed in enumerate(SEEDS):
         pal = Palpation(stomach, rings=4, device=device)
@@ -68,10 +71,11 @@ def test_batch_press_equals_palpation_bits(device, stomach):
     assert np.all(res.peak_force > 0.5)
 
 
-def test_batch_launch_chunks_do_not_change_bits(device, stomach):
+@pytest.mark.parametrize("kernel", ["vertices", "entries"])
+def test_batch_launch_chunks_do_not_change_bits(device, stomach, kernel):
     # the state goes through global memory between launches: any split gives the same numbers
-    whole = BatchPalpation(stomach, rings=3, device=device).touch(SEEDS[:3]).press(**SHORT)
-    split = BatchPalpation(stomach, rings=3, device=device).touch(SEEDS[:3]).press(**SHORT, steps_per_launch=7)
+    whole = BatchPalpation(stomach, rings=3, device=device, kernel=kernel).touch(SEEDS[:3]).press(**SHORT)
+    split = BatchPalpation(stomach, rings=3, device=device, kernel=kernel, threads=64).touch(SEEDS[:3]).press(**SHORT, steps_per_launch=7)
     np.testing.assert_array_equal(whole.peak_force, split.peak_force)
     np.testing.assert_array_equal(whole.recovery_error, split.recovery_error)
 
