@@ -76,6 +76,11 @@ class BatchRegions:
         """Mesh edge id (spring) of each CSR entry, shape [B, entry capacity]."""
         self.local_owner = wp.zeros((B, ce), dtype=wp.int32, device=d)
         """Local index of the free vertex each CSR entry belongs to, shape [B, entry capacity]."""
+        self.local_spring = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        """Per CSR entry: s + 1 when it reads spring s as is, -(s + 1) negated (its mirror entry's)."""
+        self.spring_entry = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        """The CSR entry that computes each spring (each spring of the region once), [B, entry capacity]."""
+        self.spring_count = wp.zeros(B, dtype=wp.int32, device=d)
         self.status = wp.zeros(B, dtype=wp.int32, device=d)
 
 
@@ -85,14 +90,14 @@ class BatchPalpation:
     rings: the local model's rings (the outermost fixed). dt [s]. threads: threads per block on
     CUDA (default: enough for the largest region's free vertices, 32..256); the CPU uses one.
     kernel: "entries" (a block per palpation, its threads sharing the springs: the CUDA default
-    where the regions fit) or "vertices" (a block's threads share the free vertices; a block is
+    where the regions fit; max_registers > 0 caps its registers per thread) or "vertices" (a block's threads share the free vertices; a block is
     one thread on the CPU: the CPU default). Both give the same bits on the CPU.
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
     """
 
-    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, kernel=None, **model_kw):
+    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, kernel=None, max_registers=0, **model_kw):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
         self.device = self.model.device
         self.mesh = self.model.mesh
@@ -103,6 +108,7 @@ class BatchPalpation:
             raise ValueError(f"dt must be > 0, got {dt}")
         self.dt = float(dt)
         self._kernel = kernel
+        self._max_registers = int(max_registers)
         self._threads = threads
         self._capacity = capacity
         self.batch_size = 0
@@ -150,15 +156,16 @@ class BatchPalpation:
         # the kernel's capacities: the largest region of this batch, not the build's guess
         self.vertex_capacity = _pow2(int(counts.max()), 16)
         self.entry_capacity = _pow2(int(entries.max(initial=1)), 16)
-        self.cuda_plan = self._entries_plan(int(counts.max()), int(free.max()), int(entries.max(initial=1)))
+        springs = regions.spring_count.numpy()
+        self.cuda_plan = self._entries_plan(int(counts.max()), int(entries.max(initial=1)), int(springs.max(initial=1)))
         cuda = self.device.is_cuda
         kernel = self._kernel or ("entries" if cuda and self.cuda_plan is not None else "vertices")
         if kernel not in KERNELS:
             raise ValueError(f"unknown kernel {kernel!r} (known: {', '.join(KERNELS)})")
         if kernel == "entries" and self.cuda_plan is None:
             raise ValueError(
-                f"the 'entries' kernel cannot hold these regions ({int(free.max())} free vertices, {int(entries.max())} "
-                f"springs ends: it needs a thread per free vertex, at most 16 spring ends a thread, 40 KiB of shared memory)"
+                f"the 'entries' kernel cannot hold these regions ({int(counts.max())} vertices, {int(springs.max())} springs: "
+                f"at most 16 springs a thread of 1024, and 40 KiB of shared memory)"
             )
         self.kernel = kernel
         self.shared = bool(cuda and bk.shared_bytes(self.vertex_capacity, self.entry_capacity) <= bk.SHARED_BYTES_MAX)
@@ -188,19 +195,19 @@ class BatchPalpation:
         br.rest_states(self)
         return self
 
-    def _entries_plan(self, max_vertices, max_free, max_entries):
-        """(threads, entries per thread, vertex capacity) of the "entries" kernel, or None if it cannot hold them."""
-        threads = min(max(_pow2(max_free, 32), 32), 1024) if self._threads is None else int(self._threads)
-        if threads < max_free:
-            return None
-        per_thread = -(-max_entries // threads)
-        while per_thread > 16 and threads < 1024:  # registers are unrolled up to 16 entries a thread
+    def _entries_plan(self, max_vertices, max_entries, max_springs):
+        """(threads, springs per thread, vertex capacity, entry capacity, register cap) of the
+        "entries" kernel, or None where it cannot hold these regions."""
+        threads = 64 if self._threads is None else int(self._threads)
+        per_thread = -(-max_springs // threads)
+        while per_thread > 16 and threads < 1024:  # registers are unrolled up to 16 springs a thread
             threads *= 2
-            per_thread = -(-max_entries // threads)
+            per_thread = -(-max_springs // threads)
         cv = -(-max_vertices // 16) * 16
-        if per_thread > 16 or bkc.shared_bytes(cv, threads * per_thread) > bk.SHARED_BYTES_MAX:
+        ce = -(-max_entries // 16) * 16
+        if per_thread > 16 or bkc.shared_bytes(cv, ce, threads * per_thread) > bk.SHARED_BYTES_MAX:
             return None
-        return threads, per_thread, cv
+        return threads, max(per_thread, 1), cv, ce, self._max_registers
 
     def region(self, b: int) -> np.ndarray:
         """Mesh ids of palpation b's region vertices in local order (host copy)."""

@@ -2,14 +2,16 @@
 
 The same step as kernels/batch_explicit.py (and the one-palpation step), arranged for a GPU:
 - the region's state (positions, velocities) lives in shared memory for the whole launch;
-- each thread holds, in registers loaded once, up to `per_thread` CSR entries of the region's
-  free vertices (owner, neighbour, k_ij, d_ij, rest length) and, if its lane is a free vertex,
-  that vertex's rest position, mass and anchor;
-- a step is two phases between block barriers: (A) every entry's spring force along its edge,
+- each thread holds, in registers loaded once, up to `per_thread` of the region's springs
+  (owner, neighbour, k_ij, d_ij, rest length); per-vertex constants and each CSR entry's spring
+  (and sign) are in shared memory too;
+- a step is two phases between block barriers: (A) every spring's force along its edge,
   eqs. (4)-(6), into shared memory (the work of the step, balanced over all threads); (B) each free
-  vertex sums the anchor term, eq. (3), and then its entries in mesh CSR order (the one-palpation
+  vertex sums the anchor term, eq. (3), and then its springs in mesh CSR order (the one-palpation
   order), and integrates by semi-implicit Euler in place.
-Requires a block of at least as many threads as the largest region's free vertices (<= 1024).
+Each spring is computed once: the entry j -> i of a spring between two free vertices reads the
+entry i -> j's force negated, which is its exact value (r, and the velocity difference, change
+sign exactly; the length and the dot product do not change), so the sums are the same bits.
 """
 
 import contextlib
@@ -24,24 +26,33 @@ from .forces import EPS_LENGTH
 wp.set_module_options({"enable_backward": False})
 
 
-def shared_bytes(vertex_capacity: int, entry_capacity: int) -> int:
-    """Shared memory a block of this kernel takes [bytes]: q, qd per vertex, a force per entry."""
-    return 24 * vertex_capacity + 12 * entry_capacity
+def shared_bytes(vertex_capacity: int, entry_capacity: int, spring_capacity: int) -> int:
+    """Shared memory a block of this kernel takes [bytes]: state and constants per vertex, a code
+    per CSR entry, a force per spring."""
+    return 52 * vertex_capacity + 4 + 4 * entry_capacity + 12 * spring_capacity
 
 
 @functools.cache
-def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int):
-    """The kernel for blocks of `threads` threads, `per_thread` entries each, regions of up to
-    `vertex_capacity` vertices (compile-time sizes: registers are unrolled, shared arrays static)."""
-    T, P, cv = int(threads), int(per_thread), int(vertex_capacity)
-    ce = T * P
+def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int, entry_capacity: int, max_registers: int = 0):
+    """The kernel for blocks of `threads` threads with `per_thread` springs each, regions of up to
+    `vertex_capacity` vertices and `entry_capacity` CSR entries (compile-time sizes: registers are
+    unrolled, shared arrays static); `max_registers` > 0 caps registers per thread (occupancy)."""
+    T, P, cv, ce = int(threads), int(per_thread), int(vertex_capacity), int(entry_capacity)
+    cs = T * P
     w_q = _work_array("cq", wp.vec3, cv, True)
     w_qd = _work_array("cqd", wp.vec3, cv, True)
-    w_f = _work_array("cf", wp.vec3, ce, True)
+    w_rest = _work_array("crest", wp.vec3, cv, True)
+    w_mass = _work_array("cmass", wp.float32, cv, True)
+    w_ka = _work_array("cka", wp.float32, cv, True)
+    w_kda = _work_array("ckda", wp.float32, cv, True)
+    w_off = _work_array("coff", wp.int32, cv + 1, True)
+    w_code = _work_array("ccode", wp.int32, ce, True)
+    w_f = _work_array("cf", wp.vec3, cs, True)
     vec_i = wp.types.vector(length=P, dtype=wp.int32)
     vec_f = wp.types.vector(length=P, dtype=wp.float32)
+    options = {"cuda_max_registers": int(max_registers)} if max_registers else {}
 
-    @wp.kernel(module="unique", enable_backward=False)
+    @wp.kernel(module="unique", enable_backward=False, **options)
     def press_batch_explicit_cuda(
         region_vertex: wp.array2d(dtype=wp.int32),
         region_count: wp.array(dtype=wp.int32),
@@ -50,6 +61,9 @@ def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int):
         local_neighbour: wp.array2d(dtype=wp.int32),
         local_edge: wp.array2d(dtype=wp.int32),
         local_owner: wp.array2d(dtype=wp.int32),
+        local_spring: wp.array2d(dtype=wp.int32),
+        spring_entry: wp.array2d(dtype=wp.int32),
+        spring_count: wp.array(dtype=wp.int32),
         q_rest: wp.array(dtype=wp.vec3),
         particle_mass: wp.array(dtype=wp.float32),
         anchor_ke: wp.array(dtype=wp.float32),
@@ -77,71 +91,79 @@ def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int):
         n = region_count[b]
         nf = free_count[b]
         ne = local_offsets[b, nf]
+        ns = spring_count[b]
         q = w_q(q_rest, 0)
         qd = w_qd(q_rest, 0)
+        rest = w_rest(q_rest, 0)
+        mass = w_mass(particle_mass, 0)
+        ka = w_ka(particle_mass, 0)
+        kda = w_kda(particle_mass, 0)
+        off = w_off(region_count, 0)
+        code = w_code(region_count, 0)
         fe = w_f(q_rest, 0)
+        # the region into shared memory: state, per-vertex constants, CSR offsets and entry codes
         for i in range(lane, n, T):
+            v = region_vertex[b, i]
             q[i] = q_state[b, i]
             qd[i] = qd_state[b, i]
-        # this lane's entries, in registers for the whole launch
+            rest[i] = q_rest[v]
+            mass[i] = particle_mass[v]
+            ka[i] = anchor_ke[v]
+            kda[i] = anchor_kd[v]
+        for i in range(lane, nf + 1, T):
+            off[i] = local_offsets[b, i]
+        for k in range(lane, ne, T):
+            code[k] = local_spring[b, k]
+        # this lane's springs (each spring of the region once), in registers for the whole launch
         own = vec_i(0)
         nbr = vec_i(0)
         ke = vec_f(0.0)
         kd = vec_f(0.0)
         l0 = vec_f(0.0)
         for m in range(P):
-            k = lane + m * T
-            if k < ne:
+            sp = lane + m * T
+            if sp < ns:
+                k = spring_entry[b, sp]
                 own[m] = local_owner[b, k]
                 nbr[m] = local_neighbour[b, k]
                 e = local_edge[b, k]
                 ke[m] = spring_ke[e]
                 kd[m] = spring_kd[e]
                 l0[m] = spring_rest_length[e]
-        # this lane's vertex (local index = lane), if it is free
-        i = lane
-        rest_i = wp.vec3(0.0)
-        mass_i = float(1.0)
-        ka_i = float(0.0)
-        kda_i = float(0.0)
-        k0 = int(0)
-        k1 = int(0)
-        if i < nf:
-            v = region_vertex[b, i]
-            rest_i = q_rest[v]
-            mass_i = particle_mass[v]
-            ka_i = anchor_ke[v]
-            kda_i = anchor_kd[v]
-            k0 = local_offsets[b, i]
-            k1 = local_offsets[b, i + 1]
         rest0 = wp.vec3d(q_rest[region_vertex[b, 0]])
         direction = press_direction[b]
         peak = peak_force[b]
         peak_f = peak_reaction[b]
         block_sync()
         for s in range(step_begin, step_begin + step_count):
-            # (A) each entry: elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
+            # (A) each spring: elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
             for m in range(P):
-                k = lane + m * T
-                if k < ne:
-                    x = q[own[m]]
+                sp = lane + m * T
+                if sp < ns:
+                    i = own[m]
                     j = nbr[m]
+                    x = q[i]
                     r = q[j] - x
                     l = wp.length(r)
                     c = wp.vec3(0.0)
                     if l > EPS_LENGTH:
                         inv_l = 1.0 / l
-                        sf = ke[m] * (l - l0[m]) + kd[m] * wp.dot(qd[j] - qd[own[m]], r) * inv_l
+                        sf = ke[m] * (l - l0[m]) + kd[m] * wp.dot(qd[j] - qd[i], r) * inv_l
                         c = (sf * inv_l) * r
-                    fe[k] = c
+                    fe[sp] = c
             block_sync()
-            # (B) each free vertex: anchor first, eq. (3), then its entries in mesh CSR order
-            if i < nf:
+            # (B) each free vertex: anchor first, eq. (3), then its springs in mesh CSR order (the
+            # entry j -> i of a spring i -> j is its exact negation)
+            for i in range(lane, nf, T):
                 x = q[i]
                 u = qd[i]
-                f = -anchor_scale * (ka_i * (x - rest_i) + kda_i * u)
-                for k in range(k0, k1):
-                    f += fe[k]
+                f = -anchor_scale * (ka[i] * (x - rest[i]) + kda[i] * u)
+                for k in range(off[i], off[i + 1]):
+                    sc = code[k]
+                    if sc > 0:
+                        f += fe[sc - 1]
+                    else:
+                        f += -fe[-sc - 1]
                 if i == 0 and s < press_steps:
                     # the feedback force, then displacement control: the vertex is where the probe puts it
                     fx = wp.float64(f[0])
@@ -159,13 +181,13 @@ def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int):
                     qd[i] = (target - x) / dt
                 else:
                     # m u'' + d u' + k u = F, eq. (3), by semi-implicit Euler: velocity first, then position
-                    u1 = u + dt * f / mass_i
+                    u1 = u + dt * f / mass[i]
                     q[i] = x + dt * u1
                     qd[i] = u1
             block_sync()
-        for i2 in range(lane, n, T):
-            q_state[b, i2] = q[i2]
-            qd_state[b, i2] = qd[i2]
+        for i in range(lane, n, T):
+            q_state[b, i] = q[i]
+            qd_state[b, i] = qd[i]
         if lane == 0:
             peak_force[b] = peak
             peak_reaction[b] = peak_f
@@ -176,9 +198,8 @@ def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int):
 def press_batch_cuda(batch, step_begin, step_count):
     """Advance every palpation of `batch` `step_count` steps with the CUDA kernel (batch.cuda_plan)."""
     m, r, p = batch.model, batch.regions, batch
-    threads, per_thread, cv = p.cuda_plan
     with _cpu_blocks(m.device):
-        _launch(m, r, p, threads, per_thread, cv, step_begin, step_count)
+        _launch(m, r, p, p.cuda_plan, step_begin, step_count)
 
 
 @contextlib.contextmanager
@@ -197,13 +218,15 @@ def _cpu_blocks(device):
         wp.config.enable_cpu_blocks = saved
 
 
-def _launch(m, r, p, threads, per_thread, cv, step_begin, step_count):
+def _launch(m, r, p, plan, step_begin, step_count):
+    threads = plan[0]
     wp.launch(
-        press_kernel_cuda(threads, per_thread, cv),
+        press_kernel_cuda(*plan),
         dim=p.batch_size * threads,
         block_dim=threads,
         inputs=[
             r.region_vertex, r.region_count, r.free_count, r.local_offsets, r.local_neighbour, r.local_edge, r.local_owner,
+            r.local_spring, r.spring_entry, r.spring_count,
             m.particle_q_rest, m.particle_mass, m.anchor_ke, m.anchor_kd, 1.0, m.spring_ke, m.spring_kd, m.spring_rest_length,
             p.press_direction, p.depth, p.ramp_steps, p.press_steps, p.dt, int(step_begin), int(step_count),
         ],

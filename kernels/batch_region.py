@@ -44,6 +44,9 @@ def build_batch_regions(
     local_neighbour: wp.array2d(dtype=wp.int32),
     local_edge: wp.array2d(dtype=wp.int32),
     local_owner: wp.array2d(dtype=wp.int32),
+    local_spring: wp.array2d(dtype=wp.int32),
+    spring_entry: wp.array2d(dtype=wp.int32),
+    spring_count: wp.array(dtype=wp.int32),
     status: wp.array(dtype=wp.int32),
 ):
     b = wp.tid()
@@ -104,6 +107,22 @@ def build_batch_regions(
                 flags = flags | 2
             slot += 1
         local_offsets[b, i + 1] = slot
+    # each spring once: an entry i -> j is a spring's own when j is fixed or j > i; the entry
+    # j -> i of two free ends reads it negated (its force is exactly the negation, bit for bit)
+    springs = int(0)
+    if flags == 0:
+        for i in range(nf):
+            for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
+                j = local_neighbour[b, k]
+                if j >= nf or j > i:
+                    spring_entry[b, springs] = k
+                    local_spring[b, k] = springs + 1
+                    springs += 1
+                else:
+                    for kk in range(local_offsets[b, j], local_offsets[b, j + 1]):
+                        if local_neighbour[b, kk] == i:
+                            local_spring[b, k] = -local_spring[b, kk]
+    spring_count[b] = springs
     status[b] = flags
 
 
@@ -115,7 +134,8 @@ def build_regions(dmesh, seeds, rings, arrays):
         inputs=[dmesh.adj_offsets, dmesh.adj_vertex, dmesh.adj_edge, seeds, rings],
         outputs=[
             arrays.region_vertex, arrays.ring_offsets, arrays.region_count, arrays.free_count,
-            arrays.local_offsets, arrays.local_neighbour, arrays.local_edge, arrays.local_owner, arrays.status,
+            arrays.local_offsets, arrays.local_neighbour, arrays.local_edge, arrays.local_owner,
+            arrays.local_spring, arrays.spring_entry, arrays.spring_count, arrays.status,
         ],
         device=dmesh.device,
     )

@@ -83,6 +83,7 @@ def main(argv=None):
     ap.add_argument("--rings", type=int, default=4)
     ap.add_argument("--batch", type=int, nargs="*", default=[1000, 10000, 100000])
     ap.add_argument("--threads", type=int, nargs="*", default=[None])
+    ap.add_argument("--max-registers", type=int, nargs="*", default=[0], help="register caps per thread to try (0: none)")
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--sweep-points", type=int, default=10000)
     ap.add_argument("--spheres", type=int, nargs="*", default=[])
@@ -104,22 +105,23 @@ def main(argv=None):
     dt = args.dt_ms * 1e-3 if args.dt_ms else auto_dt(Model(mesh, None, "cpu"))
     print(f"{mesh.summary()}; device {args.device}; {args.rings} rings; dt {dt * 1e3:g} ms")
     out = {"device": args.device, "mesh": str(mesh.path), "dt": dt, "batch": [], "sweep": None, "spheres": []}
-    print("| B | kernel | threads | region vertices max | build ms | step us | region-steps/s | finite |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| B | kernel | threads | register cap | region vertices max | build ms | step us | region-steps/s | finite |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for b in args.batch:
         for kernel in args.kernels:
             for threads in args.threads:
-                try:
-                    row = measure_batch(mesh, args.rings, b, args.device, steps=args.steps, threads=threads, dt=dt, kernel=kernel)
-                except ValueError as exc:  # a thread count too small for the regions
-                    print(f"| {b} | {kernel} | {threads} | skipped: {exc} |")
-                    continue
-                out["batch"].append(row)
-                print(
-                    f"| {b} | {row['kernel']} | {row['threads']} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
-                    f"{row['step_us_median']:.2f} | {row['region_steps_per_s']:.3e} | {row['finite']} |",
-                    flush=True,
-                )
+                for regs in args.max_registers if kernel != "vertices" else [0]:
+                    try:
+                        row = measure_batch(mesh, args.rings, b, args.device, steps=args.steps, threads=threads, dt=dt, kernel=kernel, max_registers=regs)
+                    except ValueError as exc:  # a thread count too small for the regions
+                        print(f"| {b} | {kernel} | {threads} | {regs} | skipped: {exc} |")
+                        continue
+                    out["batch"].append(row)
+                    print(
+                        f"| {b} | {row['kernel']} | {row['threads']} | {regs or '-'} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
+                        f"{row['step_us_median']:.2f} | {row['region_steps_per_s']:.3e} | {row['finite']} |",
+                        flush=True,
+                    )
     if args.sweep_points:
         row = sweep_time(mesh, args.sweep_points, args.device, args.rings, dt=dt)
         out["sweep"] = row

@@ -18,6 +18,7 @@ def main(argv=None):
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--points", type=int, default=32)
     ap.add_argument("--rings", type=int, default=4)
+    ap.add_argument("--kernel", default=None, help="entries or vertices (default: the device's)")
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
     from almsdm_warp.batch import BatchPalpation
@@ -28,7 +29,8 @@ def main(argv=None):
     init_warp()
     mesh = load_mesh(args.mesh)
     _, vertices = sample_points(mesh, args.points)
-    res = BatchPalpation(mesh, rings=args.rings, device=args.device).touch(vertices).press()
+    bp = BatchPalpation(mesh, rings=args.rings, device=args.device, kernel=args.kernel).touch(vertices)
+    res = bp.press()
     ref_f, ref_r = [], []
     for v in vertices:
         pal = Palpation(mesh, rings=args.rings, device=args.device)
@@ -38,7 +40,7 @@ def main(argv=None):
         ref_r.append(r.recovery_error_mm * 1e-3)
     ref_f, ref_r = np.array(ref_f), np.array(ref_r)
     print(
-        f"{args.device}: {len(vertices)} points, {args.rings} rings; peak force equal bits {np.sum(res.peak_force == ref_f)}, "
+        f"{args.device}, kernel {bp.kernel}: {len(vertices)} points, {args.rings} rings; peak force equal bits {np.sum(res.peak_force == ref_f)}, "
         f"max rel diff {np.max(np.abs(res.peak_force - ref_f) / ref_f):.3g}; recovery error equal bits "
         f"{np.sum(res.recovery_error == ref_r)}, max abs diff {np.max(np.abs(res.recovery_error - ref_r)) * 1e3:.3g} mm"
     )

@@ -67,7 +67,7 @@ def test_batch_press_equals_palpation_bits(device, stomach, kernel):
             assert res.hold_force[b] == ref.force[ref.release_step - 1]
         else:  # CUDA: both compiled by NVRTC, which may fuse multiply-adds differently per kernel
             np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=1e-5)
-            np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=1e-6)
+            np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=1e-4)
     assert np.all(res.peak_force > 0.5)
 
 
