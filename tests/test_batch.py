@@ -65,9 +65,12 @@ def test_batch_press_equals_palpation_bits(device, stomach, kernel):
             assert res.peak_force[b] == ref.peak_force_N
             assert res.recovery_error[b] * 1e3 == ref.recovery_error_mm
             assert res.hold_force[b] == ref.force[ref.release_step - 1]
-        else:  # CUDA: both compiled by NVRTC, which may fuse multiply-adds differently per kernel
-            np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=1e-5)
-            np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=1e-4)
+        elif kernel == "vertices":  # CUDA, the same loop as the one-palpation kernel: the same bits too
+            assert res.peak_force[b] == ref.peak_force_N
+            assert res.recovery_error[b] * 1e3 == ref.recovery_error_mm
+        else:  # CUDA "entries": a spring's force is stored, then added: NVRTC cannot fuse that multiply-add
+            np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=2e-6)
+            np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=2e-5)
     assert np.all(res.peak_force > 0.5)
 
 
