@@ -81,6 +81,8 @@ class BatchRegions:
         self.spring_entry = wp.zeros((B, ce), dtype=wp.int32, device=d)
         """The CSR entry that computes each spring (each spring of the region once), [B, entry capacity]."""
         self.spring_count = wp.zeros(B, dtype=wp.int32, device=d)
+        self.entry_count = wp.zeros(B, dtype=wp.int32, device=d)
+        """CSR entries of each palpation's free vertices (its local_offsets[b, free_count[b]])."""
         self.status = wp.zeros(B, dtype=wp.int32, device=d)
 
 
@@ -150,8 +152,7 @@ class BatchPalpation:
         self.regions = regions
         counts = regions.region_count.numpy()
         free = regions.free_count.numpy()
-        offsets = regions.local_offsets.numpy()
-        entries = offsets[np.arange(B), free]
+        entries = regions.entry_count.numpy()
         self.region_vertex_counts = counts
         self.free_vertex_counts = free
         # the kernel's capacities: the largest region of this batch, not the build's guess
@@ -256,10 +257,13 @@ class BatchPalpation:
         hold = self.hold_reaction.numpy()
         q0 = self.q_state.numpy()[:, 0, :]
         rest = self.mesh.vertices[self.vertices].astype(np.float32).astype(np.float64)
-        # the same expressions as PressResult's, per palpation, so the bits agree
-        peak_n = np.array([math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2) for f in peak])
-        hold_n = np.array([math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2) for f in hold])
-        recovery = np.array([float(np.linalg.norm(q0[b] - rest[b])) for b in range(self.batch_size)])
+        # PressResult's expressions, vectorized: float32 components squared in float64 (Python's
+        # x ** 2 and NumPy's agree), summed left to right; the norm of the float64 difference
+        f64 = peak.astype(np.float64)
+        peak_n = np.sqrt(f64[:, 0] ** 2 + f64[:, 1] ** 2 + f64[:, 2] ** 2)
+        h64 = hold.astype(np.float64)
+        hold_n = np.sqrt(h64[:, 0] ** 2 + h64[:, 1] ** 2 + h64[:, 2] ** 2)
+        recovery = np.linalg.norm(q0 - rest, axis=1)
         return BatchResult(
             vertex=self.vertices.copy(),
             depth=self.depth,

@@ -47,6 +47,7 @@ def build_batch_regions(
     local_spring: wp.array2d(dtype=wp.int32),
     spring_entry: wp.array2d(dtype=wp.int32),
     spring_count: wp.array(dtype=wp.int32),
+    entry_count: wp.array(dtype=wp.int32),
     status: wp.array(dtype=wp.int32),
 ):
     b = wp.tid()
@@ -107,6 +108,7 @@ def build_batch_regions(
                 flags = flags | 2
             slot += 1
         local_offsets[b, i + 1] = slot
+    entry_count[b] = slot
     # each spring once: an entry i -> j is a spring's own when j is fixed or j > i; the entry
     # j -> i of two free ends reads it negated (its force is exactly the negation, bit for bit)
     springs = int(0)
@@ -135,7 +137,7 @@ def build_regions(dmesh, seeds, rings, arrays):
         outputs=[
             arrays.region_vertex, arrays.ring_offsets, arrays.region_count, arrays.free_count,
             arrays.local_offsets, arrays.local_neighbour, arrays.local_edge, arrays.local_owner,
-            arrays.local_spring, arrays.spring_entry, arrays.spring_count, arrays.status,
+            arrays.local_spring, arrays.spring_entry, arrays.spring_count, arrays.entry_count, arrays.status,
         ],
         device=dmesh.device,
     )
