@@ -99,7 +99,7 @@ class BatchPalpation:
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
     """
 
-    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, kernel=None, max_registers=None, **model_kw):
+    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, kernel=None, max_registers=None, wide=True, **model_kw):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
         self.device = self.model.device
         self.mesh = self.model.mesh
@@ -112,6 +112,7 @@ class BatchPalpation:
         self._kernel = kernel
         # 64 registers a thread: 16 blocks of 64 threads per SM, the best of 0/40/64 caps measured on an H200
         self._max_registers = 64 if max_registers is None else int(max_registers)
+        self._wide = bool(wide)
         self._threads = threads
         self._capacity = capacity
         self.batch_size = 0
@@ -184,6 +185,7 @@ class BatchPalpation:
         self.scratch_vec3 = wp.zeros(nv, dtype=wp.vec3, device=d)
         self.scratch_float = wp.zeros(nf, dtype=wp.float32, device=d)
         self.scratch_int = wp.zeros(ni, dtype=wp.int32, device=d)
+        self.scratch_wide = wp.zeros(1, dtype=wp.vec4, device=d)  # a typed placeholder (shared memory is used)
         self.q_state = wp.zeros((B, regions.vertex_capacity), dtype=wp.vec3, device=d)
         """Positions of each palpation's region vertices [m], local order, shape [B, capacity]."""
         self.qd_state = wp.zeros((B, regions.vertex_capacity), dtype=wp.vec3, device=d)
@@ -209,7 +211,7 @@ class BatchPalpation:
         ce = -(-max_entries // 16) * 16
         if per_thread > 16 or bkc.shared_bytes(cv, ce, threads * per_thread) > bk.SHARED_BYTES_MAX:
             return None
-        return threads, max(per_thread, 1), cv, ce, self._max_registers
+        return threads, max(per_thread, 1), cv, ce, self._max_registers, self._wide
 
     def region(self, b: int) -> np.ndarray:
         """Mesh ids of palpation b's region vertices in local order (host copy)."""

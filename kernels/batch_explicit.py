@@ -26,7 +26,7 @@ wp.set_module_options({"enable_backward": False})
 SHARED_BYTES_MAX = 40 * 1024
 """Working arrays larger than this per block stay in global memory (static shared memory is 48 KiB)."""
 
-_C_TYPES = {wp.vec3: "wp::vec_t<3, wp::float32>", wp.float32: "wp::float32", wp.int32: "wp::int32"}
+_C_TYPES = {wp.vec3: "wp::vec_t<3, wp::float32>", wp.vec4: "wp::vec_t<4, wp::float32>", wp.float32: "wp::float32", wp.int32: "wp::int32"}
 
 
 class _Native:
@@ -54,7 +54,7 @@ def _work_array(name, dtype, capacity, shared):
     ctype = _C_TYPES[dtype]
     snippet = f"""
 #if defined(__CUDA_ARCH__) && {int(bool(shared))}
-    __shared__ {ctype} buf[{capacity}];
+    __shared__ __align__(16) {ctype} buf[{capacity}];
     return wp::array_t<{ctype}>(buf, {capacity});
 #elif {int(bool(shared))}
     // CPU: blocks run one after another and a block's fibers share this (plain bytes: no static-init guard)

@@ -26,28 +26,67 @@ from .forces import EPS_LENGTH
 wp.set_module_options({"enable_backward": False})
 
 
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    const float4 v = reinterpret_cast<const float4*>(a.data)[i];  // one 16-byte shared load
+    return wp::vec_t<3, wp::float32>(v.x, v.y, v.z);
+#else
+    const wp::vec_t<4, wp::float32>& v = a.data[i];
+    return wp::vec_t<3, wp::float32>(v[0], v[1], v[2]);
+#endif
+"""
+)
+def load_xyz(a: wp.array(dtype=wp.vec4), i: int) -> wp.vec3: ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    reinterpret_cast<float4*>(a.data)[i] = make_float4(v[0], v[1], v[2], 0.0f);  // one 16-byte store
+#else
+    a.data[i] = wp::vec_t<4, wp::float32>(v[0], v[1], v[2], 0.0f);
+#endif
+"""
+)
+def store_xyz(a: wp.array(dtype=wp.vec4), i: int, v: wp.vec3): ...
+
+
+@wp.func
+def load_xyz3(a: wp.array(dtype=wp.vec3), i: int):
+    return a[i]
+
+
+@wp.func
+def store_xyz3(a: wp.array(dtype=wp.vec3), i: int, v: wp.vec3):
+    a[i] = v
+
+
 def shared_bytes(vertex_capacity: int, entry_capacity: int, spring_capacity: int) -> int:
     """Shared memory a block of this kernel takes [bytes]: state and constants per vertex, a code
     per CSR entry, a force per spring."""
-    return 52 * vertex_capacity + 4 + 4 * entry_capacity + 12 * spring_capacity
+    return 60 * vertex_capacity + 4 + 4 * entry_capacity + 16 * spring_capacity  # vec4 state and forces
 
 
 @functools.cache
-def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int, entry_capacity: int, max_registers: int = 0):
+def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int, entry_capacity: int, max_registers: int = 0, wide: bool = True):
     """The kernel for blocks of `threads` threads with `per_thread` springs each, regions of up to
     `vertex_capacity` vertices and `entry_capacity` CSR entries (compile-time sizes: registers are
-    unrolled, shared arrays static); `max_registers` > 0 caps registers per thread (occupancy)."""
+    unrolled, shared arrays static); `max_registers` > 0 caps registers per thread (occupancy);
+    `wide`: positions, velocities and spring forces stored as 16-byte vec4 (one shared load each)."""
     T, P, cv, ce = int(threads), int(per_thread), int(vertex_capacity), int(entry_capacity)
     cs = T * P
-    w_q = _work_array("cq", wp.vec3, cv, True)
-    w_qd = _work_array("cqd", wp.vec3, cv, True)
+    sv = wp.vec4 if wide else wp.vec3
+    ld, st = (load_xyz, store_xyz) if wide else (load_xyz3, store_xyz3)
+    w_q = _work_array("cq" + "4" * wide, sv, cv, True)
+    w_qd = _work_array("cqd" + "4" * wide, sv, cv, True)
     w_rest = _work_array("crest", wp.vec3, cv, True)
     w_mass = _work_array("cmass", wp.float32, cv, True)
     w_ka = _work_array("cka", wp.float32, cv, True)
     w_kda = _work_array("ckda", wp.float32, cv, True)
     w_off = _work_array("coff", wp.int32, cv + 1, True)
     w_code = _work_array("ccode", wp.int32, ce, True)
-    w_f = _work_array("cf", wp.vec3, cs, True)
+    w_f = _work_array("cf" + "4" * wide, sv, cs, True)
     vec_i = wp.types.vector(length=P, dtype=wp.int32)
     vec_f = wp.types.vector(length=P, dtype=wp.float32)
     options = {"cuda_max_registers": int(max_registers)} if max_registers else {}
@@ -84,6 +123,7 @@ def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int, entry
         peak_force: wp.array(dtype=wp.float64),
         peak_reaction: wp.array(dtype=wp.vec3),
         hold_reaction: wp.array(dtype=wp.vec3),
+        scratch: wp.array(dtype=sv),
     ):
         tid = wp.tid()
         b = tid // T
@@ -92,20 +132,20 @@ def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int, entry
         nf = free_count[b]
         ne = local_offsets[b, nf]
         ns = spring_count[b]
-        q = w_q(q_rest, 0)
-        qd = w_qd(q_rest, 0)
+        q = w_q(scratch, 0)
+        qd = w_qd(scratch, 0)
         rest = w_rest(q_rest, 0)
         mass = w_mass(particle_mass, 0)
         ka = w_ka(particle_mass, 0)
         kda = w_kda(particle_mass, 0)
         off = w_off(region_count, 0)
         code = w_code(region_count, 0)
-        fe = w_f(q_rest, 0)
+        fe = w_f(scratch, 0)
         # the region into shared memory: state, per-vertex constants, CSR offsets and entry codes
         for i in range(lane, n, T):
             v = region_vertex[b, i]
-            q[i] = q_state[b, i]
-            qd[i] = qd_state[b, i]
+            st(q, i, q_state[b, i])
+            st(qd, i, qd_state[b, i])
             rest[i] = q_rest[v]
             mass[i] = particle_mass[v]
             ka[i] = anchor_ke[v]
@@ -142,28 +182,28 @@ def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int, entry
                 if sp < ns:
                     i = own[m]
                     j = nbr[m]
-                    x = q[i]
-                    r = q[j] - x
+                    x = ld(q, i)
+                    r = ld(q, j) - x
                     l = wp.length(r)
                     c = wp.vec3(0.0)
                     if l > EPS_LENGTH:
                         inv_l = 1.0 / l
-                        sf = ke[m] * (l - l0[m]) + kd[m] * wp.dot(qd[j] - qd[i], r) * inv_l
+                        sf = ke[m] * (l - l0[m]) + kd[m] * wp.dot(ld(qd, j) - ld(qd, i), r) * inv_l
                         c = (sf * inv_l) * r
-                    fe[sp] = c
+                    st(fe, sp, c)
             block_sync()
             # (B) each free vertex: anchor first, eq. (3), then its springs in mesh CSR order (the
             # entry j -> i of a spring i -> j is its exact negation)
             for i in range(lane, nf, T):
-                x = q[i]
-                u = qd[i]
+                x = ld(q, i)
+                u = ld(qd, i)
                 f = -anchor_scale * (ka[i] * (x - rest[i]) + kda[i] * u)
                 for k in range(off[i], off[i + 1]):
                     sc = code[k]
                     if sc > 0:
-                        f += fe[sc - 1]
+                        f += ld(fe, sc - 1)
                     else:
-                        f += -fe[-sc - 1]
+                        f += -ld(fe, -sc - 1)
                 if i == 0 and s < press_steps:
                     # the feedback force, then displacement control: the vertex is where the probe puts it
                     fx = wp.float64(f[0])
@@ -177,17 +217,17 @@ def press_kernel_cuda(threads: int, per_thread: int, vertex_capacity: int, entry
                         hold_reaction[b] = f
                     frac = wp.min(wp.float64(s + 1) / wp.float64(ramp_steps), wp.float64(1.0))
                     target = wp.vec3(rest0 + direction * depth * frac)
-                    q[i] = target
-                    qd[i] = (target - x) / dt
+                    st(q, i, target)
+                    st(qd, i, (target - x) / dt)
                 else:
                     # m u'' + d u' + k u = F, eq. (3), by semi-implicit Euler: velocity first, then position
                     u1 = u + dt * f / mass[i]
-                    q[i] = x + dt * u1
-                    qd[i] = u1
+                    st(q, i, x + dt * u1)
+                    st(qd, i, u1)
             block_sync()
         for i in range(lane, n, T):
-            q_state[b, i] = q[i]
-            qd_state[b, i] = qd[i]
+            q_state[b, i] = ld(q, i)
+            qd_state[b, i] = ld(qd, i)
         if lane == 0:
             peak_force[b] = peak
             peak_reaction[b] = peak_f
@@ -230,6 +270,6 @@ def _launch(m, r, p, plan, step_begin, step_count):
             m.particle_q_rest, m.particle_mass, m.anchor_ke, m.anchor_kd, 1.0, m.spring_ke, m.spring_kd, m.spring_rest_length,
             p.press_direction, p.depth, p.ramp_steps, p.press_steps, p.dt, int(step_begin), int(step_count),
         ],
-        outputs=[p.q_state, p.qd_state, p.peak_force, p.peak_reaction, p.hold_reaction],
+        outputs=[p.q_state, p.qd_state, p.peak_force, p.peak_reaction, p.hold_reaction, p.scratch_wide if plan[5] else p.scratch_vec3],
         device=m.device,
     )

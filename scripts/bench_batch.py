@@ -89,6 +89,7 @@ def main(argv=None):
     ap.add_argument("--spheres", type=int, nargs="*", default=[])
     ap.add_argument("--sphere-batch", type=int, default=10000)
     ap.add_argument("--dt-ms", type=float, default=None, help="default: 1 ms, or less where the mesh's critical step asks")
+    ap.add_argument("--wide", type=int, nargs="*", default=[1], help="entries kernel: 1 vec4 shared state, 0 vec3")
     ap.add_argument("--kernels", nargs="*", default=[None], help="entries, vertices (default: the device's default)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
@@ -110,15 +111,17 @@ def main(argv=None):
     for b in args.batch:
         for kernel in args.kernels:
             for threads in args.threads:
-                for regs in args.max_registers if kernel != "vertices" else [0]:
+                for regs, wide in [(r, w) for r in args.max_registers for w in args.wide] if kernel != "vertices" else [(0, 1)]:
                     try:
-                        row = measure_batch(mesh, args.rings, b, args.device, steps=args.steps, threads=threads, dt=dt, kernel=kernel, max_registers=regs)
+                        row = measure_batch(
+                            mesh, args.rings, b, args.device, steps=args.steps, threads=threads, dt=dt, kernel=kernel, max_registers=regs, wide=bool(wide)
+                        )
                     except ValueError as exc:  # a thread count too small for the regions
                         print(f"| {b} | {kernel} | {threads} | {regs} | skipped: {exc} |")
                         continue
                     out["batch"].append(row)
                     print(
-                        f"| {b} | {row['kernel']} | {row['threads']} | {regs if regs is not None else 64} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
+                        f"| {b} | {row['kernel']}{' vec4' * wide if kernel != 'vertices' else ''} | {row['threads']} | {regs if regs is not None else 64} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
                         f"{row['step_us_median']:.2f} | {row['region_steps_per_s']:.3e} | {row['finite']} |",
                         flush=True,
                     )
