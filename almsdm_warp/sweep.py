@@ -35,10 +35,14 @@ def farthest_points(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
     n = min(int(n), len(p))
     chosen = np.empty(n, dtype=np.int64)
     chosen[0] = start
-    d2 = np.einsum("ij,ij->i", p - p[start], p - p[start])
-    for i in range(1, n):
+    diff = p - p[start]
+    d2 = np.einsum("ij,ij->i", diff, diff)
+    tmp = np.empty_like(d2)
+    for i in range(1, n):  # buffers reused: no allocation per point
         chosen[i] = k = int(np.argmax(d2))
-        np.minimum(d2, np.einsum("ij,ij->i", p - p[k], p - p[k]), out=d2)
+        np.subtract(p, p[k], out=diff)
+        np.einsum("ij,ij->i", diff, diff, out=tmp)
+        np.minimum(d2, tmp, out=d2)
     return chosen
 
 
