@@ -19,12 +19,14 @@ import warp as wp
 from .device_mesh import check_vertex
 from .kernels import batch_explicit as bk
 from .kernels import batch_explicit_cuda as bkc
+from .kernels import batch_implicit as bki
 from .kernels import batch_region as br
 from .model import Model
 from .region import check_rings
 
 
 KERNELS = ("entries", "vertices")
+INTEGRATORS = ("explicit", "implicit")
 
 
 def _pow2(n: int, minimum: int = 1) -> int:
@@ -87,7 +89,11 @@ class BatchRegions:
 
 
 class BatchPalpation:
-    """B palpations of one mesh, built and stepped together (explicit integrator).
+    """B palpations of one mesh, built and stepped together.
+
+    integrator: "explicit" (semi-implicit Euler, many steps per launch, a block per palpation) or
+    "implicit" (backward Euler with CG, as SolverALMSDM's: one thread per palpation, one launch a
+    step; cg_max_iterations and cg_tolerance as the solver's).
 
     rings: the local model's rings (the outermost fixed). dt [s]. threads: threads per block on
     CUDA (default: enough for the largest region's free vertices, 32..256); the CPU uses one.
@@ -99,7 +105,8 @@ class BatchPalpation:
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
     """
 
-    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, kernel=None, max_registers=None, wide=True, **model_kw):
+    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, kernel=None, max_registers=None, wide=True,
+                 integrator="explicit", cg_max_iterations=200, cg_tolerance=1e-6, **model_kw):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
         self.device = self.model.device
         self.mesh = self.model.mesh
@@ -109,6 +116,11 @@ class BatchPalpation:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
         self.dt = float(dt)
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(INTEGRATORS)})")
+        self.integrator = integrator
+        self.cg_max_iterations = int(cg_max_iterations)
+        self.cg_tolerance = float(cg_tolerance)
         self._kernel = kernel
         # 64 registers a thread: 16 blocks of 64 threads per SM, the best of 0/40/64 caps measured on an H200
         self._max_registers = 64 if max_registers is None else int(max_registers)
@@ -239,12 +251,29 @@ class BatchPalpation:
         self.depth = float(depth)
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
         br.rest_states(self)
+        if self.integrator == "implicit":
+            self._implicit_press(total, on_launch)
+            return
         chunk = total if steps_per_launch is None else max(int(steps_per_launch), 1)
         for begin in range(0, total, chunk):
             count = min(chunk, total - begin)
             self.launch_steps(begin, count)
             if on_launch is not None:
                 on_launch(count)
+
+    def _implicit_press(self, total, on_launch):
+        # two states (the fixed ring at rest in both) and CG scratch per palpation; one launch a step
+        d, r = self.device, self.regions
+        other = (wp.clone(self.q_state), wp.clone(self.qd_state))
+        scratch = bki.BatchCGScratch(self.batch_size, r.vertex_capacity, r.entry_capacity, d)
+        states = [(self.q_state, self.qd_state), other]
+        for s in range(total):
+            bki.step_batch(self, s, states[s % 2], states[1 - s % 2], scratch, self.cg_max_iterations, self.cg_tolerance)
+            if on_launch is not None and (s % 100 == 99 or s == total - 1):
+                on_launch(s % 100 + 1)
+        if total % 2 == 1:  # the last step wrote the other state
+            wp.copy(self.q_state, other[0])
+            wp.copy(self.qd_state, other[1])
 
     def launch_steps(self, begin: int, count: int) -> None:
         """Launch steps begin..begin+count of the press scheduled by start_press (no wait)."""

@@ -19,7 +19,7 @@ def add_parser(sub) -> None:
         "sweep",
         help="press N points spread over a scene or mesh at once (batched); write a force map (.csv/.npz)",
         description="Press N points spread evenly over the surface, all at once on the device (the local ALMSDM "
-        "region of each, explicit integrator), and write per point: x_mm, y_mm, z_mm, vertex, peak_force_N, "
+        "region of each; explicit or implicit integrator), and write per point: x_mm, y_mm, z_mm, vertex, peak_force_N, "
         "stiffness_N_per_mm (force at full depth / depth), recovery_error_mm. An interrupted sweep resumes "
         "from the chunks it wrote (OUT.parts/) when run again with the same arguments.",
     )
@@ -31,6 +31,7 @@ def add_parser(sub) -> None:
     p.add_argument("--ramp-s", type=_number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
     p.add_argument("--hold-s", type=_number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
     p.add_argument("--settle-s", type=_number_arg(">= 0"), default=None, metavar="S", help="settle window [s] (default: the scene's)")
+    p.add_argument("--integrator", choices=("explicit", "implicit"), default="explicit", help="explicit (semi-implicit Euler, the paper's; default) or implicit (backward Euler, CG: one thread a palpation)")
     p.add_argument("--dt-ms", type=_number_arg("> 0"), default=None, metavar="MS", help="time step [ms] (default 1, less where the model's critical step asks)")
     p.add_argument("--scale-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
@@ -86,17 +87,17 @@ def cmd_sweep(args) -> int:
     points, vertices = sample_points(mesh, args.points)
     cuda = devices[0] != "cpu"
     chunk = args.chunk or (64 if not cuda else min(-(-len(vertices) // len(devices)), 16384))
-    plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], rings, 0.0, depth, ramp, hold, settle, points, vertices, chunk)
+    plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], rings, 1e-3, depth, ramp, hold, settle, points, vertices, chunk, args.integrator)
     if args.dt_ms is not None:
         plan.dt = args.dt_ms * 1e-3
-    else:
-        plan.dt = auto_dt(plan.model("cpu"))
+    elif args.integrator == "explicit":
+        plan.dt = auto_dt(plan.model("cpu"))  # 1 ms, or less where the mesh's critical step asks
     print(mesh.summary())
     lesion = f"; lesion {scene.lesion.as_dict()}" if scene.lesion is not None else ""
     where = f"Ray ({'GPU' if cuda else 'CPU'} tasks)" if args.ray else ", ".join(devices)
     print(
         f"sweep: {len(vertices)} points ({len(np.unique(vertices))} distinct vertices), {rings} rings, press {depth * 1e3:g} mm "
-        f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s), dt {plan.dt * 1e3:g} ms, chunks of {chunk} on {where}{lesion}"
+        f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s), {args.integrator}, dt {plan.dt * 1e3:g} ms, chunks of {chunk} on {where}{lesion}"
     )
     parts = Parts(out, plan)
     done = parts.open()

@@ -88,10 +88,11 @@ class SweepPlan:
     points: np.ndarray
     vertices: np.ndarray
     chunk: int
+    integrator: str = "explicit"
 
     def key(self) -> str:
         h = hashlib.sha256()
-        scalars = [self.mesh.path, self.mesh.vertex_count, self.rings, self.dt, self.depth, self.ramp, self.hold, self.settle, self.chunk]
+        scalars = [self.mesh.path, self.mesh.vertex_count, self.rings, self.dt, self.depth, self.ramp, self.hold, self.settle, self.chunk, self.integrator]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
         for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale):
             if a is not None:
@@ -102,6 +103,13 @@ class SweepPlan:
     def chunks(self) -> list[tuple[int, int]]:
         n = len(self.vertices)
         return [(i, min(i + self.chunk, n)) for i in range(0, n, self.chunk)]
+
+    def batch(self, device, model=None):
+        """A BatchPalpation for this plan on `device` (with `model`, made on that device, when given)."""
+        from .batch import BatchPalpation
+
+        model = model if model is not None else self.model(device)
+        return BatchPalpation(model=model, rings=self.rings, dt=self.dt, integrator=self.integrator)
 
     def model(self, device):
         from .model import Model
@@ -228,10 +236,8 @@ class Parts:
 # -- running -----------------------------------------------------------------------------------
 def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str], progress=None) -> None:
     """Press the chunks `todo` round-robin over `devices` (each chunk written when it is done)."""
-    from .batch import BatchPalpation
-
     models = {d: plan.model(d) for d in devices}
-    batches = [BatchPalpation(model=models[d], rings=plan.rings, dt=plan.dt) for d in devices]
+    batches = [plan.batch(d, models[d]) for d in devices]
     advance = None if progress is None else progress.advance
     todo = list(todo)
     while todo:
@@ -246,11 +252,10 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
 
 def _ray_chunk(plan: SweepPlan, begin: int, end: int, gpu: bool) -> dict:
     # a Ray task: one chunk on this worker's GPU (Ray sets CUDA_VISIBLE_DEVICES) or its CPU
-    from .batch import BatchPalpation
     from .warp_init import init_warp
 
     init_warp()
-    batch = BatchPalpation(model=plan.model("cuda:0" if gpu else "cpu"), rings=plan.rings, dt=plan.dt)
+    batch = plan.batch("cuda:0" if gpu else "cpu")
     return press_chunk(batch, plan, begin, end)()
 
 

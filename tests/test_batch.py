@@ -74,6 +74,21 @@ def test_batch_press_equals_palpation_bits(device, stomach, kernel):
     assert np.all(res.peak_force > 0.5)
 
 
+def test_batch_implicit_press_equals_palpation_bits(device, stomach):
+    # backward Euler with CG, one thread per palpation: the same bits as the one-palpation solve
+    res = BatchPalpation(stomach, rings=3, device=device, integrator="implicit").touch(SEEDS[:4]).press(**SHORT)
+    for b, seed in enumerate(SEEDS[:4]):
+        pal = Palpation(stomach, rings=3, device=device, integrator="implicit")
+        pal.touch(seed)
+        ref = pal.press(**SHORT)
+        if device == "cpu":
+            assert res.peak_force[b] == ref.peak_force_N
+            assert res.recovery_error[b] * 1e3 == ref.recovery_error_mm
+        else:
+            np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=2e-6)
+            np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=2e-5)
+
+
 @pytest.mark.parametrize("kernel", ["vertices", "entries"])
 def test_batch_launch_chunks_do_not_change_bits(device, stomach, kernel):
     # the state goes through global memory between launches: any split gives the same numbers

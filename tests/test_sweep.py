@@ -140,6 +140,18 @@ def test_sweep_on_ray_gives_the_same_file(tmp_path):
     assert distributed.read_text() == local.read_text()
 
 
+def test_sweep_implicit_matches_the_batch(tmp_path, stomach):
+    # the command's implicit sweep is BatchPalpation's implicit press at the same points
+    out = tmp_path / "imp.npz"
+    assert main(["sweep", "--points", "6", "--rings", "2", "--integrator", "implicit", "--out", str(out), *FAST]) == 0
+    table = sw.read_table(out)
+    from almsdm_warp.batch import BatchPalpation
+
+    res = BatchPalpation(stomach, rings=2, dt=5e-4, integrator="implicit").touch(table["vertex"]).press(0.01, 0.05, 0.05, 0.05)
+    np.testing.assert_array_equal(table["peak_force_N"], res.peak_force)
+    np.testing.assert_array_equal(table["recovery_error_mm"], res.recovery_error * 1e3)
+
+
 def test_sweep_png(tmp_path):
     pytest.importorskip("matplotlib")
     png = tmp_path / "map.png"
