@@ -91,6 +91,7 @@ def main(argv=None):
     ap.add_argument("--dt-ms", type=float, default=None, help="default: 1 ms, or less where the mesh's critical step asks")
     ap.add_argument("--wide", type=int, nargs="*", default=[1], help="entries kernel: 1 vec4 shared state, 0 vec3")
     ap.add_argument("--kernels", nargs="*", default=[None], help="entries, vertices (default: the device's default)")
+    ap.add_argument("--implicit-batch", type=int, nargs="*", default=[], help="batch sizes for the implicit integrator")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
@@ -125,6 +126,20 @@ def main(argv=None):
                         f"{row['step_us_median']:.2f} | {row['region_steps_per_s']:.3e} | {row['finite']} |",
                         flush=True,
                     )
+    for b in args.implicit_batch:
+        from almsdm_warp.batch import BatchPalpation
+        from almsdm_warp.bench import spread_vertices
+
+        bp = BatchPalpation(mesh, rings=args.rings, dt=1e-3, device=args.device, integrator="implicit").touch(spread_vertices(mesh, b))
+        bp.press(0.01, 0.01, 0.0, 0.01)  # compile and load
+        times = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            res = bp.press(0.01, 0.05, 0.05, 0.1)  # 200 steps, the force read back at the end
+            times.append(time.perf_counter() - t0)
+        row = {"batch": b, "integrator": "implicit", "steps": bp.total_steps, "region_steps_per_s": b * bp.total_steps / statistics.median(times)}
+        out.setdefault("implicit", []).append(row)
+        print(f"implicit batch {b}: {row['region_steps_per_s']:.3e} region-steps/s ({bp.total_steps} steps, one launch a step; median peak force {np.median(res.peak_force):.3f} N)", flush=True)
     if args.sweep_points:
         row = sweep_time(mesh, args.sweep_points, args.device, args.rings, dt=dt)
         out["sweep"] = row
