@@ -147,7 +147,7 @@ def test_sweep_implicit_matches_the_batch(tmp_path, stomach):
     table = sw.read_table(out)
     from almsdm_warp.batch import BatchPalpation
 
-    res = BatchPalpation(stomach, rings=2, dt=5e-4, integrator="implicit").touch(table["vertex"]).press(0.01, 0.05, 0.05, 0.05)
+    res = BatchPalpation(stomach, rings=2, dt=5e-4, device="cpu", integrator="implicit").touch(table["vertex"]).press(0.01, 0.05, 0.05, 0.05)
     np.testing.assert_array_equal(table["peak_force_N"], res.peak_force)
     np.testing.assert_array_equal(table["recovery_error_mm"], res.recovery_error * 1e3)
 
