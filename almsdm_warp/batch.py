@@ -150,7 +150,8 @@ class BatchPalpation:
         seeds = wp.array(verts.astype(np.int32), dtype=wp.int32, device=self.device)
         k = self.rings
         cv = _pow2(2 * (3 * k * (k + 1) + 1), 32) if self._capacity is None else int(self._capacity)
-        ce = _pow2(cv * min(self._max_degree, 8), 8)
+        # CSR entries of the free vertices: ~3.6 per region vertex on a surface (60% free, degree 6)
+        ce = _pow2(cv * min(self._max_degree, 4), 8)
         while True:
             regions = BatchRegions(B, cv, ce, k, self.device)
             br.build_regions(self.model.dmesh, seeds, k, regions)
@@ -159,7 +160,7 @@ class BatchPalpation:
                 break
             if np.any(status & br.BUILD_OVERFLOW):
                 cv *= 2
-            ce = ce * 2 if np.any(status & br.BUILD_CSR_OVERFLOW) else max(ce, _pow2(cv * min(self._max_degree, 8)))
+            ce = ce * 2 if np.any(status & br.BUILD_CSR_OVERFLOW) else max(ce, _pow2(cv * min(self._max_degree, 4)))
             if cv > max(4 * n, 64):  # cannot happen for a valid mesh: a region never exceeds it
                 raise RuntimeError("batch region build did not converge")
         self.regions = regions
