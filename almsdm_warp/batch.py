@@ -95,18 +95,23 @@ class BatchPalpation:
     "implicit" (backward Euler with CG, as SolverALMSDM's: one thread per palpation, one launch a
     step; cg_max_iterations and cg_tolerance as the solver's).
 
-    rings: the local model's rings (the outermost fixed). dt [s]. threads: threads per block on
-    CUDA (default: enough for the largest region's free vertices, 32..256); the CPU uses one.
-    kernel: "entries" (a block per palpation, its threads sharing the springs: the CUDA default
-    where the regions fit; max_registers caps its registers per thread, default 64, 0: no cap) or "vertices" (a block's threads share the free vertices; a block is
-    one thread on the CPU: the CPU default). Both give the same bits on the CPU.
+    rings: the local model's rings (the outermost fixed). dt [s].
+    kernel (explicit): "entries" (a block per palpation, its threads sharing the springs, each
+    computed once; the CUDA default where the regions fit) or "vertices" (a block's threads share
+    the free vertices; a block is one thread on the CPU: the CPU default). Both give the same
+    bits on the CPU. threads: threads per block on CUDA (default 64 for "entries"; for
+    "vertices" enough for the largest region's free vertices, 32..256). max_registers: the
+    "entries" kernel's registers per thread (default 64; 0: no cap). wide: its state as vec4.
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
     """
 
-    def __init__(self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, threads=None, capacity=None, kernel=None, max_registers=None, wide=True,
-                 integrator="explicit", cg_max_iterations=200, cg_tolerance=1e-6, **model_kw):
+    def __init__(
+        self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
+        kernel=None, threads=None, max_registers=None, wide=True, capacity=None,
+        cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
+    ):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
         self.device = self.model.device
         self.mesh = self.model.mesh
@@ -193,7 +198,8 @@ class BatchPalpation:
             self.threads = int(self._threads)
         else:
             self.threads = min(max(_pow2(int(free.max()), 32), 32), 256)
-        nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared)
+        # global working arrays of the "vertices" kernel where its regions do not fit in shared memory
+        nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared or kernel == "entries")
         d = self.device
         self.scratch_vec3 = wp.zeros(nv, dtype=wp.vec3, device=d)
         self.scratch_float = wp.zeros(nf, dtype=wp.float32, device=d)

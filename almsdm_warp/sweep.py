@@ -92,7 +92,8 @@ class SweepPlan:
 
     def key(self) -> str:
         h = hashlib.sha256()
-        scalars = [self.mesh.path, self.mesh.vertex_count, self.rings, self.dt, self.depth, self.ramp, self.hold, self.settle, self.chunk, self.integrator]
+        scalars = [self.mesh.path, self.mesh.vertex_count, self.rings, self.dt, self.depth]
+        scalars += [self.ramp, self.hold, self.settle, self.chunk, self.integrator]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
         for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale):
             if a is not None:
@@ -134,7 +135,8 @@ def press_chunk(batch, plan: SweepPlan, begin: int, end: int, on_launch=None):
     """Start the presses of points begin..end on `batch` (a BatchPalpation); returns a finisher."""
     batch.touch(plan.vertices[begin:end])
     launch = None if on_launch is None else (lambda steps: on_launch(steps * (end - begin)))
-    batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=200 if batch.device.is_cpu else None, on_launch=launch)
+    per_launch = 200 if batch.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
+    batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=launch)
     return lambda: plan.columns(begin, end, batch.finish_press())
 
 
