@@ -24,6 +24,8 @@ import numpy as np
 
 from .errors import InputError
 
+FPS_MAX = 20000
+"""Beyond this many points (and the mesh's vertices), points are area-uniform random, not farthest-point."""
 COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "stiffness_N_per_mm", "recovery_error_mm")
 FORMATS = (".csv", ".npz")
 
@@ -51,8 +53,9 @@ def sample_points(mesh, n: int, seed: int = 0):
 
     Up to the number of surface vertices: farthest-point sampling of the vertices themselves
     (distinct contacts), starting from the highest one. Beyond: of an area-uniform sample of
-    the surface (seeded, so a rerun picks the same points), each snapped to its nearest vertex,
-    as the probe's contact moves to the nearest vertex (the paper's model).
+    the surface (seeded, so a rerun picks the same points; beyond FPS_MAX points that sample
+    itself), each snapped to its nearest vertex, as the probe's contact moves to the nearest
+    vertex (the paper's model).
     """
     surface = mesh.surface_vertices
     v = mesh.vertices
@@ -64,8 +67,11 @@ def sample_points(mesh, n: int, seed: int = 0):
     from scipy.spatial import cKDTree
 
     tm = trimesh.Trimesh(vertices=v, faces=mesh.triangles, process=False)
-    dense, _ = trimesh.sample.sample_surface(tm, 3 * n, seed=seed)
-    pts = dense[farthest_points(dense, n, int(np.argmax(dense[:, 2])))]
+    if n <= FPS_MAX:
+        dense, _ = trimesh.sample.sample_surface(tm, 3 * n, seed=seed)
+        pts = dense[farthest_points(dense, n, int(np.argmax(dense[:, 2])))]
+    else:  # farthest-point sampling costs n x 3n: beyond FPS_MAX, area-uniform random points
+        pts, _ = trimesh.sample.sample_surface(tm, n, seed=seed)
     _, near = cKDTree(v[surface]).query(pts)
     return pts, surface[near].astype(np.int64)
 
