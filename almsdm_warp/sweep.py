@@ -243,11 +243,18 @@ class Parts:
 
 # -- running -----------------------------------------------------------------------------------
 def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str], progress=None) -> None:
-    """Press the chunks `todo` round-robin over `devices` (each chunk written when it is done)."""
+    """Press the chunks `todo` round-robin over `devices` (each chunk written when it is done).
+
+    Several CUDA devices: a host thread each (region builds, read-backs and writes overlap; Warp's
+    calls release the GIL while they wait). Otherwise one thread, chunks interleaved over them.
+    """
     models = {d: plan.model(d) for d in devices}
     batches = [plan.batch(d, models[d]) for d in devices]
     advance = None if progress is None else progress.advance
     todo = list(todo)
+    if len(set(devices)) > 1 and all(d.startswith("cuda") for d in devices):
+        _run_threads(plan, parts, [todo[k :: len(batches)] for k in range(len(batches))], batches, advance)
+        return
     while todo:
         running = []
         for batch in batches:
@@ -256,6 +263,28 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
                 running.append((i, press_chunk(batch, plan, *plan.chunks[i], on_launch=advance)))
         for i, finish in running:
             parts.write(i, finish())
+
+
+def _run_threads(plan, parts, queues, batches, advance):
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    stop = threading.Event()
+
+    def work(batch, queue):
+        for i in queue:
+            if stop.is_set():
+                return
+            parts.write(i, press_chunk(batch, plan, *plan.chunks[i], on_launch=advance)())
+
+    with ThreadPoolExecutor(len(batches)) as pool:
+        futures = [pool.submit(work, b, q) for b, q in zip(batches, queues)]
+        try:
+            for f in futures:
+                f.result()
+        except BaseException:  # an interrupt: the other threads end after their current chunk
+            stop.set()
+            raise
 
 
 def _ray_chunk(plan: SweepPlan, begin: int, end: int, gpu: bool) -> dict:
