@@ -157,13 +157,17 @@ def build_parser() -> argparse.ArgumentParser:
     palpate.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal, for runs over ~2 s)")
     add_record_args(palpate)
     palpate.set_defaults(func=cmd_palpate)
+    from .cli_bench import add_parser as add_bench
     from .cli_evaluate import add_parser as add_evaluate
+    from .cli_sweep import add_parser as add_sweep
 
     add_evaluate(sub)
+    add_sweep(sub)
+    add_bench(sub)
     return parser
 
 
-COMMANDS = ("palpate", "touch", "evaluate")
+COMMANDS = ("palpate", "touch", "evaluate", "sweep", "bench")
 
 
 def _default_command(argv) -> bool:

@@ -25,6 +25,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
 if TYPE_CHECKING:
+    from .lesion import Lesion
     from .mesh import TissueMesh
 
 DEFAULT_SCENE = "stomach"
@@ -93,6 +94,8 @@ class Scene:
     """Rings grown from the contact vertex along mesh edges; the outermost ring is fixed."""
     press: PressParams = field(default_factory=PressParams)
     """The press protocol."""
+    lesion: "Lesion | None" = None
+    """A sphere of stiffer tissue (the scene's optional [lesion] table), or None."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
@@ -124,6 +127,8 @@ class Scene:
                 elif factor != 1.0:
                     value = value * factor
                 out[section][key] = value
+        if self.lesion is not None:
+            out["lesion"] = self.lesion.as_dict()
         return out
 
     def summary(self) -> str:
@@ -248,6 +253,11 @@ def load_scene(path) -> Scene:
 
     allowed_sections = ", ".join(f"[{s}]" for s in SCHEMA)
     values: dict[str, dict[str, object]] = {section: {} for section in SCHEMA}
+    lesion = None
+    if "lesion" in data:  # an optional table of its own (an array and scalars: almsdm_warp/lesion.py)
+        from .lesion import parse_lesion
+
+        lesion = parse_lesion(data.pop("lesion"), where)
     for section, table in data.items():
         if section not in SCHEMA:
             what = "section" if isinstance(table, dict) else "top-level key"
@@ -289,6 +299,7 @@ def load_scene(path) -> Scene:
         tissue=TissueParams(**values["tissue"]),
         rings=values["region"].get("rings", Scene.rings),
         press=PressParams(**values["press"]),
+        lesion=lesion,
     )
 
 

@@ -28,33 +28,10 @@ def default_mesh():
 
 
 def measure(mesh, rings, integrator, device, blocks, steps=2000):
-    from almsdm_warp.palpation import Palpation
+    """One configuration's timing: moved to almsdm_warp.bench (shared with `almsdm bench`)."""
+    from almsdm_warp.bench import measure as _measure
 
-    pal = Palpation(mesh, None, rings=rings, integrator=integrator, dt=1e-3, device=device)
-    vertex = int(mesh.surface_vertices[np.argmax(mesh.vertices[mesh.surface_vertices, 2])])
-    pal.touch(vertex)
-    pal.set_probe(1, pal.rest_position() + pal.inward_normal() * 0.005)
-    for _ in range(500):
-        pal.step()
-    per_step = []
-    force = 0.0
-    for _ in range(blocks):
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            f = pal.step()
-            force = f[2]  # read every step
-        per_step.append((time.perf_counter() - t0) / steps)
-    assert np.isfinite(force)
-    return {
-        "rings": rings,
-        "integrator": integrator,
-        "region_vertices": pal.region_vertices,
-        "free_vertices": pal.solver.free_count,
-        "step_us_median": statistics.median(per_step) * 1e6,
-        "step_us_best": min(per_step) * 1e6,
-        "steps_per_s": 1.0 / statistics.median(per_step),
-        "cg_iterations": pal.solver.cg_stats[0] if integrator == "implicit" else None,
-    }
+    return _measure(mesh, rings, integrator, device, blocks, steps)
 
 
 def main(argv=None):

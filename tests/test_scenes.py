@@ -117,7 +117,7 @@ def test_liver_tets_positive_boundary_closed_volume_matches(make_scenes):
 
 # -- the scene files -----------------------------------------------------------------------
 def test_shipped_scenes_load_in_si_units():
-    assert scene_names() == ["liver", "stomach"]
+    assert scene_names() == ["liver", "stomach", "stomach_lesion"]
     assert scenes_dir() == SCENES
     stomach = load_scene(default_scene_path())
     assert stomach.path == SCENES / "stomach.toml" and stomach.mesh_path == SCENES / "stomach.obj"

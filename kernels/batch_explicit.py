@@ -1,0 +1,305 @@
+"""A batch of presses, semi-implicit Euler: one block per palpation, many steps in one launch.
+
+Each palpation's region (its state, rest positions, masses, anchors and the local topology of
+its free vertices: neighbour local index and spring parameters per CSR entry) is loaded once
+into working arrays, stepped `step_count` times with a block barrier between steps, and written
+back. On CUDA the working arrays are in shared memory (native snippets below declare them and
+give Warp an array view of them) and a block's threads share the free vertices; elsewhere
+(the CPU, or regions too large for shared memory) they are per-palpation slices of global
+scratch arrays and a block is one thread.
+
+The arithmetic is the one-palpation step's (kernels/step_explicit.py), in the same order: the
+anchor term first, then the vertex's neighbours in mesh CSR order; velocity, then position; the
+probe's target computed in float64 as the host computes it, then rounded to float32. So a batch
+gives the same bits as ``Palpation.press`` on the same device (tests/test_batch.py).
+"""
+
+import functools
+
+import warp as wp
+
+from .forces import EPS_LENGTH
+
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
+SHARED_BYTES_MAX = 40 * 1024
+"""Working arrays larger than this per block stay in global memory (static shared memory is 48 KiB)."""
+
+_C_TYPES = {wp.vec3: "wp::vec_t<3, wp::float32>", wp.vec4: "wp::vec_t<4, wp::float32>", wp.float32: "wp::float32", wp.int32: "wp::int32"}
+
+
+class _Native:
+    """``@_native.func_native(snippet, name)``: wp.func_native under a name of our choosing.
+
+    Warp keys a function by its qualified name and recognizes a native stub by a decorator
+    spelled ``*.func_native(...)``; the working arrays differ per capacity, so each needs its
+    own name (and its own __shared__ buffer).
+    """
+
+    @staticmethod
+    def func_native(snippet, name):
+        def decorate(f):
+            f.__name__ = f.__qualname__ = name
+            return wp.func_native(snippet)(f)
+
+        return decorate
+
+
+_native = _Native()
+
+
+def _work_array(name, dtype, capacity, shared):
+    # an array view of a block's working storage: __shared__ on CUDA, else a global slice
+    ctype = _C_TYPES[dtype]
+    snippet = f"""
+#if defined(__CUDA_ARCH__) && {int(bool(shared))}
+    __shared__ __align__(16) {ctype} buf[{capacity}];
+    return wp::array_t<{ctype}>(buf, {capacity});
+#elif {int(bool(shared))}
+    // CPU: blocks run one after another and a block's fibers share this (plain bytes: no static-init guard)
+    alignas(16) static unsigned char raw[sizeof({ctype}) * {capacity}];
+    return wp::array_t<{ctype}>(reinterpret_cast<{ctype}*>(raw), {capacity});
+#else
+    return wp::array_t<{ctype}>(fallback.data + offset, {capacity});
+#endif
+"""
+
+    @_native.func_native(snippet, f"work_{name}_{capacity}_{int(bool(shared))}")
+    def stub(fallback: wp.array(dtype=dtype), offset: int) -> wp.array(dtype=dtype): ...
+
+    return stub
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    __syncthreads();
+#else
+    ::wp::tile_sync<WP_TILE_BLOCK_DIM>();  // a barrier of the block's fibers (none when a block is one thread)
+#endif
+"""
+)
+def block_sync(): ...
+
+
+@wp.func
+def substep_explicit(
+    lane: int,
+    threads: int,
+    nf: int,
+    off: wp.array(dtype=wp.int32),
+    nbr: wp.array(dtype=wp.int32),
+    spring_ke: wp.array(dtype=wp.float32),
+    spring_kd: wp.array(dtype=wp.float32),
+    spring_rest_length: wp.array(dtype=wp.float32),
+    q_rest: wp.array(dtype=wp.vec3),
+    particle_mass: wp.array(dtype=wp.float32),
+    anchor_ke: wp.array(dtype=wp.float32),
+    anchor_kd: wp.array(dtype=wp.float32),
+    anchor_scale: float,
+    pressed: int,
+    target: wp.vec3,
+    dt: float,
+    q_in: wp.array(dtype=wp.vec3),
+    qd_in: wp.array(dtype=wp.vec3),
+    q_out: wp.array(dtype=wp.vec3),
+    qd_out: wp.array(dtype=wp.vec3),
+):
+    # one step of the free vertices this lane owns; returns the reaction on local vertex 0 (the
+    # probe's), which lane 0 owns. Local indices: arrays are the region's, not the mesh's.
+    reaction = wp.vec3(0.0)
+    for i in range(lane, nf, threads):
+        x = q_in[i]
+        u = qd_in[i]
+        # anchor spring and damper to the rest position, eq. (3)
+        f = -anchor_scale * (anchor_ke[i] * (x - q_rest[i]) + anchor_kd[i] * u)
+        for k in range(off[i], off[i + 1]):
+            j = nbr[k]
+            r = q_in[j] - x
+            l = wp.length(r)
+            if l > EPS_LENGTH:
+                # elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
+                inv_l = 1.0 / l
+                s = spring_ke[k] * (l - spring_rest_length[k]) + spring_kd[k] * wp.dot(qd_in[j] - u, r) * inv_l
+                f += (s * inv_l) * r
+        if i == 0 and pressed != 0:
+            reaction = f  # the feedback force: the tissue's internal forces on the probe
+            # displacement control: the vertex is where the probe puts it
+            q_out[i] = target
+            qd_out[i] = (target - x) / dt
+        else:
+            # m u'' + d u' + k u = F, eq. (3), by semi-implicit Euler: velocity first, then position
+            u1 = u + dt * f / particle_mass[i]
+            q_out[i] = x + dt * u1
+            qd_out[i] = u1
+    return reaction
+
+
+@functools.cache
+def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
+    """The batch press kernel for regions of up to `vertex_capacity` vertices and `entry_capacity`
+    CSR entries of free vertices; working arrays in shared memory on CUDA when `shared`."""
+    cv, ce = int(vertex_capacity), int(entry_capacity)
+    w_q_a = _work_array("q_a", wp.vec3, cv, shared)
+    w_qd_a = _work_array("qd_a", wp.vec3, cv, shared)
+    w_q_b = _work_array("q_b", wp.vec3, cv, shared)
+    w_qd_b = _work_array("qd_b", wp.vec3, cv, shared)
+    w_rest = _work_array("rest", wp.vec3, cv, shared)
+    w_mass = _work_array("mass", wp.float32, cv, shared)
+    w_ka = _work_array("ka", wp.float32, cv, shared)
+    w_kda = _work_array("kda", wp.float32, cv, shared)
+    w_ke = _work_array("ke", wp.float32, ce, shared)
+    w_kd = _work_array("kd", wp.float32, ce, shared)
+    w_l0 = _work_array("l0", wp.float32, ce, shared)
+    w_off = _work_array("off", wp.int32, cv + 1, shared)
+    w_nbr = _work_array("nbr", wp.int32, ce, shared)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def press_batch_explicit(
+        threads: int,
+        region_vertex: wp.array2d(dtype=wp.int32),
+        region_count: wp.array(dtype=wp.int32),
+        free_count: wp.array(dtype=wp.int32),
+        local_offsets: wp.array2d(dtype=wp.int32),
+        local_neighbour: wp.array2d(dtype=wp.int32),
+        local_edge: wp.array2d(dtype=wp.int32),
+        q_rest: wp.array(dtype=wp.vec3),
+        particle_mass: wp.array(dtype=wp.float32),
+        anchor_ke: wp.array(dtype=wp.float32),
+        anchor_kd: wp.array(dtype=wp.float32),
+        anchor_scale: float,
+        spring_ke: wp.array(dtype=wp.float32),
+        spring_kd: wp.array(dtype=wp.float32),
+        spring_rest_length: wp.array(dtype=wp.float32),
+        press_direction: wp.array(dtype=wp.vec3d),
+        depth: wp.float64,
+        ramp_steps: int,
+        press_steps: int,
+        dt: float,
+        step_begin: int,
+        step_count: int,
+        scratch_vec3: wp.array(dtype=wp.vec3),
+        scratch_float: wp.array(dtype=wp.float32),
+        scratch_int: wp.array(dtype=wp.int32),
+        q_state: wp.array2d(dtype=wp.vec3),
+        qd_state: wp.array2d(dtype=wp.vec3),
+        peak_force: wp.array(dtype=wp.float64),
+        peak_reaction: wp.array(dtype=wp.vec3),
+        hold_reaction: wp.array(dtype=wp.vec3),
+    ):
+        tid = wp.tid()
+        b = tid // threads
+        lane = tid - b * threads
+        n = region_count[b]
+        nf = free_count[b]
+        ne = local_offsets[b, nf]
+        # working arrays (shared memory on CUDA; offsets are used only by the global fallback)
+        q_a = w_q_a(scratch_vec3, (5 * b + 0) * cv)
+        qd_a = w_qd_a(scratch_vec3, (5 * b + 1) * cv)
+        q_b = w_q_b(scratch_vec3, (5 * b + 2) * cv)
+        qd_b = w_qd_b(scratch_vec3, (5 * b + 3) * cv)
+        rest = w_rest(scratch_vec3, (5 * b + 4) * cv)
+        mass = w_mass(scratch_float, b * (3 * cv + 3 * ce))
+        ka = w_ka(scratch_float, b * (3 * cv + 3 * ce) + cv)
+        kda = w_kda(scratch_float, b * (3 * cv + 3 * ce) + 2 * cv)
+        ke = w_ke(scratch_float, b * (3 * cv + 3 * ce) + 3 * cv)
+        kd = w_kd(scratch_float, b * (3 * cv + 3 * ce) + 3 * cv + ce)
+        l0 = w_l0(scratch_float, b * (3 * cv + 3 * ce) + 3 * cv + 2 * ce)
+        off = w_off(scratch_int, b * (cv + 1 + ce))
+        nbr = w_nbr(scratch_int, b * (cv + 1 + ce) + cv + 1)
+        # load the region once: state, per-vertex parameters, local topology with spring parameters
+        for i in range(lane, n, threads):
+            v = region_vertex[b, i]
+            rest[i] = q_rest[v]
+            mass[i] = particle_mass[v]
+            ka[i] = anchor_ke[v]
+            kda[i] = anchor_kd[v]
+            q_a[i] = q_state[b, i]
+            qd_a[i] = qd_state[b, i]
+            q_b[i] = q_state[b, i]
+            qd_b[i] = qd_state[b, i]
+        for i in range(lane, nf + 1, threads):
+            off[i] = local_offsets[b, i]
+        for k in range(lane, ne, threads):
+            nbr[k] = local_neighbour[b, k]
+            e = local_edge[b, k]
+            ke[k] = spring_ke[e]
+            kd[k] = spring_kd[e]
+            l0[k] = spring_rest_length[e]
+        block_sync()
+
+        rest0 = wp.vec3d(rest[0])
+        direction = press_direction[b]
+        peak = peak_force[b]
+        peak_f = peak_reaction[b]
+        for s in range(step_begin, step_begin + step_count):
+            pressed = int(0)
+            target = wp.vec3(0.0)
+            if s < press_steps:
+                pressed = 1
+                # the probe's target, in float64 as the host computes it, then float32
+                frac = wp.min(wp.float64(s + 1) / wp.float64(ramp_steps), wp.float64(1.0))
+                target = wp.vec3(rest0 + direction * depth * frac)
+            if (s - step_begin) % 2 == 0:
+                f = substep_explicit(lane, threads, nf, off, nbr, ke, kd, l0, rest, mass, ka, kda, anchor_scale, pressed, target, dt, q_a, qd_a, q_b, qd_b)
+            else:
+                f = substep_explicit(lane, threads, nf, off, nbr, ke, kd, l0, rest, mass, ka, kda, anchor_scale, pressed, target, dt, q_b, qd_b, q_a, qd_a)
+            if lane == 0 and pressed != 0:
+                fx = wp.float64(f[0])
+                fy = wp.float64(f[1])
+                fz = wp.float64(f[2])
+                m = wp.sqrt(fx * fx + fy * fy + fz * fz)
+                if m > peak:
+                    peak = m
+                    peak_f = f
+                if s == press_steps - 1:
+                    hold_reaction[b] = f
+            block_sync()
+        # write the state back (the last step wrote b when step_count is odd)
+        odd = step_count % 2
+        for i in range(lane, n, threads):
+            if odd == 1:
+                q_state[b, i] = q_b[i]
+                qd_state[b, i] = qd_b[i]
+            else:
+                q_state[b, i] = q_a[i]
+                qd_state[b, i] = qd_a[i]
+        if lane == 0:
+            peak_force[b] = peak
+            peak_reaction[b] = peak_f
+
+    return press_batch_explicit
+
+
+def scratch_sizes(batch: int, vertex_capacity: int, entry_capacity: int, shared: bool):
+    """Element counts of the global scratch arrays (vec3, float32, int32); 1 each when in shared memory."""
+    if shared:
+        return 1, 1, 1
+    cv, ce = vertex_capacity, entry_capacity
+    return batch * 5 * cv, batch * (3 * cv + 3 * ce), batch * (cv + 1 + ce)
+
+
+def shared_bytes(vertex_capacity: int, entry_capacity: int) -> int:
+    """Shared memory a block of the press kernel takes [bytes]."""
+    cv, ce = vertex_capacity, entry_capacity
+    return 5 * cv * 12 + (3 * cv + 3 * ce) * 4 + (cv + 1 + ce) * 4
+
+
+def press_batch(batch, step_begin, step_count):
+    """Advance every palpation of `batch` (an almsdm_warp.batch.BatchPalpation) `step_count` steps."""
+    m, r, p = batch.model, batch.regions, batch
+    kernel = press_kernel(p.vertex_capacity, p.entry_capacity, p.shared)
+    wp.launch(
+        kernel,
+        dim=p.batch_size * p.threads,
+        block_dim=p.threads,
+        inputs=[
+            p.threads, r.region_vertex, r.region_count, r.free_count, r.local_offsets, r.local_neighbour, r.local_edge,
+            m.particle_q_rest, m.particle_mass, m.anchor_ke, m.anchor_kd, 1.0, m.spring_ke, m.spring_kd, m.spring_rest_length,
+            p.press_direction, p.depth, p.ramp_steps, p.press_steps, p.dt, int(step_begin), int(step_count),
+            p.scratch_vec3, p.scratch_float, p.scratch_int,
+        ],
+        outputs=[p.q_state, p.qd_state, p.peak_force, p.peak_reaction, p.hold_reaction],
+        device=m.device,
+    )

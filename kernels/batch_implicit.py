@@ -1,0 +1,213 @@
+"""A batch of presses, implicit (backward) Euler: one thread per palpation, one step per launch.
+
+The one-palpation implicit step (kernels/step_implicit.py) on each palpation's compacted region:
+linearized once per step (Baraff & Witkin), (M + dt C + dt^2 K) dv = dt (f0 - dt K v0),
+block-Jacobi preconditioned conjugate gradients warm-started from the palpation's previous dv;
+the driven vertex (local 0 while the probe presses) is a known velocity, the fixed ring has
+dv = 0. The same expressions and the same order of every sum (vertices in local order, each
+vertex's springs in mesh CSR order), so a palpation of the batch gives the same bits as
+``Palpation(..., integrator="implicit").press`` on the CPU.
+"""
+
+import warp as wp
+
+from .forces import EPS_LENGTH
+from .step_implicit import spring_block
+
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.kernel
+def step_batch_implicit(
+    region_vertex: wp.array2d(dtype=wp.int32),
+    free_count: wp.array(dtype=wp.int32),
+    local_offsets: wp.array2d(dtype=wp.int32),
+    local_neighbour: wp.array2d(dtype=wp.int32),
+    local_edge: wp.array2d(dtype=wp.int32),
+    q_rest: wp.array(dtype=wp.vec3),
+    particle_mass: wp.array(dtype=wp.float32),
+    anchor_ke: wp.array(dtype=wp.float32),
+    anchor_kd: wp.array(dtype=wp.float32),
+    anchor_scale: float,
+    spring_ke: wp.array(dtype=wp.float32),
+    spring_kd: wp.array(dtype=wp.float32),
+    spring_rest_length: wp.array(dtype=wp.float32),
+    press_direction: wp.array(dtype=wp.vec3d),
+    depth: wp.float64,
+    ramp_steps: int,
+    press_steps: int,
+    step: int,
+    dt: float,
+    max_iterations: int,
+    tolerance: float,
+    q_in: wp.array2d(dtype=wp.vec3),
+    qd_in: wp.array2d(dtype=wp.vec3),
+    dv: wp.array2d(dtype=wp.vec3),
+    cg_r: wp.array2d(dtype=wp.vec3),
+    cg_p: wp.array2d(dtype=wp.vec3),
+    cg_Ap: wp.array2d(dtype=wp.vec3),
+    block_diag: wp.array2d(dtype=wp.mat33),
+    block_diag_inv: wp.array2d(dtype=wp.mat33),
+    csr_block: wp.array2d(dtype=wp.mat33),
+    q_out: wp.array2d(dtype=wp.vec3),
+    qd_out: wp.array2d(dtype=wp.vec3),
+    peak_force: wp.array(dtype=wp.float64),
+    peak_reaction: wp.array(dtype=wp.vec3),
+    hold_reaction: wp.array(dtype=wp.vec3),
+):
+    b = wp.tid()
+    free_n = free_count[b]
+    driven = int(-1)
+    dv_driven = wp.vec3(0.0)
+    target = wp.vec3(0.0)
+    if step < press_steps:
+        # the probe's target, in float64 as the host computes it, then float32; local vertex 0 is driven
+        frac = wp.min(wp.float64(step + 1) / wp.float64(ramp_steps), wp.float64(1.0))
+        target = wp.vec3(wp.vec3d(q_rest[region_vertex[b, 0]]) + press_direction[b] * depth * frac)
+        driven = 0
+        dv_driven = (target - q_in[b, 0]) / dt - qd_in[b, 0]
+
+    # 1) forces, diagonal blocks and right-hand side b = dt (f0 - dt K v0) - A_ic dv_c
+    b_norm2 = float(0.0)
+    for i in range(free_n):
+        v = region_vertex[b, i]
+        x = q_in[b, i]
+        u = qd_in[b, i]
+        # anchor spring and damper, eq. (3); springs and dampers along the edges below, eqs. (4)-(6)
+        f = -anchor_scale * (anchor_ke[v] * (x - q_rest[v]) + anchor_kd[v] * u)
+        ka = anchor_scale * anchor_ke[v]
+        kda = anchor_scale * anchor_kd[v]
+        D = (particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
+        Kv = ka * u
+        correction = wp.vec3(0.0)
+        for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
+            j = local_neighbour[b, k]
+            e = local_edge[b, k]
+            r = q_in[b, j] - x
+            l = wp.length(r)
+            if l > EPS_LENGTH:
+                inv_l = 1.0 / l
+                s = spring_ke[e] * (l - spring_rest_length[e]) + spring_kd[e] * wp.dot(qd_in[b, j] - u, r) * inv_l
+                f += (s * inv_l) * r
+            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], r, dt)
+            csr_block[b, k] = B
+            D += B
+            Kv += Kb * (u - qd_in[b, j])
+            if j == driven:
+                correction += B * dv_driven  # -A_ic dv_c, with A_ic = -B
+        if i == 0 and driven == 0:
+            # the feedback force: internal forces on the probe's vertex
+            fx = wp.float64(f[0])
+            fy = wp.float64(f[1])
+            fz = wp.float64(f[2])
+            mag = wp.sqrt(fx * fx + fy * fy + fz * fz)
+            if mag > peak_force[b]:
+                peak_force[b] = mag
+                peak_reaction[b] = f
+            if step == press_steps - 1:
+                hold_reaction[b] = f
+        block_diag[b, i] = D
+        block_diag_inv[b, i] = wp.inverse(D)
+        rhs = dt * (f - dt * Kv) + correction
+        if i == driven:
+            rhs = wp.vec3(0.0)
+        cg_r[b, i] = rhs
+        b_norm2 += wp.dot(rhs, rhs)
+
+    # 2) r = b - A dv (warm start), z = P^-1 r, p = z
+    rz = float(0.0)
+    for i in range(free_n):
+        if i == driven:
+            dv[b, i] = wp.vec3(0.0)
+        Ax = block_diag[b, i] * dv[b, i]
+        for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
+            lj = local_neighbour[b, k]  # an unknown of the solve: free, not the driven vertex
+            if lj >= 0 and lj < free_n and lj != driven and i != driven:
+                Ax -= csr_block[b, k] * dv[b, lj]
+        r = cg_r[b, i] - Ax
+        if i == driven:
+            r = wp.vec3(0.0)
+        cg_r[b, i] = r
+        z = block_diag_inv[b, i] * r
+        cg_p[b, i] = z
+        rz += wp.dot(r, z)
+
+    # 3) conjugate gradients
+    iterations = int(0)
+    r_norm2 = float(0.0)
+    for i in range(free_n):
+        r_norm2 += wp.dot(cg_r[b, i], cg_r[b, i])
+    threshold = tolerance * tolerance * b_norm2
+    while iterations < max_iterations and r_norm2 > threshold:
+        pAp = float(0.0)
+        for i in range(free_n):
+            Ap = wp.vec3(0.0)
+            if i != driven:
+                Ap = block_diag[b, i] * cg_p[b, i]
+                for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
+                    lj = local_neighbour[b, k]
+                    if lj >= 0 and lj < free_n and lj != driven:
+                        Ap -= csr_block[b, k] * cg_p[b, lj]
+            cg_Ap[b, i] = Ap
+            pAp += wp.dot(cg_p[b, i], Ap)
+        if pAp <= 0.0:
+            break
+        alpha = rz / pAp
+        r_norm2 = float(0.0)
+        rz_new = float(0.0)
+        for i in range(free_n):
+            dv[b, i] = dv[b, i] + alpha * cg_p[b, i]
+            r = cg_r[b, i] - alpha * cg_Ap[b, i]
+            cg_r[b, i] = r
+            z = block_diag_inv[b, i] * r
+            cg_Ap[b, i] = z  # A p is spent: keep the preconditioned residual there
+            r_norm2 += wp.dot(r, r)
+            rz_new += wp.dot(r, z)
+        beta = rz_new / rz
+        rz = rz_new
+        for i in range(free_n):
+            cg_p[b, i] = cg_Ap[b, i] + beta * cg_p[b, i]
+        iterations += 1
+
+    # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
+    for i in range(free_n):
+        x = q_in[b, i]
+        if i == driven:
+            q_out[b, i] = target
+            qd_out[b, i] = (target - x) / dt
+        else:
+            u1 = qd_in[b, i] + dv[b, i]
+            q_out[b, i] = x + dt * u1
+            qd_out[b, i] = u1
+
+
+class BatchCGScratch:
+    """Per-palpation conjugate-gradient arrays of the implicit batch, [B, capacity]."""
+
+    def __init__(self, batch: int, vertex_capacity: int, entry_capacity: int, device):
+        shape_v, shape_e = (batch, vertex_capacity), (batch, max(entry_capacity, 1))
+        self.dv = wp.zeros(shape_v, dtype=wp.vec3, device=device)
+        self.r = wp.zeros(shape_v, dtype=wp.vec3, device=device)
+        self.p = wp.zeros(shape_v, dtype=wp.vec3, device=device)
+        self.Ap = wp.zeros(shape_v, dtype=wp.vec3, device=device)
+        self.diag = wp.zeros(shape_v, dtype=wp.mat33, device=device)
+        self.diag_inv = wp.zeros(shape_v, dtype=wp.mat33, device=device)
+        self.csr_block = wp.zeros(shape_e, dtype=wp.mat33, device=device)
+
+
+def step_batch(batch, step, state_in, state_out, scratch, max_iterations, tolerance):
+    """One implicit step of every palpation of `batch`: state_in -> state_out, (q, qd) pairs."""
+    m, r, p = batch.model, batch.regions, batch
+    wp.launch(
+        step_batch_implicit,
+        dim=p.batch_size,
+        inputs=[
+            r.region_vertex, r.free_count, r.local_offsets, r.local_neighbour, r.local_edge,
+            m.particle_q_rest, m.particle_mass, m.anchor_ke, m.anchor_kd, 1.0, m.spring_ke, m.spring_kd, m.spring_rest_length,
+            p.press_direction, p.depth, p.ramp_steps, p.press_steps, int(step), p.dt, int(max_iterations), float(tolerance),
+            state_in[0], state_in[1], scratch.dv, scratch.r, scratch.p, scratch.Ap, scratch.diag, scratch.diag_inv, scratch.csr_block,
+        ],
+        outputs=[state_out[0], state_out[1], p.peak_force, p.peak_reaction, p.hold_reaction],
+        device=m.device,
+    )

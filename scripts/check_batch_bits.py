@@ -1,0 +1,50 @@
+"""Batched presses against one-palpation presses on a device: how many agree bit for bit.
+
+    python scripts/check_batch_bits.py [MESH] --device cuda:0 --points 32
+
+On the CPU every point agrees (tests/test_batch.py asserts it); on CUDA this reports how far
+NVRTC's fused multiply-adds take the two kernels apart.
+"""
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("mesh", nargs="?", type=Path, default=Path(__file__).resolve().parents[1] / "scenes" / "stomach.obj")
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--points", type=int, default=32)
+    ap.add_argument("--rings", type=int, default=4)
+    ap.add_argument("--kernel", default=None, help="entries or vertices (default: the device's)")
+    args = ap.parse_args(argv)
+    from almsdm_warp import load_mesh
+    from almsdm_warp.batch import BatchPalpation
+    from almsdm_warp.palpation import Palpation
+    from almsdm_warp.sweep import sample_points
+    from almsdm_warp.warp_init import init_warp
+
+    init_warp()
+    mesh = load_mesh(args.mesh)
+    _, vertices = sample_points(mesh, args.points)
+    bp = BatchPalpation(mesh, rings=args.rings, device=args.device, kernel=args.kernel).touch(vertices)
+    res = bp.press()
+    ref_f, ref_r = [], []
+    for v in vertices:
+        pal = Palpation(mesh, rings=args.rings, device=args.device)
+        pal.touch(int(v))
+        r = pal.press()
+        ref_f.append(r.peak_force_N)
+        ref_r.append(r.recovery_error_mm * 1e-3)
+    ref_f, ref_r = np.array(ref_f), np.array(ref_r)
+    print(
+        f"{args.device}, kernel {bp.kernel}: {len(vertices)} points, {args.rings} rings; peak force equal bits {np.sum(res.peak_force == ref_f)}, "
+        f"max rel diff {np.max(np.abs(res.peak_force - ref_f) / ref_f):.3g}; recovery error equal bits "
+        f"{np.sum(res.recovery_error == ref_r)}, max abs diff {np.max(np.abs(res.recovery_error - ref_r)) * 1e3:.3g} mm"
+    )
+
+
+if __name__ == "__main__":
+    main()

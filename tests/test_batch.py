@@ -1,0 +1,131 @@
+"""Batched palpations: regions against Region and a breadth-first search, presses against Palpation."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.csgraph import shortest_path
+
+from almsdm_warp import Region
+from almsdm_warp.batch import BatchPalpation
+from almsdm_warp.palpation import Palpation
+from conftest import SCENES, load_cached
+
+SEEDS = [0, 17, 311, 500, 693, 1001]
+SHORT = dict(depth=0.01, ramp=0.05, hold=0.05, settle=0.1)  # 200 steps: ramp, hold, release, settle
+
+
+@pytest.fixture(scope="module")
+def stomach():
+    return load_cached(SCENES / "stomach.obj")
+
+
+def _graph(mesh):
+    e = mesh.edges
+    n = mesh.vertex_count
+    return sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+
+
+@pytest.mark.parametrize("rings,capacity", [(1, None), (4, None), (6, 4)])
+def test_batch_regions_match_region_and_bfs(device, stomach, rings, capacity):
+    # capacity 4 is far too small for 6 rings: the build must grow and retry, not truncate
+    bp = BatchPalpation(stomach, rings=rings, device=device, capacity=capacity).touch(SEEDS)
+    hops = shortest_path(_graph(stomach), directed=False, unweighted=True, indices=SEEDS)
+    offsets, neighbours, edges = stomach.adjacency
+    local_offsets = bp.regions.local_offsets.numpy()
+    local_neighbour = bp.regions.local_neighbour.numpy()
+    local_edge = bp.regions.local_edge.numpy()
+    for b, seed in enumerate(SEEDS):
+        got = bp.region(b)
+        ref = Region(stomach, device).build(seed, rings)
+        np.testing.assert_array_equal(got, ref.vertices())
+        assert bp.free_vertex_counts[b] == ref.free_count
+        # independent: the region is exactly the vertices within `rings` hops, ring by ring
+        assert set(got) == set(np.flatnonzero(hops[b] <= rings))
+        assert np.all(np.diff(hops[b][got]) >= 0)
+        # local topology: each free vertex's CSR neighbours, in mesh CSR order, as local indices
+        for i in range(bp.free_vertex_counts[b]):
+            v = got[i]
+            k0, k1 = local_offsets[b, i], local_offsets[b, i + 1]
+            np.testing.assert_array_equal(got[local_neighbour[b, k0:k1]], neighbours[offsets[v] : offsets[v + 1]])
+            np.testing.assert_array_equal(local_edge[b, k0:k1], edges[offsets[v] : offsets[v + 1]])
+
+
+@pytest.mark.parametrize("kernel", ["vertices", "entries"])
+def test_batch_press_equals_palpation_bits(device, stomach, kernel):
+    # same device, same points: the same force and recovery, bit for bit on the CPU, with either
+    # kernel ("entries", CUDA's default, runs on the CPU as blocks of fibers with real barriers)
+    bp = BatchPalpation(stomach, rings=4, device=device, kernel=kernel).touch(SEEDS)
+    assert bp.kernel == kernel
+    res = bp.press(**SHORT)
+    for b, seed in enumerate(SEEDS):
+        pal = Palpation(stomach, rings=4, device=device)
+        pal.touch(seed)
+        ref = pal.press(**SHORT)
+        if device == "cpu":
+            assert res.peak_force[b] == ref.peak_force_N
+            assert res.recovery_error[b] * 1e3 == ref.recovery_error_mm
+            assert res.hold_force[b] == ref.force[ref.release_step - 1]
+        elif kernel == "vertices":  # CUDA, the same loop as the one-palpation kernel: the same bits too
+            assert res.peak_force[b] == ref.peak_force_N
+            assert res.recovery_error[b] * 1e3 == ref.recovery_error_mm
+        else:  # CUDA "entries": a spring's force is stored, then added: NVRTC cannot fuse that multiply-add
+            np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=2e-6)
+            np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=2e-5)
+    assert np.all(res.peak_force > 0.5)
+
+
+def test_batch_implicit_press_equals_palpation_bits(device, stomach):
+    # backward Euler with CG, one thread per palpation: the same bits as the one-palpation solve
+    res = BatchPalpation(stomach, rings=3, device=device, integrator="implicit").touch(SEEDS[:4]).press(**SHORT)
+    for b, seed in enumerate(SEEDS[:4]):
+        pal = Palpation(stomach, rings=3, device=device, integrator="implicit")
+        pal.touch(seed)
+        ref = pal.press(**SHORT)
+        if device == "cpu":
+            assert res.peak_force[b] == ref.peak_force_N
+            assert res.recovery_error[b] * 1e3 == ref.recovery_error_mm
+        else:
+            np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=2e-6)
+            np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=2e-5)
+
+
+@pytest.mark.parametrize("kernel", ["vertices", "entries"])
+def test_batch_launch_chunks_do_not_change_bits(device, stomach, kernel):
+    # the state goes through global memory between launches: any split gives the same numbers
+    whole = BatchPalpation(stomach, rings=3, device=device, kernel=kernel).touch(SEEDS[:3]).press(**SHORT)
+    split = BatchPalpation(stomach, rings=3, device=device, kernel=kernel, threads=64).touch(SEEDS[:3]).press(**SHORT, steps_per_launch=7)
+    np.testing.assert_array_equal(whole.peak_force, split.peak_force)
+    np.testing.assert_array_equal(whole.recovery_error, split.recovery_error)
+
+
+def test_batch_repeated_vertices(device, stomach):
+    # the same contact twice in a batch gives the same result twice (palpations do not interact)
+    res = BatchPalpation(stomach, rings=2, device=device).touch([693, 5, 693]).press(**SHORT)
+    assert res.peak_force[0] == res.peak_force[2]
+    assert res.recovery_error[0] == res.recovery_error[2]
+
+
+def test_batch_rejects_bad_vertices(stomach):
+    bp = BatchPalpation(stomach, rings=2, device="cpu")
+    with pytest.raises(ValueError, match="outside the mesh"):
+        bp.touch([0, 5000])
+    with pytest.raises(ValueError, match="non-empty"):
+        bp.touch([])
+    with pytest.raises(RuntimeError, match="touch"):
+        bp.press()
+
+
+def test_batch_region_covering_a_small_component(device):
+    # a tetrahedron's surface: 2 rings cover it, the outer non-empty ring (1) is fixed, as in Region
+    from almsdm_warp.mesh import TissueMesh
+
+    tet = TissueMesh.from_arrays(
+        np.array([[0, 0, 0], [30, 0, 0], [0, 30, 0], [0, 0, 30]], dtype=float),
+        np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]),
+    )
+    bp = BatchPalpation(tet, rings=3, device=device).touch([0, 2])
+    for b, seed in enumerate([0, 2]):
+        ref = Region(tet, device).build(seed, 3)
+        np.testing.assert_array_equal(bp.region(b), ref.vertices())
+        assert bp.free_vertex_counts[b] == ref.free_count == 1
+    assert np.all(np.isfinite(bp.press(**SHORT).peak_force))

@@ -1,0 +1,208 @@
+"""`almsdm sweep`: points spread over the surface, files that round-trip, resuming, the lesion found."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from almsdm_warp import sweep as sw
+from almsdm_warp.cli import main
+from almsdm_warp.scene import resolve_scene_or_mesh
+from conftest import SCENES, load_cached
+
+FAST = ["--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05", "--dt-ms", "0.5"]
+
+
+@pytest.fixture(scope="module")
+def stomach():
+    return load_cached(SCENES / "stomach.obj")
+
+
+def test_points_spread_evenly_over_the_vertices(stomach):
+    points, vertices = sw.sample_points(stomach, 50)
+    assert len(np.unique(vertices)) == 50
+    np.testing.assert_array_equal(points, stomach.vertices[vertices])
+    # farthest-point sampling: every surface vertex is no farther from a chosen point than the
+    # closest two chosen points are from each other (the greedy covering guarantee)
+    tree = cKDTree(points)
+    covering = tree.query(stomach.vertices[stomach.surface_vertices])[0].max()
+    separation = tree.query(points, k=2)[0][:, 1].min()
+    assert covering <= separation + 1e-12
+
+
+def test_more_points_than_vertices_snap_to_the_nearest(stomach):
+    points, vertices = sw.sample_points(stomach, 1500)
+    assert len(points) == 1500
+    # each point lies in some triangle: on its plane, with barycentric coordinates in [0, 1]
+    t = stomach.vertices[stomach.triangles]
+    a, e1, e2 = t[:, 0], t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    n = np.cross(e1, e2)
+    d = points[:, None, :] - a[None]
+    off_plane = np.abs(np.einsum("ptk,tk->pt", d, n)) / np.linalg.norm(n, axis=1)
+    g = np.stack([np.einsum("tk,tk->t", e1, e1), np.einsum("tk,tk->t", e1, e2), np.einsum("tk,tk->t", e2, e2)])
+    r1, r2 = np.einsum("ptk,tk->pt", d, e1), np.einsum("ptk,tk->pt", d, e2)
+    det = g[0] * g[2] - g[1] ** 2
+    u, w = (g[2] * r1 - g[1] * r2) / det, (g[0] * r2 - g[1] * r1) / det
+    inside = (off_plane < 1e-9) & (u >= -1e-9) & (w >= -1e-9) & (u + w <= 1 + 1e-9)
+    assert inside.any(axis=1).all()
+    d = np.linalg.norm(points[:, None, :] - stomach.vertices[None, :, :], axis=2)
+    np.testing.assert_allclose(np.linalg.norm(points - stomach.vertices[vertices], axis=1), d.min(axis=1))
+
+
+def test_tables_round_trip(tmp_path):
+    rng = np.random.default_rng(1)
+    cols = {c: rng.normal(size=9) for c in sw.COLUMNS}
+    cols["vertex"] = rng.integers(0, 1000, size=9)
+    cols["recovery_error_mm"][3] = np.nan
+    for suffix in (".csv", ".npz"):
+        back = sw.read_table(sw.write_table(tmp_path / f"t{suffix}", cols))
+        for c in sw.COLUMNS:
+            np.testing.assert_array_equal(back[c], cols[c])  # exact: CSV floats are written with repr
+        assert back["vertex"].dtype == np.int64
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv", "t.npz"]  # no temporary left
+
+
+def test_sweep_finds_the_lesion(tmp_path, capsys):
+    # the same points and step with and without the lesion: far from it, the same numbers; the
+    # stiffest point of the lesion scene is inside the lesion and stiffer than anything without it
+    lesion_out, plain_out = tmp_path / "lesion.csv", tmp_path / "plain.npz"
+    assert main(["sweep", "stomach_lesion", "--points", "48", "--out", str(lesion_out), *FAST]) == 0
+    assert main(["sweep", "stomach", "--points", "48", "--out", str(plain_out), *FAST]) == 0
+    a, b = sw.read_table(lesion_out), sw.read_table(plain_out)
+    np.testing.assert_array_equal(a["vertex"], b["vertex"])
+    lesion = resolve_scene_or_mesh("stomach_lesion").lesion
+    xyz = np.column_stack([a["x_mm"], a["y_mm"], a["z_mm"]]) * 1e-3
+    dist = np.linalg.norm(xyz - np.array(lesion.center), axis=1)
+    k = int(np.argmax(a["stiffness_N_per_mm"]))
+    assert dist[k] <= lesion.radius
+    assert a["stiffness_N_per_mm"][k] > 2 * b["stiffness_N_per_mm"].max()
+    far = dist > lesion.radius + 0.06  # beyond 4 rings of ~10 mm edges, and some
+    assert far.sum() > 10
+    np.testing.assert_array_equal(a["stiffness_N_per_mm"][far], b["stiffness_N_per_mm"][far])
+    assert "stiffest at vertex" in capsys.readouterr().out
+
+
+def test_interrupted_sweep_resumes_to_the_same_file(tmp_path, monkeypatch, capsys):
+    whole = tmp_path / "whole.csv"
+    assert main(["sweep", "--points", "20", "--chunk", "6", "--out", str(whole), *FAST]) == 0
+    out = tmp_path / "resumed.csv"
+    real_write = sw.Parts.write
+    calls = []
+
+    def write_then_stop(self, i, columns):
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        calls.append(i)
+        real_write(self, i, columns)
+
+    monkeypatch.setattr(sw.Parts, "write", write_then_stop)
+    assert main(["sweep", "--points", "20", "--chunk", "6", "--out", str(out), *FAST]) == 130
+    assert not out.exists()
+    assert len(list((tmp_path / "resumed.csv.parts").glob("chunk_*.npz"))) == 2
+    monkeypatch.setattr(sw.Parts, "write", real_write)
+    capsys.readouterr()
+    assert main(["sweep", "--points", "20", "--chunk", "6", "--out", str(out), *FAST]) == 0
+    assert "resuming: 2 of 4 chunks" in capsys.readouterr().out
+    assert out.read_text() == whole.read_text()
+    assert not (tmp_path / "resumed.csv.parts").exists()
+    # parts of another sweep are not mixed in
+    (tmp_path / "other.csv.parts").mkdir()
+    (tmp_path / "other.csv.parts" / "plan.json").write_text('{"key": "0000"}')
+    assert main(["sweep", "--points", "20", "--out", str(tmp_path / "other.csv"), *FAST]) == 2
+    assert "different sweep" in capsys.readouterr().err
+
+
+def test_chunks_over_several_devices_interleave(stomach, tmp_path):
+    # two batches in flight at once (as on two GPUs), here both on the CPU: the same numbers
+    points, vertices = sw.sample_points(stomach, 12)
+    from almsdm_warp.scene import TissueParams
+
+    plan = sw.SweepPlan(stomach, TissueParams(), None, None, 3, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 5)
+    results = []
+    for devices in (["cpu"], ["cpu", "cpu"]):
+        parts = sw.Parts(tmp_path / f"x{len(devices)}.npz", plan)
+        parts.open()
+        sw.run_local(plan, parts, [0, 1, 2], devices)
+        results.append(parts.gather())
+    for c in sw.COLUMNS:
+        np.testing.assert_array_equal(results[0][c], results[1][c])
+
+
+def test_sweep_on_ray_gives_the_same_file(tmp_path):
+    ray = pytest.importorskip("ray")
+    local, distributed = tmp_path / "local.csv", tmp_path / "ray.csv"
+    args = ["sweep", "--points", "12", "--chunk", "4", "--rings", "2", *FAST]
+    assert main([*args, "--out", str(local)]) == 0
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    try:
+        assert main([*args, "--out", str(distributed), "--ray"]) == 0
+    finally:
+        ray.shutdown()
+    assert distributed.read_text() == local.read_text()
+
+
+def test_sweep_implicit_matches_the_batch(tmp_path, stomach):
+    # the command's implicit sweep is BatchPalpation's implicit press at the same points
+    out = tmp_path / "imp.npz"
+    assert main(["sweep", "--points", "6", "--rings", "2", "--integrator", "implicit", "--out", str(out), *FAST]) == 0
+    table = sw.read_table(out)
+    from almsdm_warp.batch import BatchPalpation
+
+    res = BatchPalpation(stomach, rings=2, dt=5e-4, device="cpu", integrator="implicit").touch(table["vertex"]).press(0.01, 0.05, 0.05, 0.05)
+    np.testing.assert_array_equal(table["peak_force_N"], res.peak_force)
+    np.testing.assert_array_equal(table["recovery_error_mm"], res.recovery_error * 1e3)
+
+
+def test_sweep_png(tmp_path):
+    pytest.importorskip("matplotlib")
+    png = tmp_path / "map.png"
+    assert main(["sweep", "--points", "8", "--rings", "1", "--out", str(tmp_path / "m.npz"), "--png", str(png), *FAST]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--out", "x.txt"], "unknown format"),
+        (["--out", "/nonexistent/x.csv"], "does not exist"),
+        (["--out", "x.csv", "--device", "tpu"], "unknown device"),
+        (["--out", "x.csv", "--points", "0"], "must be >= 1"),
+        (["--out", "x.csv", "--depth-mm", "-1"], "must be > 0"),
+    ],
+)
+def test_sweep_bad_input(tmp_path, monkeypatch, capsys, args, message):
+    monkeypatch.chdir(tmp_path)
+    assert main(["sweep", *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_lesion_scene_and_its_errors(tmp_path):
+    from almsdm_warp.errors import InputError
+    from almsdm_warp.model import Model
+    from almsdm_warp.scene import load_scene
+
+    scene = resolve_scene_or_mesh("stomach_lesion")
+    lesion = scene.lesion
+    assert lesion.center == (-0.027, 0.056, 0.0) and lesion.radius == 0.018 and lesion.stiffness_factor == 5.0
+    assert scene.as_dict()["lesion"]["radius_mm"] == 18.0
+    mesh = scene.load_mesh()
+    edge_scale, anchor_scale = lesion.scales(mesh)
+    model = Model(mesh, scene.tissue, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale)
+    inside = np.linalg.norm(mesh.vertices - np.array(lesion.center), axis=1) <= lesion.radius
+    assert 0 < inside.sum() < 100
+    np.testing.assert_allclose(model.anchor_ke.numpy(), np.where(inside, 5.0, 1.0) * scene.tissue.anchor_stiffness, rtol=1e-6)
+    mid = mesh.vertices[mesh.edges].mean(axis=1)
+    stiff_edges = np.linalg.norm(mid - np.array(lesion.center), axis=1) <= lesion.radius
+    np.testing.assert_allclose(model.spring_ke.numpy(), np.where(stiff_edges, 5.0, 1.0) * scene.tissue.edge_stiffness, rtol=1e-6)
+    assert resolve_scene_or_mesh("stomach").lesion is None
+    for table, message in [
+        ("center_mm = [0, 0]\nradius_mm = 5", "center_mm must be 3 finite numbers"),
+        ("center_mm = [0, 0, 0]\nradius_mm = -5", "radius_mm must be a finite number > 0"),
+        ("center_mm = [0, 0, 0]", "needs radius_mm"),
+        ("center_mm = [0, 0, 0]\nradius_mm = 5\nhardness = 3", "unknown key 'hardness'"),
+    ]:
+        path = tmp_path / "l.toml"
+        path.write_text(f'[mesh]\npath = "{SCENES / "stomach.obj"}"\n[lesion]\n{table}\n')
+        with pytest.raises(InputError, match=message):
+            load_scene(path)
