@@ -76,7 +76,7 @@ def load_mesh(path, *, scale: float = 1.0) -> TissueMesh:
     except InputError:
         raise
     except Exception as exc:  # wrapped, never let through: the message says which file and format
-        raise InputError(f"{where}: cannot read as {fmt}: {_one_line(exc)}") from exc
+        raise InputError(f"{where}: cannot read as {fmt}: {_explain_bare(exc, p) or _one_line(exc)}") from exc
 
     mesh = build_mesh(vertices, triangles, tetrahedra, scale=scale, path=where)
     if notes:
@@ -126,6 +126,22 @@ def _read_meshio(p: Path, where: str):
     tri = np.concatenate(blocks["triangle"]) if blocks["triangle"] else None
     tet = np.concatenate(blocks["tetra"]) if blocks["tetra"] else None
     return np.asarray(m.points, dtype=np.float64), tri, tet, notes
+
+
+def _explain_bare(exc: BaseException, p: Path) -> str | None:
+    """What went wrong when a reader says nothing (meshio's VTU reader raises a bare ReadError for
+    any XML it cannot parse): the XML parser's own message, with line and column."""
+    if str(exc).strip() or p.suffix.lower() != ".vtu":
+        return None
+    import xml.etree.ElementTree as ET
+
+    try:
+        ET.parse(p)
+    except ET.ParseError as xml_error:
+        return f"broken XML: {_one_line(xml_error).split(': ', 1)[-1]}"
+    except Exception:  # noqa: BLE001 - only an explanation: the caller reports the original error
+        return None
+    return "well-formed XML, but not a VTK UnstructuredGrid that meshio reads (a missing or inconsistent element)"
 
 
 def _one_line(exc: BaseException) -> str:

@@ -166,3 +166,19 @@ def test_spring_shorter_than_float32_resolves_is_an_input_error():
     v[1] = v[0] + [0, 0, 1e-6]
     with pytest.raises(InputError, match=r"edge between vertices 0 and 1 is 1e-09 m long .* no direction"):
         TissueMesh.from_arrays(v, f, path="m.obj")
+
+
+def test_broken_vtu_says_where_the_xml_breaks(tmp_path):
+    """meshio raises a bare ReadError for any XML it cannot parse: the message was
+    'cannot read as VTU: ReadError'. It now carries the XML parser's line and column."""
+    from conftest import SCENES
+
+    data = (SCENES / "liver.vtu").read_bytes()
+    cut = tmp_path / "cut.vtu"
+    cut.write_bytes(data[:5000])
+    with pytest.raises(InputError, match=r"cut\.vtu: cannot read as VTU: broken XML: no element found: line \d+, column \d+$"):
+        load_mesh(cut)
+    junk = tmp_path / "junk.vtu"
+    junk.write_bytes(data[:3000] + b"\x00<<" + data[3003:])
+    with pytest.raises(InputError, match=r"junk\.vtu: cannot read as VTU: broken XML: not well-formed \(invalid token\): line"):
+        load_mesh(junk)
