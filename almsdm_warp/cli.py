@@ -99,6 +99,10 @@ def cmd_touch(args) -> int:
             }
         )
         print(f"  {region.summary()}")
+        if k < rings and len(rows) > 1 and rows[-1]["region_vertices"] == rows[-2]["region_vertices"]:
+            # the region covers the contact's component: more rings add nothing (and --rings 1e20 would loop for ever)
+            print(f"  rings {k + 1}..{rings}: the same region (it covers the mesh component of vertex {contact.vertex})")
+            break
     if args.json:
         write_json(
             args.json,

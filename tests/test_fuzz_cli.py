@@ -79,7 +79,7 @@ JSON_KINDS = ["ok", "ok", "ok", "ok", "missing folder", "a folder", "read-only f
 
 
 def run_checked(argv, folder, json_path, test, case):
-    code, out, err = run_main(argv)
+    code, out, err = run_main(argv, fuzz_limits=True)
     outcome = check_outcome(code, out, err, json_path, folder)
     record(test, case, outcome, err.strip().splitlines()[-1] if err.strip() else "")
     return outcome, out, err
@@ -146,6 +146,33 @@ def test_impossible_parameters_are_one_line_errors(argv, message, tmp_path):
     code, stdout, err = run_main([*argv, "--json", str(out)] if "\0" not in argv[-1] else argv)
     check_outcome(code, stdout, err, out, tmp_path)
     assert code == 2 and message in err, err
+
+
+@pytest.mark.parametrize("rings", ["1000000", "99999999999999999999"])
+def test_touch_with_more_rings_than_the_mesh_holds(rings, tmp_path):
+    """touch built every ring count from 1 to --rings: 1e6 full-mesh builds (a hang, and 2 GB of
+    rows) or for ever. It now stops where the region covers the mesh component, which is the
+    breadth-first depth of the mesh from the contact (scipy), plus the one empty ring that shows it."""
+    import json
+
+    import numpy as np
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import shortest_path
+
+    from almsdm_warp.scene import resolve_scene_or_mesh
+
+    out = tmp_path / "touch.json"
+    code, stdout, err = run_main(["touch", "--rings", rings, "--json", out])
+    check_outcome(code, stdout, err, out, tmp_path)
+    assert code == 0, err
+    data = json.loads(out.read_text())
+    mesh = resolve_scene_or_mesh(None).load_mesh()
+    e = mesh.edges
+    g = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(mesh.vertex_count,) * 2)
+    depth = int(shortest_path(g, directed=False, unweighted=True, indices=data["contact"]["vertex"]).max())
+    assert [row["rings"] for row in data["regions"]] == list(range(1, depth + 2))
+    assert data["regions"][-1]["region_vertices"] == data["regions"][-2]["region_vertices"] == mesh.vertex_count
+    assert f"rings {depth + 2}..{rings}: the same region" in stdout
 
 
 def test_far_probe_within_reach_still_touches(tmp_path):
