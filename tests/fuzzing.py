@@ -26,6 +26,9 @@ SCALE = int(os.environ.get("ALMSDM_FUZZ_SCALE", "0") or 0)
 LOG = os.environ.get("ALMSDM_FUZZ_LOG")
 HANG_S = 120
 """An example that runs longer than this is a hang (a failure), not a slow result."""
+FUZZ_MAX_STEPS = 20_000
+"""The command line's step limit while fuzzing (MAX_STEPS is 1e7): a drawn --hold-s 5000 on the
+global implicit model is a legitimate hour-long run, not a hang; the same limit check refuses it."""
 
 
 def fuzz_settings(examples: int):
@@ -48,12 +51,17 @@ def record(test: str, case: str, outcome: str, message: str = "") -> None:
         f.write(json.dumps({"test": test, "case": case, "outcome": outcome, "message": head}) + "\n")
 
 
+class Hang(AssertionError):
+    """A run past HANG_S (not a TimeoutError: that is an OSError, which the command line turns
+    into one line and exit code 2, and the hang would pass for a clear error)."""
+
+
 @contextlib.contextmanager
 def hang_guard(seconds: int = HANG_S):
-    """Fail (TimeoutError) instead of hanging when the body runs longer than `seconds`."""
+    """Fail (Hang) instead of hanging when the body runs longer than `seconds`."""
 
     def alarm(signum, frame):
-        raise TimeoutError(f"no result within {seconds} s: a hang")
+        raise Hang(f"no result within {seconds} s: a hang")
 
     old = signal.signal(signal.SIGALRM, alarm)
     signal.alarm(seconds)
@@ -65,14 +73,18 @@ def hang_guard(seconds: int = HANG_S):
 
 
 # -- the command line, in-process ------------------------------------------------------------
-def run_main(argv):
+def run_main(argv, fuzz_limits=False):
     """almsdm_warp.cli.main(argv) with stdout and stderr captured: (exit code, stdout, stderr).
+    fuzz_limits: run under FUZZ_MAX_STEPS.
 
     Any exception that escapes main() is a bug (a traceback for the user): it propagates."""
+    from unittest import mock
+
     from almsdm_warp.cli import main
 
     out, err = io.StringIO(), io.StringIO()
-    with hang_guard(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+    limit = mock.patch("almsdm_warp.cli_palpate.MAX_STEPS", FUZZ_MAX_STEPS) if fuzz_limits else contextlib.nullcontext()
+    with hang_guard(), limit, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main([str(a) for a in argv])
     return code, out.getvalue(), err.getvalue()
 

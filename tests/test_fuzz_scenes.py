@@ -120,7 +120,7 @@ def test_corrupted_scene_bytes(data):
     description, corrupted, _ = data.draw(corruptions(scene_text(name).encode(), {".toml"}))
     with tempfile.TemporaryDirectory() as tmp:
         kind = description.split()[0] if not description[0].isdigit() else description.split()[1]
-        load_or_error(write_scene(Path(tmp), "scene.toml", corrupted), "scene_bytes", kind)
+        load_or_error(write_scene(Path(tmp), "scene.toml", corrupted), "scene_bytes", f".toml {kind}")
 
 
 @fuzz_settings(8)
@@ -140,7 +140,7 @@ def test_edited_scene_through_the_command_line(edit, integrator):
             pass
         if scene is not None and (scene.press.ramp + scene.press.hold + scene.press.settle) > 0.05:
             argv += ["--ramp-s", "0.01", "--hold-s", "0.01", "--settle-s", "0.02"]
-        code, stdout, err = run_main(argv)
+        code, stdout, err = run_main(argv, fuzz_limits=True)
         outcome = check_outcome(code, stdout, err, out, folder)
         record("scene_cli", description.split(":")[1].strip()[:60], outcome, err.strip().splitlines()[-1] if err.strip() else "")
 
