@@ -199,12 +199,12 @@ def lesion_palpation(integrator, dt, device, rings=4):
 
 
 def test_stiff_lesion_1e6_implicit(device):
-    """Springs 1e6 times stiffer than the rest (a hard lesion under the probe), implicit at 1 ms:
-    no NaN, and the held force equals the float64 static equilibrium (Newton with load steps) to
-    1e-3; the lesion makes it ~20x the uniform tissue's."""
-    p, scene, mesh, ke = lesion_palpation("implicit", 1e-3, device)
+    """Springs 1e6 times stiffer than the rest (a hard lesion under the probe), implicit at 5 ms
+    (quasi-static): no NaN, and the held force equals the float64 static equilibrium (Newton with
+    load steps) to 1e-3; the lesion makes it ~20x the uniform tissue's."""
+    p, scene, mesh, ke = lesion_palpation("implicit", 5e-3, device)
     top = p.vertex
-    forces = hold(p, DEPTH, 800, 100)
+    forces = hold(p, DEPTH, 160, 20)
     assert np.all(np.isfinite(forces)) and finite_states(p)
     free = p.region.vertices()[: p.region.free_count]
     target = (p.rest_position() + p.inward_normal() * DEPTH).astype(np.float32).astype(np.float64)
@@ -213,7 +213,7 @@ def test_stiff_lesion_1e6_implicit(device):
     uniform = np.linalg.norm(static_reaction(mesh, scene.tissue, top, target, free))
     assert want > 10 * uniform  # not vacuous: the lesion is felt
     np.testing.assert_allclose(np.linalg.norm(forces[-1]), want, rtol=1e-3)
-    release(p, 1500)
+    release(p, 300)
     assert finite_states(p)
     assert np.abs(p.positions() - mesh.vertices).max() < 1e-4
 
