@@ -93,7 +93,61 @@ def _read_trimesh(p: Path, where: str):
     vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
     faces = getattr(loaded, "faces", None)
     faces = np.zeros((0, 3), dtype=np.int64) if faces is None else np.asarray(faces, dtype=np.int64)
+    _check_announced_counts(p, where, len(vertices), len(faces))
     return vertices, faces, None, []
+
+
+def _announced_counts(p: Path):
+    """(format, vertices, faces) that an OFF or PLY header or a binary STL's size announces, or
+    None where the file announces nothing (OBJ, ASCII STL) or its header is not understood."""
+    suffix = p.suffix.lower()
+    if suffix == ".stl":
+        size = p.stat().st_size
+        with open(p, "rb") as f:
+            head = f.read(84)
+        if len(head) == 84:
+            n = int(np.frombuffer(head[80:84], dtype="<u4")[0])
+            if size == 84 + 50 * n or not head.lstrip().lower().startswith(b"solid"):
+                return ("binary STL", None, n) if size == 84 + 50 * n else ("binary STL", -1, n)
+        return None
+    if suffix not in (".off", ".ply"):
+        return None
+    with open(p, "rb") as f:
+        text = f.read(1 << 16).decode("latin-1")
+    if suffix == ".off":
+        tokens = " ".join(line.split("#", 1)[0] for line in text.splitlines()[:50]).split()
+        if len(tokens) >= 3 and tokens[0].upper().endswith("OFF") and tokens[1].isdigit() and tokens[2].isdigit():
+            return "OFF", int(tokens[1]), int(tokens[2])
+        return None
+    counts = {}
+    for line in text.splitlines():
+        words = line.split()
+        if words[:1] == ["end_header"]:
+            break
+        if len(words) == 3 and words[0] == "element" and words[2].isdigit():
+            counts[words[1]] = int(words[2])
+    if "vertex" in counts:
+        return "PLY", counts["vertex"], counts.get("face", 0)
+    return None
+
+
+def _check_announced_counts(p: Path, where: str, vertex_count: int, face_count: int) -> None:
+    """trimesh stops quietly where a truncated OFF or ASCII PLY ends, and reads a truncated binary
+    STL as empty: half a mesh, which would look like a physics bug later. Compare with what the
+    file announces (polygons may become several triangles: at least that many faces)."""
+    announced = _announced_counts(p)
+    if announced is None:
+        return
+    fmt, vertices, faces = announced
+    if fmt == "binary STL":
+        if vertices == -1:
+            size = p.stat().st_size
+            raise InputError(f"{where}: truncated binary STL: its header announces {faces} triangles "
+                             f"({84 + 50 * faces} bytes), but the file has {size} bytes")
+        return
+    if vertex_count != vertices or face_count < faces:
+        raise InputError(f"{where}: the {fmt} header announces {vertices} vertices and {faces} faces, but the file "
+                         f"holds {vertex_count} vertices and {face_count} faces (truncated, or lines missing?)")
 
 
 def _read_polydata(p: Path, where: str):

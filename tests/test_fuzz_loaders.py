@@ -21,6 +21,40 @@ SMALL_SHARED = {"gca_stomach_1002v.obj", "liver.msh", "mor_liverTinyMesh.vtu", "
                 "sofa_liver2_tets.vtu", "mor_liverCoarse.vtu", "liver2.msh"}
 FILES = [p for p in scene_mesh_paths()] + [p for p in shared_mesh_paths() if p.name in SMALL_SHARED]
 _bytes = {}
+_converted = {}
+
+
+def converted_files():
+    """The scenes written in the formats no shipped file uses: STL, PLY, OFF (trimesh), an ASCII
+    VTK POLYDATA (our own reader), Gmsh 2.2 and 4.1 and a legacy VTK grid (meshio); made once, in
+    memory, as {name: bytes} (the mesh content is valid: corruption comes after)."""
+    if _converted:
+        return _converted
+    import meshio
+    import trimesh
+
+    from conftest import SCENES
+
+    stomach = load_mesh(SCENES / "stomach.obj")
+    liver = load_mesh(SCENES / "liver.vtu")
+    v, t = stomach.vertices_mm, stomach.triangles
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        surface = trimesh.Trimesh(v, t, process=False)
+        for suffix in (".stl", ".ply", ".off"):
+            surface.export(folder / f"stomach{suffix}")
+        points = "\n".join(" ".join(f"{x:.6f}" for x in row) for row in v)
+        cells = "\n".join("3 " + " ".join(str(i) for i in row) for row in t)
+        (folder / "stomach_polydata.vtk").write_text(
+            f"# vtk DataFile Version 3.0\nstomach\nASCII\nDATASET POLYDATA\nPOINTS {len(v)} float\n{points}\n"
+            f"POLYGONS {len(t)} {4 * len(t)}\n{cells}\n")
+        grid = meshio.Mesh(liver.vertices_mm, [("tetra", liver.tetrahedra)])
+        meshio.write(folder / "liver_v22.msh", grid, file_format="gmsh22", binary=False)
+        meshio.write(folder / "liver_v41.msh", grid, file_format="gmsh", binary=False)
+        meshio.write(folder / "liver_grid.vtk", grid, file_format="vtk", binary=False)
+        for path in folder.iterdir():
+            _converted[path.name] = path.read_bytes()
+    return _converted
 
 
 def file_bytes(path):
@@ -62,13 +96,38 @@ def load_or_error(path, test, case):
 @fuzz_settings(60)
 @given(data=st.data())
 def test_corrupted_mesh_files(data):
+    """The shipped scenes and small shared meshes (OBJ, VTU, Gmsh v1)."""
     path = data.draw(st.sampled_from(FILES), label="file")
-    description, corrupted, suffix = data.draw(corruptions(file_bytes(path), MESH_SUFFIXES), label="corruption")
+    corrupt_and_load(data, path, file_bytes(path), ".msh v1" if path.suffix == ".msh" else None)
+
+
+@fuzz_settings(40)
+@given(data=st.data())
+def test_corrupted_files_in_every_other_format(data):
+    """The scenes converted to STL, PLY, OFF, VTK POLYDATA, Gmsh 2.2 / 4.1, legacy VTK grid."""
+    files = converted_files()
+    name = data.draw(st.sampled_from(sorted(files)), label="file")
+    if name not in _loaded_ok:  # the file as written loads: what fails below is the corruption
+        with tempfile.TemporaryDirectory() as tmp:
+            target = Path(tmp) / name
+            target.write_bytes(files[name])
+            assert_usable(load_mesh(target))
+        _loaded_ok.add(name)
+    label = {"stomach_polydata.vtk": ".vtk POLYDATA", "liver_v22.msh": ".msh v2.2", "liver_v41.msh": ".msh v4.1",
+             "liver_grid.vtk": ".vtk grid"}.get(name, Path(name).suffix)
+    corrupt_and_load(data, Path(name), files[name], label)
+
+
+_loaded_ok = set()
+
+
+def corrupt_and_load(data, path, content, label=None):
+    description, corrupted, suffix = data.draw(corruptions(content, MESH_SUFFIXES), label="corruption")
     with tempfile.TemporaryDirectory() as tmp:
         target = Path(tmp) / (path.stem + (suffix or path.suffix))
         target.write_bytes(corrupted)
         kind = description.split()[0] if not description[0].isdigit() else description.split()[1]
-        load_or_error(target, "corrupted_file", f"{path.suffix} {kind}")
+        load_or_error(target, "corrupted_file", f"{label or path.suffix} {kind}")
 
 
 @fuzz_settings(80)
@@ -182,3 +241,39 @@ def test_broken_vtu_says_where_the_xml_breaks(tmp_path):
     junk.write_bytes(data[:3000] + b"\x00<<" + data[3003:])
     with pytest.raises(InputError, match=r"junk\.vtu: cannot read as VTU: broken XML: not well-formed \(invalid token\): line"):
         load_mesh(junk)
+
+
+@pytest.mark.parametrize(
+    "suffix, cut, message",
+    [
+        (".off", "half_the_lines", r"the OFF header announces 1002 vertices and 2000 faces, but the file holds 1002 vertices and \d+ faces"),
+        (".off", "delete_face", r"the OFF header announces 1002 vertices and 2000 faces, but the file holds 1002 vertices and 1999"),
+        (".ply", "delete_face", r"the PLY header announces 1002 vertices and 2000 faces, but the file holds 1002 vertices and 1999"),
+        (".stl", "truncate", r"truncated binary STL: its header announces 2000 triangles \(100084 bytes\), but the file has \d+ bytes"),
+    ],
+)
+def test_truncated_counted_formats_are_errors_not_half_meshes(suffix, cut, message, tmp_path):
+    """Found by fuzzing converted files: trimesh read a truncated OFF or ASCII PLY up to where it
+    ended (an OFF cut at half its lines loaded as 285 vertices and 496 triangles, with only an
+    'open surface' note) and a truncated binary STL as empty ('the mesh is empty'). The counts
+    the header announces are now checked."""
+    import trimesh
+
+    from conftest import SCENES
+
+    mesh = load_mesh(SCENES / "stomach.obj")
+    path = tmp_path / f"stomach{suffix}"
+    trimesh.Trimesh(mesh.vertices_mm, mesh.triangles, process=False).export(path, **({"encoding": "ascii"} if suffix == ".ply" else {}))
+    data = path.read_bytes()
+    assert_usable(load_mesh(path))  # as written, it loads
+    if cut == "truncate":
+        data = data[: len(data) // 2]
+    elif cut == "half_the_lines":
+        lines = data.split(b"\n")
+        data = b"\n".join(lines[: len(lines) // 2]) + b"\n"
+    else:  # the last face line (a face, in both formats)
+        lines = data.rstrip(b"\n").split(b"\n")
+        data = b"\n".join(lines[:-1]) + b"\n"
+    path.write_bytes(data)
+    with pytest.raises(InputError, match=message):
+        load_mesh(path)
