@@ -46,7 +46,7 @@ def record(test: str, case: str, outcome: str, message: str = "") -> None:
     """One line of the campaign log (no-op without ALMSDM_FUZZ_LOG)."""
     if not LOG:
         return
-    head = re.sub(r"/\S*/", "…/", " ".join(message.split()))[:160]
+    head = re.sub(r"\S{41,}", "…", re.sub(r"/\S*/", "…/", " ".join(message.split())))[:160]
     with open(LOG, "a", encoding="utf-8") as f:
         f.write(json.dumps({"test": test, "case": case, "outcome": outcome, "message": head}) + "\n")
 
