@@ -74,7 +74,7 @@ def build_mesh(vertices, triangles=None, tetrahedra=None, *, scale: float = 1.0,
     lo, hi = v[used].min(axis=0), v[used].max(axis=0)
     diag = float(np.linalg.norm(hi - lo))
 
-    inside = np.flatnonzero(np.abs(v).max(axis=1) <= MAX_COORDINATE_M / (scale * 1e-3))
+    inside = np.flatnonzero(np.abs(v).max(axis=1) <= min(MAX_COORDINATE_M / (scale * 1e-3), MAX_FILE_COORDINATE))
     remap = _merge_duplicates(v, inside, diag, notes)
     elements = remap[elements]
     elements, ids = _drop_degenerate(v, elements, ids, diag, where, notes)
