@@ -87,6 +87,9 @@ def load_mesh(path, *, scale: float = 1.0) -> TissueMesh:
 def _read_trimesh(p: Path, where: str):
     import trimesh
 
+    if p.suffix.lower() == ".obj":
+        _check_obj_face_indices(p, where)
+
     loaded = trimesh.load_mesh(p, file_type=p.suffix.lower()[1:], process=False)
     if isinstance(loaded, trimesh.Scene):  # several objects: concatenated, none dropped
         loaded = loaded.to_mesh()
@@ -95,6 +98,31 @@ def _read_trimesh(p: Path, where: str):
     faces = np.zeros((0, 3), dtype=np.int64) if faces is None else np.asarray(faces, dtype=np.int64)
     _check_announced_counts(p, where, len(vertices), len(faces))
     return vertices, faces, None, []
+
+
+def _check_obj_face_indices(p: Path, where: str) -> None:
+    """Every OBJ face index names a vertex: trimesh reads an index 0 as the last vertex (0 - 1 =
+    -1: a wrong mesh, silently) and fails on one past the end with a bare IndexError. Positive
+    indices count from the file's first vertex, negative ones back from the last vertex so far."""
+    with open(p, "rb") as f:
+        lines = f.read().split(b"\n")
+    total = sum(1 for line in lines if line[:2] in (b"v ", b"v\t"))
+    seen = 0
+    for number, line in enumerate(lines, start=1):
+        head = line[:2]
+        if head in (b"v ", b"v\t"):
+            seen += 1
+        elif head in (b"f ", b"f\t"):
+            for token in line.split()[1:]:
+                try:
+                    index = int(token.split(b"/")[0])
+                except ValueError:
+                    break  # not a number: the reader's own error says what it is
+                if index == 0 or index > total or index < -seen:
+                    what = "OBJ indices start at 1" if index == 0 else (
+                        f"the file has {total} vertices" if index > 0 else f"only {seen} vertices precede it")
+                    raise InputError(f"{where}: line {number}: face {line.decode(errors='replace').strip()[:60]!r} "
+                                     f"references vertex {index}, but {what}")
 
 
 def _announced_counts(p: Path):

@@ -277,3 +277,25 @@ def test_truncated_counted_formats_are_errors_not_half_meshes(suffix, cut, messa
     path.write_bytes(data)
     with pytest.raises(InputError, match=message):
         load_mesh(path)
+
+
+@pytest.mark.parametrize(
+    "face, message",
+    [
+        ("f 1 2 0", r"line \d+: face 'f 1 2 0' references vertex 0, but OBJ indices start at 1"),  # was: silently the last vertex
+        ("f 1/1 2/2 5000/3", r"references vertex 5000, but the file has 1002 vertices"),  # was: a bare IndexError
+        ("f 1 2 -5000", r"references vertex -5000, but only 1002 vertices precede it"),
+    ],
+)
+def test_obj_face_index_out_of_range_names_the_line(face, message, tmp_path):
+    """Found by fuzzing: trimesh read an OBJ face index 0 as the last vertex (a wrong mesh, no
+    error) and an index past the end as 'IndexError: index 4999 is out of bounds'."""
+    from conftest import SCENES
+
+    lines = (SCENES / "stomach.obj").read_text().split("\n")
+    k = next(i for i, line in enumerate(lines) if line.startswith("f "))
+    lines[k] = face
+    path = tmp_path / "bad.obj"
+    path.write_text("\n".join(lines))
+    with pytest.raises(InputError, match=message):
+        load_mesh(path)
