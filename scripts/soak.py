@@ -19,7 +19,6 @@ A long check, not a test; tests/test_soak.py runs a short version.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path

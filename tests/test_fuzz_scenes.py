@@ -8,6 +8,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import pytest
 from conftest import SCENES
 from fuzzing import check_outcome, corruptions, fuzz_settings, hang_guard, record, run_main
 from hypothesis import given
@@ -146,8 +147,6 @@ def test_edited_scene_through_the_command_line(edit, integrator):
 
 
 # -- regressions found by the fuzzing above ---------------------------------------------------
-import pytest  # noqa: E402
-
 
 @pytest.mark.parametrize(
     "key, value",
