@@ -19,6 +19,7 @@ import sys
 TESTS = {
     "corrupted_file": "mesh file, corrupted",
     "random_arrays": "random arrays",
+    "perturbed_icosahedron": "an icosahedron, perturbed",
     "random_mesh": "random mesh, written and read",
     "scene_edit": "scene file, values edited",
     "scene_bytes": "scene file, bytes corrupted",

@@ -151,6 +151,37 @@ def test_random_arrays(vertices, elements, scale):
     record("random_arrays", f"{elements.shape[1]}-cells", "ok", "; ".join(mesh.notes))
 
 
+@fuzz_settings(60)
+@given(
+    jitter=hnp.arrays(np.float64, (12, 3), elements=st.sampled_from([0.0, 0.0, 1e-12, 1e-7, 1e-3, 0.5, 5.0, -5.0, 1e3])),
+    edits=st.lists(st.tuples(st.integers(0, 19), st.integers(0, 2), st.integers(-1, 13)), max_size=3),
+    extra=st.integers(0, 3),
+    scale=st.sampled_from([1.0, 10.0, 1e-3, 1e3]),
+)
+def test_perturbed_icosahedron(jitter, edits, extra, scale):
+    """A valid closed surface (an icosahedron, 10 mm) with its vertices moved (nothing, slivers,
+    coincident points, folds), a few indices changed (repeated, out of range) and unreferenced
+    vertices added: mostly meshes that must load usable, some that must fail clearly."""
+    import trimesh
+
+    ico = trimesh.creation.icosahedron()
+    v = np.vstack([ico.vertices * 10.0 + jitter, np.full((extra, 3), 7.0)])
+    f = np.array(ico.faces, dtype=np.int64)
+    for face, corner, vertex in edits:
+        f[face, corner] = vertex
+    try:
+        mesh = TissueMesh.from_arrays(v, f, scale=scale)
+    except InputError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith("<arrays>"), str(exc)
+        record("perturbed_icosahedron", "edits" if edits else "moved only", "error", str(exc)[len("<arrays>"):])
+        return
+    assert_usable(mesh)
+    if not edits and np.abs(jitter).max() < 1e-3:  # nothing but noise: all 12 vertices, 20 faces, outward
+        assert (mesh.vertex_count, mesh.triangle_count) == (12, 20)
+        assert trimesh.Trimesh(mesh.vertices, mesh.triangles, process=False).volume > 0
+    record("perturbed_icosahedron", "edits" if edits else "moved only", "ok", "; ".join(mesh.notes))
+
+
 @fuzz_settings(30)
 @given(
     points=hnp.arrays(np.float64, st.tuples(st.integers(4, 30), st.just(3)), elements=st.floats(-50, 50, width=32)),
