@@ -177,6 +177,11 @@ def cmd_palpate(args) -> int:
     from .palpation import Palpation, SimulationDiverged
 
     rings = scene.rings if args.rings is None else args.rings
+    if rings not in GLOBAL_RINGS and rings > mesh.vertex_count:
+        # more rings than vertices can only repeat the whole component (and 1e20 overflows the ring table)
+        where = "--rings" if args.rings is not None else f"the scene's [region] rings"
+        raise InputError(f"{where} {rings} is more than the mesh's {mesh.vertex_count} vertices; "
+                         f"a region that large is the whole mesh: use --rings global")
     p = scene.press
     depth = p.depth if args.depth_mm is None else args.depth_mm * 1e-3
     ramp = p.ramp if args.ramp_s is None else args.ramp_s

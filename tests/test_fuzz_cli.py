@@ -137,6 +137,7 @@ def test_cli_extreme_parameters(command, flags, probe, scene, json_kind):
         # a probe beyond the contact query's reach: "seed vertex -1 is outside the mesh"
         (["--probe-mm", "1e30", "0", "0"], "more than 1e+06 mm from the origin"),
         (["touch", "--probe-mm", "1e38", "1e38", "1e38"], "more than 1e+06 mm from the origin"),  # was a ValueError traceback
+        (["--rings", "99999999999999999999"], "is more than the mesh's 1002 vertices"),  # was an OverflowError in Region
         (["touch", "a\0b.obj"], "cannot hold a NUL byte"),  # was ValueError: embedded null byte
         (["touch", "/tmp/" + "a" * 300 + ".obj"], "File name too long"),  # was an OSError traceback
     ],

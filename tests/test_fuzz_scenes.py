@@ -187,3 +187,14 @@ def test_zero_anchor_and_damping_still_run(tmp_path):
     assert scene.tissue.anchor_stiffness == 0 and scene.tissue.edge_damping == 0
     code, stdout, err = run_main(["palpate", path, "--integrator", "implicit", "--ramp-s", "0.02", "--hold-s", "0", "--settle-s", "0.02"])
     assert code == 0, err
+
+
+def test_scene_with_more_rings_than_vertices(tmp_path):
+    """rings = 2^63 - 1 in a scene passed every check and crashed in Region (an OverflowError
+    from a list of that many empty rings): the command line now refuses more rings than vertices."""
+    path = write_scene(tmp_path, "scene.toml", set_value(scene_text("stomach"), "region", "rings", "9223372036854775807"))
+    assert load_scene(path).rings == 2**63 - 1  # a valid scene: an integer >= 1
+    out = tmp_path / "out.json"
+    code, stdout, err = run_main(["palpate", path, "--json", out])
+    check_outcome(code, stdout, err, out, tmp_path)
+    assert code == 2 and "the scene's [region] rings 9223372036854775807 is more than the mesh's 1002 vertices" in err
