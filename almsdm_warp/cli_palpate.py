@@ -177,7 +177,7 @@ def cmd_palpate(args) -> int:
     from .palpation import Palpation, SimulationDiverged
 
     rings = scene.rings if args.rings is None else args.rings
-    if rings not in GLOBAL_RINGS and rings > mesh.vertex_count:
+    if isinstance(rings, int) and rings > mesh.vertex_count:  # (not "global", "global-free")
         # more rings than vertices can only repeat the whole component (and 1e20 overflows the ring table)
         where = "--rings" if args.rings is not None else f"the scene's [region] rings"
         raise InputError(f"{where} {rings} is more than the mesh's {mesh.vertex_count} vertices; "
