@@ -22,6 +22,16 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(f"{self.prog}: {message}")
 
 
+def _path_arg(text):
+    """A path argument: any text but one the operating system cannot take as a path."""
+    if "\0" in text:
+        raise argparse.ArgumentTypeError(f"a path cannot hold a NUL byte: {text!r}")
+    return text
+
+
+_path_arg.__name__ = "path"
+
+
 def _device(name):
     import warp as wp
 
@@ -58,15 +68,16 @@ def cmd_touch(args) -> int:
     rings = scene.rings if args.rings is None else args.rings
     print(mesh.summary())
 
+    from .cli_palpate import check_contact, probe_position
+
     if args.probe_mm is not None:
-        probe = np.asarray(args.probe_mm, dtype=np.float64) * 1e-3
-        if not np.all(np.isfinite(probe)):
-            raise InputError(f"--probe-mm must be finite, got {args.probe_mm}")
+        probe = probe_position(args.probe_mm)
     else:
         # above the highest surface vertex: a press from the top
         top = mesh.surface_vertices[np.argmax(mesh.vertices[mesh.surface_vertices, 2])]
         probe = mesh.vertices[top] + np.array([0.0, 0.0, 5e-3])
     contact = find_contacts(mesh, probe, device=device)
+    check_contact(contact, probe, mesh)
     print(
         f"probe at {np.round(probe * 1e3, 2).tolist()} mm touches face {contact.face} at "
         f"{np.round(contact.point * 1e3, 2).tolist()} mm ({contact.distance * 1e3:.2f} mm away); "
@@ -88,6 +99,10 @@ def cmd_touch(args) -> int:
             }
         )
         print(f"  {region.summary()}")
+        if k < rings and len(rows) > 1 and rows[-1]["region_vertices"] == rows[-2]["region_vertices"]:
+            # the region covers the contact's component: more rings add nothing (and --rings 1e20 would loop for ever)
+            print(f"  rings {k + 1}..{rings}: the same region (it covers the mesh component of vertex {contact.vertex})")
+            break
     if args.json:
         write_json(
             args.json,
@@ -125,11 +140,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="almsdm", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", parser_class=_Parser)
     touch = sub.add_parser("touch", help="touch a scene or mesh with the probe and print the ring region")
-    touch.add_argument("scene", nargs="?", default=None, help="scene (.toml) or mesh file; default: the stomach scene")
+    touch.add_argument("scene", nargs="?", default=None, type=_path_arg, help="scene (.toml) or mesh file; default: the stomach scene")
     touch.add_argument("--rings", type=int, default=None, help="rings to grow (default: the scene's)")
     touch.add_argument("--probe-mm", type=float, nargs=3, metavar=("X", "Y", "Z"), help="probe position [mm]")
     touch.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
-    touch.add_argument("--json", default=None, help="write the result as JSON here")
+    touch.add_argument("--json", default=None, type=_path_arg, help="write the result as JSON here")
     touch.set_defaults(func=cmd_touch)
 
     palpate = sub.add_parser(
@@ -138,7 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Press the probe into a scene or mesh (the local ALMSDM region, or the whole mesh) and print "
         "the feedback force, the recovery after release and the speed of a step. Defaults come from the scene.",
     )
-    palpate.add_argument("scene", nargs="?", default=None, metavar="MESH_OR_SCENE", help="scene (.toml), scene name or mesh file; default: the stomach scene")
+    palpate.add_argument("scene", nargs="?", default=None, type=_path_arg, metavar="MESH_OR_SCENE", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     palpate.add_argument("--rings", type=_rings_arg, default=None, metavar="{N,auto,global,global-free}", help="rings of the local region (outermost fixed), auto (sized to --tol-mm), or a global model (default: the scene's)")
     palpate.add_argument("--tol-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="--rings auto: grow the region until its fixed ring would move less than this [mm] (default 0.1)")
     palpate.add_argument("--integrator", choices=("explicit", "implicit"), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
@@ -153,7 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--vertex", type=int, default=None, metavar="V", help="contact vertex (a surface vertex id)")
     where.add_argument("--probe-mm", type=float, nargs=3, metavar=("X", "Y", "Z"), help="probe position [mm]; the contact is its nearest surface vertex")
     palpate.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
-    palpate.add_argument("--json", default=None, metavar="PATH", help="write the result as JSON here")
+    palpate.add_argument("--json", default=None, type=_path_arg, metavar="PATH", help="write the result as JSON here")
     palpate.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal, for runs over ~2 s)")
     add_record_args(palpate)
     palpate.set_defaults(func=cmd_palpate)
@@ -201,6 +216,10 @@ def main(argv=None) -> int:
     except InputError as exc:
         message = " ".join(str(exc).split())  # one line, whatever the message holds
         print(f"almsdm: error: {message}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:  # the file system refused a path given (a name too long, a loop of links, ...)
+        name = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        print(f"almsdm: error: {name}{exc.strerror or ' '.join(str(exc).split())}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("almsdm: interrupted", file=sys.stderr)

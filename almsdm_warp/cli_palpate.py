@@ -18,6 +18,9 @@ AUTO_TOL_MM = 0.1
 """--tol-mm when --rings auto is given without it [mm]."""
 TIMING_STEPS = 2000
 """Steps timed after the presses, in batches (fewer when a step is slow: about 1 s in all)."""
+MAX_STEPS = 10_000_000
+"""Steps one run may take (every press together): a hundred minutes at a few us a step; more is a
+typo (a dt in seconds given to --dt-ms, a hold in ms given to --hold-s), not a run to wait for."""
 
 
 def _rings_arg(text):
@@ -68,6 +71,46 @@ def _finite(value):
     return value if math.isfinite(value) else None
 
 
+def probe_position(probe_mm, flag="--probe-mm"):
+    """--probe-mm X Y Z -> metres, finite and within the +-1 km that meshes are held to."""
+    from .validate import MAX_COORDINATE_M
+
+    probe = np.asarray(probe_mm, dtype=np.float64) * 1e-3
+    if not np.all(np.isfinite(probe)):
+        raise InputError(f"{flag} must be finite, got {list(probe_mm)}")
+    if np.abs(probe).max() > MAX_COORDINATE_M:
+        raise InputError(f"{flag} {list(probe_mm)} is more than {MAX_COORDINATE_M * 1e3:g} mm from the origin, "
+                         f"beyond any mesh the simulator holds")
+    return probe
+
+
+def check_contact(contact, probe, mesh):
+    """A contact that found no surface vertex is an InputError, not a vertex id of -1."""
+    if int(contact.vertex) < 0 or int(contact.face) < 0:
+        raise InputError(f"the probe at {np.round(probe * 1e3, 3).tolist()} mm finds no surface of {mesh.name} "
+                         f"(it is too far from the mesh)")
+
+
+def check_protocol(depth, dt, ramp, hold, settle, presses, mesh):
+    """A press the simulator can run: depth within the organ, dt no longer than the ramp or the
+    settle window, and no more than MAX_STEPS steps in all (floats first: 1e300 / 1e-300 is inf)."""
+    if not dt > 0:
+        raise InputError(f"dt must be > 0, got {dt!r} s (--dt-ms underflows)")
+    size = float(np.ptp(mesh.vertices, axis=0).max())
+    if depth > size:
+        raise InputError(f"press depth {depth * 1e3:g} mm is more than the mesh's extent ({size * 1e3:.4g} mm): "
+                         f"the probe would go through the organ")
+    for name, value, flag in (("ramp", ramp, "--ramp-s"), ("settle window", settle, "--settle-s")):
+        if value > 0 and dt > value:
+            raise InputError(f"dt {dt * 1e3:g} ms is longer than the {name} ({value:g} s): the press would not be "
+                             f"resolved; use a smaller --dt-ms or a longer {flag}")
+    steps = presses * (max(ramp / dt, 1.0) + hold / dt + max(settle / dt, 1.0))
+    if not steps <= MAX_STEPS:
+        raise InputError(f"the run would take {steps:.3g} steps ({presses} x (ramp {ramp:g} s + hold {hold:g} s + "
+                         f"settle {settle:g} s) at dt {dt * 1e3:g} ms), more than the {MAX_STEPS:,} a run may take; "
+                         f"use a larger --dt-ms or shorter times")
+
+
 def _contact(args, mesh, device):
     """(vertex, point [m], extra JSON) from --vertex, --probe-mm, or the top surface vertex."""
     if args.vertex is not None:
@@ -80,10 +123,9 @@ def _contact(args, mesh, device):
     if args.probe_mm is not None:
         from .contact import find_contacts
 
-        probe = np.asarray(args.probe_mm, dtype=np.float64) * 1e-3
-        if not np.all(np.isfinite(probe)):
-            raise InputError(f"--probe-mm must be finite, got {args.probe_mm}")
+        probe = probe_position(args.probe_mm)
         c = find_contacts(mesh, probe, device=device)
+        check_contact(c, probe, mesh)
         extra = {"probe_mm": (probe * 1e3).tolist(), "face": int(c.face), "distance_mm": float(c.distance * 1e3)}
         return int(c.vertex), np.asarray(c.point, dtype=np.float64), extra
     # the highest surface vertex: a press from the top
@@ -140,12 +182,18 @@ def cmd_palpate(args) -> int:
     from .palpation import Palpation, SimulationDiverged
 
     rings = scene.rings if args.rings is None else args.rings
+    if isinstance(rings, int) and rings > mesh.vertex_count:  # (not "global", "global-free")
+        # more rings than vertices can only repeat the whole component (and 1e20 overflows the ring table)
+        where = "--rings" if args.rings is not None else f"the scene's [region] rings"
+        raise InputError(f"{where} {rings} is more than the mesh's {mesh.vertex_count} vertices; "
+                         f"a region that large is the whole mesh: use --rings global")
     p = scene.press
     depth = p.depth if args.depth_mm is None else args.depth_mm * 1e-3
     ramp = p.ramp if args.ramp_s is None else args.ramp_s
     hold = p.hold if args.hold_s is None else args.hold_s
     settle = p.settle if args.settle_s is None else args.settle_s
     dt = args.dt_ms * 1e-3
+    check_protocol(depth, dt, ramp, hold, settle, args.presses, mesh)
     vertex, point, contact_extra = _contact(args, mesh, device)
     tol = _auto_tol(args, rings)
 

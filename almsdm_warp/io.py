@@ -76,7 +76,7 @@ def load_mesh(path, *, scale: float = 1.0) -> TissueMesh:
     except InputError:
         raise
     except Exception as exc:  # wrapped, never let through: the message says which file and format
-        raise InputError(f"{where}: cannot read as {fmt}: {_one_line(exc)}") from exc
+        raise InputError(f"{where}: cannot read as {fmt}: {_explain_bare(exc, p) or _one_line(exc)}") from exc
 
     mesh = build_mesh(vertices, triangles, tetrahedra, scale=scale, path=where)
     if notes:
@@ -87,13 +87,95 @@ def load_mesh(path, *, scale: float = 1.0) -> TissueMesh:
 def _read_trimesh(p: Path, where: str):
     import trimesh
 
+    if p.suffix.lower() == ".obj":
+        _check_obj_face_indices(p, where)
+
     loaded = trimesh.load_mesh(p, file_type=p.suffix.lower()[1:], process=False)
     if isinstance(loaded, trimesh.Scene):  # several objects: concatenated, none dropped
         loaded = loaded.to_mesh()
     vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
     faces = getattr(loaded, "faces", None)
     faces = np.zeros((0, 3), dtype=np.int64) if faces is None else np.asarray(faces, dtype=np.int64)
+    _check_announced_counts(p, where, len(vertices), len(faces))
     return vertices, faces, None, []
+
+
+def _check_obj_face_indices(p: Path, where: str) -> None:
+    """Every OBJ face index names a vertex: trimesh reads an index 0 as the last vertex (0 - 1 =
+    -1: a wrong mesh, silently) and fails on one past the end with a bare IndexError. Positive
+    indices count from the file's first vertex, negative ones back from the last vertex so far."""
+    with open(p, "rb") as f:
+        lines = f.read().split(b"\n")
+    total = sum(1 for line in lines if line[:2] in (b"v ", b"v\t"))
+    seen = 0
+    for number, line in enumerate(lines, start=1):
+        head = line[:2]
+        if head in (b"v ", b"v\t"):
+            seen += 1
+        elif head in (b"f ", b"f\t"):
+            for token in line.split()[1:]:
+                try:
+                    index = int(token.split(b"/")[0])
+                except ValueError:
+                    break  # not a number: the reader's own error says what it is
+                if index == 0 or index > total or index < -seen:
+                    what = "OBJ indices start at 1" if index == 0 else (
+                        f"the file has {total} vertices" if index > 0 else f"only {seen} vertices precede it")
+                    raise InputError(f"{where}: line {number}: face {line.decode(errors='replace').strip()[:60]!r} "
+                                     f"references vertex {index}, but {what}")
+
+
+def _announced_counts(p: Path):
+    """(format, vertices, faces) that an OFF or PLY header or a binary STL's size announces, or
+    None where the file announces nothing (OBJ, ASCII STL) or its header is not understood."""
+    suffix = p.suffix.lower()
+    if suffix == ".stl":
+        size = p.stat().st_size
+        with open(p, "rb") as f:
+            head = f.read(84)
+        if len(head) == 84:
+            n = int(np.frombuffer(head[80:84], dtype="<u4")[0])
+            if size == 84 + 50 * n or not head.lstrip().lower().startswith(b"solid"):
+                return ("binary STL", None, n) if size == 84 + 50 * n else ("binary STL", -1, n)
+        return None
+    if suffix not in (".off", ".ply"):
+        return None
+    with open(p, "rb") as f:
+        text = f.read(1 << 16).decode("latin-1")
+    if suffix == ".off":
+        tokens = " ".join(line.split("#", 1)[0] for line in text.splitlines()[:50]).split()
+        if len(tokens) >= 3 and tokens[0].upper().endswith("OFF") and tokens[1].isdigit() and tokens[2].isdigit():
+            return "OFF", int(tokens[1]), int(tokens[2])
+        return None
+    counts = {}
+    for line in text.splitlines():
+        words = line.split()
+        if words[:1] == ["end_header"]:
+            break
+        if len(words) == 3 and words[0] == "element" and words[2].isdigit():
+            counts[words[1]] = int(words[2])
+    if "vertex" in counts:
+        return "PLY", counts["vertex"], counts.get("face", 0)
+    return None
+
+
+def _check_announced_counts(p: Path, where: str, vertex_count: int, face_count: int) -> None:
+    """trimesh stops quietly where a truncated OFF or ASCII PLY ends, and reads a truncated binary
+    STL as empty: half a mesh, which would look like a physics bug later. Compare with what the
+    file announces (polygons may become several triangles: at least that many faces)."""
+    announced = _announced_counts(p)
+    if announced is None:
+        return
+    fmt, vertices, faces = announced
+    if fmt == "binary STL":
+        if vertices == -1:
+            size = p.stat().st_size
+            raise InputError(f"{where}: truncated binary STL: its header announces {faces} triangles "
+                             f"({84 + 50 * faces} bytes), but the file has {size} bytes")
+        return
+    if vertex_count != vertices or face_count < faces:
+        raise InputError(f"{where}: the {fmt} header announces {vertices} vertices and {faces} faces, but the file "
+                         f"holds {vertex_count} vertices and {face_count} faces (truncated, or lines missing?)")
 
 
 def _read_polydata(p: Path, where: str):
@@ -126,6 +208,22 @@ def _read_meshio(p: Path, where: str):
     tri = np.concatenate(blocks["triangle"]) if blocks["triangle"] else None
     tet = np.concatenate(blocks["tetra"]) if blocks["tetra"] else None
     return np.asarray(m.points, dtype=np.float64), tri, tet, notes
+
+
+def _explain_bare(exc: BaseException, p: Path) -> str | None:
+    """What went wrong when a reader says nothing (meshio's VTU reader raises a bare ReadError for
+    any XML it cannot parse): the XML parser's own message, with line and column."""
+    if str(exc).strip() or p.suffix.lower() != ".vtu":
+        return None
+    import xml.etree.ElementTree as ET
+
+    try:
+        ET.parse(p)
+    except ET.ParseError as xml_error:
+        return f"broken XML: {_one_line(xml_error).split(': ', 1)[-1]}"
+    except Exception:  # noqa: BLE001 - only an explanation: the caller reports the original error
+        return None
+    return "well-formed XML, but not a VTK UnstructuredGrid that meshio reads (a missing or inconsistent element)"
 
 
 def _one_line(exc: BaseException) -> str:

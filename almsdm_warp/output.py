@@ -21,6 +21,14 @@ def check_writable(path) -> Path:
         raise InputError(f"{p}: folder {parent} does not exist")
     if not os.access(parent, os.W_OK):
         raise InputError(f"{p}: folder {parent} is not writable")
+    # os.access can say yes where creating a file fails (/proc, a read-only mount, a full disk,
+    # another user's sticky folder): try it, and leave nothing behind
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=parent)
+    except OSError as exc:
+        raise InputError(f"{p}: cannot write in folder {parent}: {exc.strerror or exc}") from exc
+    os.close(fd)
+    os.unlink(tmp)
     return p
 
 
@@ -29,13 +37,18 @@ def atomic_path(path, suffix: str = ".tmp"):
     """Yield a temporary file's path beside `path`; when the block ends without an error it is
     renamed to `path` (with a new file's mode), otherwise removed: nothing is half-written."""
     p = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=suffix, dir=p.parent if str(p.parent) else ".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=suffix, dir=p.parent if str(p.parent) else ".")
+    except OSError as exc:
+        raise InputError(f"{p}: cannot write in folder {p.parent}: {exc.strerror or exc}") from exc
     os.close(fd)
     try:
         yield tmp
         publish(tmp, p)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise InputError(f"{p}: cannot write: {exc.strerror or exc}") from exc
         raise
 
 

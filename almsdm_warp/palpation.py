@@ -272,10 +272,17 @@ class Palpation:
         if not ok:
             free = self.region.vertices()[: self.region.free_count] if self.region is not None else None
             crit = self.model.critical_dt(free, anchors=self.solver.anchor_scale > 0)
-            raise SimulationDiverged(
-                f"the {self.solver.integrator} integrator diverged at step {step_index} "
-                f"(t = {step_index * self.dt:.4g} s): dt = {self.dt * 1e3:.4g} ms exceeds the critical "
-                f"step of about {crit * 1e3:.4g} ms; use a smaller --dt-ms or --integrator implicit"
+            if self.solver.integrator == "explicit" and self.dt > crit:
+                raise SimulationDiverged(
+                    f"the {self.solver.integrator} integrator diverged at step {step_index} "
+                    f"(t = {step_index * self.dt:.4g} s): dt = {self.dt * 1e3:.4g} ms exceeds the critical "
+                    f"step of about {crit * 1e3:.4g} ms; use a smaller --dt-ms or --integrator implicit"
+                )
+            raise SimulationDiverged(  # not the step: the press (or the force) is more than the model holds
+                f"the {self.solver.integrator} integrator ran away at step {step_index} "
+                f"(t = {step_index * self.dt:.4g} s): a vertex is not finite or more than twice the mesh's size "
+                f"({size * 1e3:.4g} mm) from rest, with dt = {self.dt * 1e3:.4g} ms under the critical step at rest "
+                f"(about {crit * 1e3:.4g} ms); the press is deeper, or its force larger, than the model holds"
             )
 
     # -- the press protocol --------------------------------------------------------------------

@@ -168,6 +168,11 @@ SCHEMA: dict[str, dict[str, tuple[str, type, float, str]]] = {
 }
 """Every section and key a scene file may hold: attribute, type, file units per SI unit, rule."""
 
+MAGNITUDE = (1.0e-12, 1.0e12)
+"""A number in a scene is 0 (where allowed) or of magnitude within these bounds, in the file's units
+as in SI: products of such values stay far inside float32 (the device's), no tissue is outside
+them, and a value outside them is a typo or a unit mix-up."""
+
 _FIELD_RULE = {(section, attr): rule for section, keys in SCHEMA.items() for attr, _k, _f, rule in keys.values()}
 _TOML_TYPE = {str: "a string", float: "a number", int: "an integer"}
 
@@ -214,6 +219,9 @@ def _check_value(value, kind: type, rule: str, name: str):
         value = float(value)
         if not math.isfinite(value):
             raise InputError(f"{name} must be finite, got {value!r}")
+        lo, hi = MAGNITUDE
+        if value != 0 and not lo <= abs(value) <= hi:
+            raise InputError(f"{name} must be 0 or of magnitude {lo:g} to {hi:g}, got {value!r}")
     if rule == "> 0" and not value > 0:
         raise InputError(f"{name} must be > 0, got {value!r}")
     if rule == ">= 0" and not value >= 0:
@@ -292,15 +300,18 @@ def load_scene(path) -> Scene:
     if mesh_path.is_dir():
         raise InputError(f"{where}: [mesh] path = {raw_mesh!r} is a directory, not a mesh file ({mesh_path})")
 
-    return Scene(
-        path=Path(os.path.abspath(p)),
-        mesh_path=mesh_path,
-        scale_mm=values["mesh"].get("scale_mm", 1.0),
-        tissue=TissueParams(**values["tissue"]),
-        rings=values["region"].get("rings", Scene.rings),
-        press=PressParams(**values["press"]),
-        lesion=lesion,
-    )
+    try:  # the SI values are checked again: say which file they came from
+        return Scene(
+            path=Path(os.path.abspath(p)),
+            mesh_path=mesh_path,
+            scale_mm=values["mesh"].get("scale_mm", 1.0),
+            tissue=TissueParams(**values["tissue"]),
+            rings=values["region"].get("rings", Scene.rings),
+            press=PressParams(**values["press"]),
+            lesion=lesion,
+        )
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
 
 
 def _did_you_mean(word: str, choices, fmt: str) -> str:

@@ -21,6 +21,18 @@ MERGE_TOL = 1e-9
 """Vertices closer than this x the bounding-box diagonal are one vertex."""
 DEGENERATE_TOL = 1e-12
 """Triangles with area <= this x diag^2, tets with |volume| <= this x diag^3, are degenerate."""
+MAX_COORDINATE_M = 1.0e3
+"""Coordinates beyond +-1 km (after the scale) are an error: no organ is that large, and the
+device's float32 would leave millimetre springs unresolved there (a wrong scale, usually)."""
+MAX_FILE_COORDINATE = 1.0e100
+"""Coordinates beyond this in the file's own units are an error whatever the scale (cubes of
+them, for tet volumes, would overflow float64)."""
+MIN_EDGE_M = 1.0e-8
+"""Edges shorter than this [m] are an error: the force kernels treat springs under 1e-9 m as
+collapsed (no direction, no force), so such a spring would silently do nothing."""
+MIN_EDGE_RELATIVE = 2.0**-20
+"""Edges shorter than this x the largest |coordinate| are an error: float32 on the device
+(24-bit mantissa) keeps no more than a few bits of their length."""
 
 _KINDS = {3: ("triangle", "triangles"), 4: ("tetrahedron", "tetrahedra")}
 
@@ -49,6 +61,7 @@ def build_mesh(vertices, triangles=None, tetrahedra=None, *, scale: float = 1.0,
         raise InputError(f"{where}: vertex {i} has a non-finite coordinate {_fmt_xyz(v[i])}")
     _check_range(tri, n, where)
     _check_range(tet, n, where)
+    _check_extent(v, np.unique(tet if len(tet) else tri), scale, where)
 
     volume = len(tet) > 0
     if volume and len(tri):
@@ -61,7 +74,8 @@ def build_mesh(vertices, triangles=None, tetrahedra=None, *, scale: float = 1.0,
     lo, hi = v[used].min(axis=0), v[used].max(axis=0)
     diag = float(np.linalg.norm(hi - lo))
 
-    remap = _merge_duplicates(v, diag, notes)
+    inside = np.flatnonzero(np.abs(v).max(axis=1) <= min(MAX_COORDINATE_M / (scale * 1e-3), MAX_FILE_COORDINATE))
+    remap = _merge_duplicates(v, inside, diag, notes)
     elements = remap[elements]
     elements, ids = _drop_degenerate(v, elements, ids, diag, where, notes)
     elements, ids = _drop_duplicates(elements, ids, notes)
@@ -93,13 +107,15 @@ def build_mesh(vertices, triangles=None, tetrahedra=None, *, scale: float = 1.0,
         elements = surface
     _report_components(elements, len(keep), notes)
 
-    return TissueMesh(
+    mesh = TissueMesh(
         vertices=v_kept * (scale * 1e-3),
         triangles=surface.astype(np.int32),
         tetrahedra=elements.astype(np.int32) if volume else np.zeros((0, 4), dtype=np.int32),
         path=path if path is None else str(path),
         notes=tuple(notes),
     )
+    _check_edge_lengths(mesh, keep, where)
+    return mesh
 
 
 # -- input checks ---------------------------------------------------------------------------------
@@ -166,16 +182,61 @@ def _check_range(elements: np.ndarray, n: int, where: str) -> None:
     )
 
 
+def _check_extent(v: np.ndarray, used: np.ndarray, scale: float, where: str) -> None:
+    """Every vertex that an element uses within +-MAX_COORDINATE_M once scaled to metres and
+    within +-MAX_FILE_COORDINATE in the file's units (checked before any float64 arithmetic on
+    them: squares of 1e154 overflow); and the mesh not smaller than MIN_EDGE_M."""
+    limit = min(MAX_COORDINATE_M / (scale * 1e-3), MAX_FILE_COORDINATE)  # in file units
+    far = np.abs(v[used]).max(axis=1) > limit
+    if far.any():
+        i = int(used[np.argmax(far)])
+        metres = float(np.abs(v[i]).max()) * scale * 1e-3
+        if metres > MAX_COORDINATE_M:
+            raise InputError(
+                f"{where}: vertex {i} at {_fmt_xyz(v[i])} (file units, x {scale:g} mm each) is {metres:.3g} m from the "
+                f"origin, beyond the {MAX_COORDINATE_M:g} m the simulator handles; check the scale (millimetres per file unit)"
+            )
+        raise InputError(f"{where}: vertex {i} at {_fmt_xyz(v[i])} is beyond +-{MAX_FILE_COORDINATE:g} file units")
+    size = float(np.ptp(v[used], axis=0).max()) * scale * 1e-3
+    if size < MIN_EDGE_M:
+        raise InputError(
+            f"{where}: the mesh is {size:.3g} m across (file units x {scale:g} mm), smaller than the {MIN_EDGE_M:g} m "
+            f"springs the simulator resolves; check the scale (millimetres per file unit)"
+        )
+
+
+def _check_edge_lengths(mesh: TissueMesh, keep: np.ndarray, where: str) -> None:
+    """Every spring long enough for the force kernels and for float32 on the device."""
+    if mesh.edge_count == 0:
+        return
+    length = mesh.edge_rest_length
+    span = float(np.abs(mesh.vertices).max())
+    floor = max(MIN_EDGE_M, MIN_EDGE_RELATIVE * span)
+    j = int(np.argmin(length))
+    if length[j] < floor:
+        a, b = (int(keep[x]) for x in mesh.edges[j])
+        why = (f"{MIN_EDGE_M:g} m, below which a spring has no direction" if floor == MIN_EDGE_M
+               else f"{floor:.3g} m, what float32 resolves at coordinates up to {span:.3g} m")
+        raise InputError(
+            f"{where}: the edge between vertices {a} and {b} is {length[j]:.3g} m long at rest, shorter than "
+            f"{why}; check the scale (millimetres per file unit) or merge those vertices"
+        )
+
+
 # -- repairs --------------------------------------------------------------------------------------
-def _merge_duplicates(v: np.ndarray, diag: float, notes: list[str]) -> np.ndarray:
-    """Map each vertex to the lowest-numbered vertex within MERGE_TOL x diag of it (or of a chain)."""
+def _merge_duplicates(v: np.ndarray, used: np.ndarray, diag: float, notes: list[str]) -> np.ndarray:
+    """Map each vertex to the lowest-numbered vertex within MERGE_TOL x diag of it (or of a chain).
+
+    `used`: the vertices that take part, those within the extent the simulator handles (every
+    vertex an element references is); the others are unreferenced, dropped anyway, and may hold
+    anything (coordinates of 1e300 overflow the tree's distances)."""
     n = len(v)
     identity = np.arange(n)
-    if n < 2:
+    if len(used) < 2:
         return identity
     from scipy.spatial import cKDTree
 
-    pairs = cKDTree(v).query_pairs(MERGE_TOL * diag, output_type="ndarray")
+    pairs = used[cKDTree(v[used]).query_pairs(MERGE_TOL * diag, output_type="ndarray")]
     if len(pairs) == 0:
         return identity
     count, label = topo.connected_components(pairs, n)
