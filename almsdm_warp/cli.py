@@ -217,6 +217,9 @@ def main(argv=None) -> int:
         message = " ".join(str(exc).split())  # one line, whatever the message holds
         print(f"almsdm: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # the reader of our output went away (`almsdm ... | head`): not an error
+        sys.stderr.close()  # nothing more can be said, and Python's exit flush must not complain
+        return 0
     except OSError as exc:  # the file system refused a path given (a name too long, a loop of links, ...)
         name = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"almsdm: error: {name}{exc.strerror or ' '.join(str(exc).split())}", file=sys.stderr)

@@ -184,7 +184,7 @@ def cmd_palpate(args) -> int:
     rings = scene.rings if args.rings is None else args.rings
     if isinstance(rings, int) and rings > mesh.vertex_count:  # (not "global", "global-free")
         # more rings than vertices can only repeat the whole component (and 1e20 overflows the ring table)
-        where = "--rings" if args.rings is not None else f"the scene's [region] rings"
+        where = "--rings" if args.rings is not None else "the scene's [region] rings"
         raise InputError(f"{where} {rings} is more than the mesh's {mesh.vertex_count} vertices; "
                          f"a region that large is the whole mesh: use --rings global")
     p = scene.press
@@ -198,17 +198,22 @@ def cmd_palpate(args) -> int:
     tol = _auto_tol(args, rings)
 
     print(mesh.summary())
+    if scene.lesion is not None:
+        les = scene.lesion.as_dict()
+        print(f"lesion: {les['stiffness_factor']:g}x stiffer within {les['radius_mm']:g} mm of {[round(c, 2) for c in les['center_mm']]} mm")
     print(
         f"contact: vertex {vertex} at {np.round(point * 1e3, 2).tolist()} mm; press {depth * 1e3:g} mm "
         f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s) x {args.presses}"
     )
+    scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
+    lesion = dict(zip(("edge_scale", "anchor_scale"), scales))
     try:
         if tol is not None:
             from .adaptive import AdaptivePalpation
 
-            pal = AdaptivePalpation(mesh, scene.tissue, tol=tol, integrator=args.integrator, dt=dt, device=device)
+            pal = AdaptivePalpation(mesh, scene.tissue, tol=tol, integrator=args.integrator, dt=dt, device=device, **lesion)
         else:
-            pal = Palpation(mesh, scene.tissue, rings=rings, integrator=args.integrator, dt=dt, device=device)
+            pal = Palpation(mesh, scene.tissue, rings=rings, integrator=args.integrator, dt=dt, device=device, **lesion)
         pal.touch(vertex)
     except ValueError as exc:  # a parameter Palpation rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc

@@ -261,3 +261,14 @@ def test_json_output_gets_the_mode_of_a_new_file(tmp_path):
     mask = os.umask(0)
     os.umask(mask)
     assert (out.stat().st_mode & 0o777) == (0o666 & ~mask)
+
+
+def test_palpate_feels_the_lesion_of_a_lesion_scene(tmp_path_factory):
+    # the same press at the lesion's centre: every spring and anchor there is stiffer (x5 inside the
+    # sphere), so the force grows, by at most the factor (the static force is linear in a common scale)
+    args = ("--probe-mm", "-27", "56", "0", "--integrator", "implicit", *SHORT)
+    plain = palpate(tmp_path_factory, "stomach", *args)
+    hard = palpate(tmp_path_factory, "stomach_lesion", *args)
+    assert plain["contact"]["vertex"] == hard["contact"]["vertex"]
+    ratio = hard["presses"][0]["peak_force_N"] / plain["presses"][0]["peak_force_N"]
+    assert 2.0 < ratio <= 5.0 * 1.05

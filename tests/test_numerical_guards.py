@@ -12,6 +12,7 @@ from test_simulation_press import DEPTH, internal_forces, scene_and_mesh, static
 from almsdm_warp.mesh import TissueMesh
 from almsdm_warp.model import PROBE_DISPLACEMENT, PROBE_OFF
 from almsdm_warp.palpation import Palpation
+from almsdm_warp.region import Region
 from almsdm_warp.scene import TissueParams
 
 
@@ -169,20 +170,15 @@ def static_reaction_per_edge(mesh, ke, ka, vertex, target, free):
     return forces(x)[vertex]
 
 
-def stiff_inclusion(p, mesh, ratio, centre_vertex, radius):
-    """Springs with both ends within `radius` [m] of `centre_vertex` made `ratio` times stiffer
-    (stiffness and damping), in place: a hard lesion. Returns the per-edge stiffness [N/m]."""
+def stiff_inclusion(mesh, ratio, centre_vertex, radius):
+    """Per-edge scale: springs with both ends within `radius` [m] of `centre_vertex` `ratio` times
+    stiffer (stiffness and damping), a hard lesion."""
     e = mesh.edges
     centre = mesh.vertices[centre_vertex]
     near = np.linalg.norm(mesh.vertices - centre, axis=1) < radius
     scale = np.where(near[e[:, 0]] & near[e[:, 1]], ratio, 1.0)
     assert (scale > 1).sum() >= 3
-    t = p.model.tissue
-    p.model.spring_ke.assign((t.edge_stiffness * scale).astype(np.float32))
-    p.model.spring_kd.assign((t.edge_damping * scale).astype(np.float32))
-    p.model._ke_host = t.edge_stiffness * scale  # for critical_dt
-    p.model._kd_host = t.edge_damping * scale
-    return t.edge_stiffness * scale
+    return scale
 
 
 def lesion_palpation(integrator, dt, device, rings=4):
@@ -191,11 +187,12 @@ def lesion_palpation(integrator, dt, device, rings=4):
     scene, mesh = scene_and_mesh("liver")
     sv = mesh.surface_vertices
     top = int(sv[np.argmax(mesh.vertices[sv, 2])])
-    p = Palpation(mesh, scene.tissue, rings=rings, integrator=integrator, dt=dt, device=device)
+    ring1 = Region(mesh, device).build(top, 1)
+    centre = int(ring1.vertices()[ring1.ring_offsets[1]])
+    scale = stiff_inclusion(mesh, 1e6, centre, 0.03)
+    p = Palpation(mesh, scene.tissue, rings=rings, integrator=integrator, dt=dt, device=device, edge_scale=scale)
     p.touch(top)
-    centre = int(p.region.vertices()[p.region.ring_offsets[1]])
-    ke = stiff_inclusion(p, mesh, 1e6, centre, 0.03)
-    return p, scene, mesh, ke
+    return p, scene, mesh, scene.tissue.edge_stiffness * scale
 
 
 def test_stiff_lesion_1e6_implicit(device):
