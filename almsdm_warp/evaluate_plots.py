@@ -93,11 +93,16 @@ def plot_speed_accuracy(acc, extra, path):
     for r in rows:
         groups.setdefault((r["scene"], r["integrator"], r["device"]), []).append(r)
     for (scene, integrator, device), rs in groups.items():
-        local = [r for r in rs if r["rings"] != "global"]
+        local = [r for r in rs if r["rings"] != "global" and not str(r["rings"]).startswith("auto")]
+        auto = [r for r in rs if str(r["rings"]).startswith("auto")]
         for ax, key in ((axes[0], "force_error_N"), (axes[1], "disp_error_mm")):
             line = ax.plot([r["step_us"] for r in local], [max(r[key], FLOOR) for r in local], marker="o", ms=4, label=f"{scene}, {integrator}, {device}")
             for r in local:
                 ax.annotate(str(r["rings"]), (r["step_us"], max(r[key], FLOOR)), fontsize=6, xytext=(2, 2), textcoords="offset points")
+            for r in auto:  # the adaptive region: one point per tolerance, not on the fixed-ring line
+                y = max(r[key], FLOOR)
+                ax.plot([r["step_us"]], [y], marker="*", ms=8, ls="none", color=line[0].get_color(), mec="k", mew=0.4)
+                ax.annotate(f"tol {str(r['rings']).split(':', 1)[-1]}", (r["step_us"], y), fontsize=6, xytext=(3, -7), textcoords="offset points")
             for r in rs:
                 if r["rings"] == "global":
                     ax.plot([r["step_us"]], [FLOOR], marker="s", color=line[0].get_color(), mfc="none")
@@ -115,7 +120,7 @@ def plot_speed_accuracy(acc, extra, path):
         ax.legend(fontsize=7, loc="upper right")
     fig.suptitle(
         "Speed against accuracy: rings 1..N against the global anchored reference "
-        f"(numbers: rings; errors below {FLOOR:g} drawn at {FLOOR:g})"
+        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})"
     )
     return _save(fig, path)
 
