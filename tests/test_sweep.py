@@ -175,6 +175,9 @@ def test_sweep_png(tmp_path):
         (["--out", "x.csv", "--device", "tpu"], "unknown device"),
         (["--out", "x.csv", "--points", "0"], "must be >= 1"),
         (["--out", "x.csv", "--depth-mm", "-1"], "must be > 0"),
+        (["--out", "x.csv", "--rings", "automatic"], "allowed: an integer >= 1 or 'auto'"),
+        (["--out", "x.csv", "--rings", "3", "--tol-mm", "0.1"], "--tol-mm is for --rings auto"),
+        (["--out", "x.csv", "--rings", "auto", "--tol-mm", "0"], "must be > 0"),
     ],
 )
 def test_sweep_bad_input(tmp_path, monkeypatch, capsys, args, message):
@@ -243,6 +246,13 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     np.testing.assert_allclose(eight["peak_force_N"], peaks, rtol=1e-3)  # 8 rings: the global reference's
     np.testing.assert_allclose(auto["peak_force_N"], eight["peak_force_N"], rtol=0.01)
     np.testing.assert_allclose(auto["peak_force_N"], peaks, rtol=0.01)
+    # a scene's [region] rings = "auto", tol_mm = 0.1: the same sweep
+    text = (SCENES / "stomach.toml").read_text().replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
+    (tmp_path / "auto.toml").write_text(text.replace("\nrings = 4 ", '\nrings = "auto"\ntol_mm = 0.1\n# '))
+    assert main(["sweep", str(tmp_path / "auto.toml"), *press, "--out", str(tmp_path / "scene.npz")]) == 0
+    by_scene = sw.read_table(tmp_path / "scene.npz")
+    for c in sw.COLUMNS:
+        np.testing.assert_array_equal(by_scene[c], auto[c])
     # each point's rings are a fresh adaptive palpation's there (sized from rest, whatever the order)
     for k in (1, 4):
         pal = AdaptivePalpation(stomach, TissueParams(), tol=1e-4, dt=1e-3, device="cpu", retire=False)
