@@ -66,6 +66,9 @@ def cmd_touch(args) -> int:
     for note in mesh.notes:
         print(f"note: {note}", file=sys.stderr)
     rings = scene.rings if args.rings is None else args.rings
+    if not isinstance(rings, int):  # a scene's rings = "auto": sized during a press, not by touching
+        raise InputError(f"the scene {scene.name!r} sizes its region during a press ([region] rings = {rings!r}): "
+                         f"give --rings K to touch, or press it with almsdm palpate")
     print(mesh.summary())
 
     from .cli_palpate import check_contact, probe_position

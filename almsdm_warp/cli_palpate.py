@@ -195,7 +195,7 @@ def cmd_palpate(args) -> int:
     dt = args.dt_ms * 1e-3
     check_protocol(depth, dt, ramp, hold, settle, args.presses, mesh)
     vertex, point, contact_extra = _contact(args, mesh, device)
-    tol = _auto_tol(args, rings)
+    tol = _auto_tol(args, rings, scene)
 
     print(mesh.summary())
     if scene.lesion is not None:
@@ -323,13 +323,18 @@ def cmd_palpate(args) -> int:
     return 0
 
 
-def _auto_tol(args, rings):
-    """--tol-mm [m] for --rings auto (default AUTO_TOL_MM), None for the others; an error otherwise."""
+def _auto_tol(args, rings, scene=None):
+    """The tolerance [m] of rings "auto" (--tol-mm, else the scene's [region] tol_mm, else AUTO_TOL_MM),
+    None for the others; --tol-mm with a fixed ring count is an error."""
     if rings != "auto":
         if args.tol_mm is not None:
-            raise InputError(f"--tol-mm is for --rings auto (the region sized to a tolerance), not --rings {rings}")
+            where = f"--rings {rings}" if args.rings is not None else f"the scene's [region] rings = {rings}"
+            raise InputError(f"--tol-mm is for --rings auto (the region sized to a tolerance), not {where}")
         return None
-    return (AUTO_TOL_MM if args.tol_mm is None else args.tol_mm) * 1e-3
+    if args.tol_mm is not None:
+        return args.tol_mm * 1e-3
+    tol = getattr(scene, "tol", None)
+    return tol if tol is not None else AUTO_TOL_MM * 1e-3
 
 
 def _auto_json(pal, tol):

@@ -26,7 +26,8 @@ def add_parser(sub) -> None:
     p.add_argument("scene", nargs="?", default=None, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     p.add_argument("--out", required=True, metavar="FILE", help="output table: .csv or .npz")
     p.add_argument("--points", type=_count_arg, default=200, metavar="N", help="points to press (default 200)")
-    p.add_argument("--rings", type=_count_arg, default=None, metavar="K", help="rings of each local region (default: the scene's)")
+    p.add_argument("--rings", type=_rings_arg, default=None, metavar="{K,auto}", help="rings of each local region, or auto: each point's sized to --tol-mm as almsdm palpate --rings auto sizes it (default: the scene's)")
+    p.add_argument("--tol-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
     p.add_argument("--depth-mm", "--depth", dest="depth_mm", type=_number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
     p.add_argument("--ramp-s", type=_number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
     p.add_argument("--hold-s", type=_number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
@@ -40,6 +41,21 @@ def add_parser(sub) -> None:
     p.add_argument("--png", default=None, metavar="PATH", help="also draw the organ coloured by stiffness (matplotlib)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
     p.set_defaults(func=cmd_sweep)
+
+
+def _rings_arg(text):
+    """--rings: an integer >= 1 or "auto"."""
+    import argparse
+
+    if text == "auto":
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"unknown value {text!r} (allowed: an integer >= 1 or 'auto')") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
 
 
 def _devices(text: str) -> list[str]:
@@ -64,6 +80,7 @@ def cmd_sweep(args) -> int:
     from .progress import Progress
     from .scene import resolve_scene_or_mesh
     from .sweep import FORMATS, Parts, SweepPlan, auto_dt, run_local, run_ray, sample_points, write_table
+    from .sweep_auto import rings_summary
 
     out = Path(args.out)
     if out.suffix.lower() not in FORMATS:
@@ -79,6 +96,9 @@ def cmd_sweep(args) -> int:
         print(f"note: {note}", file=sys.stderr)
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings
+    from .cli_palpate import _auto_tol
+
+    tol = _auto_tol(args, rings, scene)
     depth = press.depth if args.depth_mm is None else args.depth_mm * 1e-3
     ramp = press.ramp if args.ramp_s is None else args.ramp_s
     hold = press.hold if args.hold_s is None else args.hold_s
@@ -87,16 +107,22 @@ def cmd_sweep(args) -> int:
     points, vertices = sample_points(mesh, args.points)
     cuda = devices[0] != "cpu"
     chunk = args.chunk or (64 if not cuda else min(-(-len(vertices) // len(devices)), 16384))
-    plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], rings, 1e-3, depth, ramp, hold, settle, points, vertices, chunk, args.integrator)
+    plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, 1e-3, depth, ramp, hold, settle, points,
+                     vertices, chunk, args.integrator, tol)
     if args.dt_ms is not None:
         plan.dt = args.dt_ms * 1e-3
     elif args.integrator == "explicit":
         plan.dt = auto_dt(plan.model("cpu"))  # 1 ms, or less where the mesh's critical step asks
     print(mesh.summary())
+    if tol is not None:
+        plan.rings = _size(plan, scene, scales, tol, args.progress)
+        rings_text = f"auto rings (tol {tol * 1e3:g} mm: {rings_summary(plan.rings)})"
+    else:
+        rings_text = f"{rings} rings"
     lesion = f"; lesion {scene.lesion.as_dict()}" if scene.lesion is not None else ""
     where = f"Ray ({'GPU' if cuda else 'CPU'} tasks)" if args.ray else ", ".join(devices)
     print(
-        f"sweep: {len(vertices)} points ({len(np.unique(vertices))} distinct vertices), {rings} rings, press {depth * 1e3:g} mm "
+        f"sweep: {len(vertices)} points ({len(np.unique(vertices))} distinct vertices), {rings_text}, press {depth * 1e3:g} mm "
         f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s), {args.integrator}, dt {plan.dt * 1e3:g} ms, chunks of {chunk} on {where}{lesion}"
     )
     parts = Parts(out, plan)
@@ -132,9 +158,29 @@ def cmd_sweep(args) -> int:
     if args.png:
         from .sweep_png import plot_sweep
 
-        plot_sweep(mesh, columns, args.png, title=f"{scene.name}: stiffness under a {depth * 1e3:g} mm press, {rings} rings")
+        plot_sweep(mesh, columns, args.png, title=f"{scene.name}: stiffness under a {depth * 1e3:g} mm press, {rings_text}")
         print(f"wrote {args.png}")
     return 0
+
+
+def _size(plan, scene, scales, tol, progress):
+    """--rings auto: the ring count of each point (sweep_auto.size_regions, on the CPU), timed and said."""
+    from .palpation import SimulationDiverged
+    from .progress import Progress
+    from .sweep_auto import rings_summary, size_regions
+
+    distinct = len(np.unique(plan.vertices))
+    t0 = time.perf_counter()
+    try:
+        with Progress(distinct, enabled=progress, label="sizing regions") as bar:
+            rings = size_regions(plan.mesh, scene.tissue, plan.vertices, tol, depth=plan.depth, ramp=plan.ramp, hold=plan.hold,
+                                 integrator=plan.integrator, dt=plan.dt, edge_scale=scales[0], anchor_scale=scales[1],
+                                 on_point=bar.advance)
+    except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
+        raise InputError(str(exc)) from exc
+    print(f"auto rings: {distinct} contacts sized to {tol * 1e3:g} mm in {time.perf_counter() - t0:.2f} s "
+          f"(an adaptive press each, CPU): {rings_summary(rings)}")
+    return rings
 
 
 def _total_steps(plan) -> int:

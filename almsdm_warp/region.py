@@ -55,7 +55,9 @@ class Region:
         self.rings = 0
         """Rings asked for (the outermost may be empty when the region covers its component)."""
         self.ring_offsets = np.zeros(1, dtype=np.int64)
-        """Host: ring r is region_vertex[ring_offsets[r]:ring_offsets[r+1]]."""
+        """Host: ring r is region_vertex[ring_offsets[r]:ring_offsets[r+1]]. Growth stops at the
+        first empty ring (the region covers its component): rings past len(ring_offsets) - 1, up to
+        `rings`, are empty and not recorded."""
         self.spring_count = 0
 
     # -- size ----------------------------------------------------------------------------------
@@ -127,8 +129,8 @@ class Region:
         for done in range(rings):
             begin, end = int(offsets[-2]), int(offsets[-1])
             if end == begin:
-                # the region already covers its component: the remaining rings are empty
-                offsets.extend([end] * (rings - done))
+                # the region already covers its component: the remaining rings are empty, and are
+                # counted in `rings` but not recorded (10**20 of them would not fit in memory)
                 self.rings += rings - done
                 break
             self.rings += 1

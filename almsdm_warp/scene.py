@@ -90,19 +90,28 @@ class Scene:
     """Millimetres per mesh file unit (1.0 for a file in mm, 10.0 for cm, 1000.0 for m)."""
     tissue: TissueParams = field(default_factory=TissueParams)
     """Mass, spring and damper parameters."""
-    rings: int = 4
-    """Rings grown from the contact vertex along mesh edges; the outermost ring is fixed."""
+    rings: int | str = 4
+    """Rings grown from the contact vertex along mesh edges (the outermost ring fixed), or "auto":
+    the region sized during each press to `tol` (AdaptivePalpation, ``--rings auto``)."""
     press: PressParams = field(default_factory=PressParams)
     """The press protocol."""
     lesion: "Lesion | None" = None
     """A sphere of stiffer tissue (the scene's optional [lesion] table), or None."""
+    tol: float | None = None
+    """With rings = "auto": the displacement tolerance [m] the region is sized to (None: the
+    command line's default, cli_palpate.AUTO_TOL_MM); None otherwise."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
         if self.path is not None:
             object.__setattr__(self, "path", Path(self.path))
         object.__setattr__(self, "scale_mm", _check_value(self.scale_mm, float, "> 0", "Scene.scale_mm"))
-        _check_value(self.rings, int, ">= 1", "Scene.rings")
+        _check_rings(self.rings, "Scene.rings")
+        if self.tol is not None:
+            object.__setattr__(self, "tol", _check_value(self.tol, float, "> 0", "Scene.tol"))
+            if self.rings != AUTO:
+                raise InputError(f"Scene.tol is for rings = {AUTO!r} (the region sized to a tolerance), "
+                                 f"but rings = {self.rings!r}")
 
     @property
     def name(self) -> str:
@@ -115,6 +124,12 @@ class Scene:
 
         return load_mesh(self.mesh_path, scale=self.scale_mm)
 
+    def rings_text(self) -> str:
+        """"4 rings", or "auto rings (tol 0.1 mm)" ("tol: the default" when the scene gives none)."""
+        if self.rings != AUTO:
+            return f"{self.rings} rings"
+        return f"auto rings (tol {self.tol * 1e3:g} mm)" if self.tol is not None else "auto rings (tol: the default)"
+
     def as_dict(self) -> dict:
         """The scene in interface units, keyed as in a scene file (for JSON records)."""
         out: dict = {"scene": str(self.path) if self.path else None}
@@ -124,7 +139,7 @@ class Scene:
                 value = _get(self, section, attr)
                 if section == "mesh" and attr == "path":
                     value = str(self.mesh_path)
-                elif factor != 1.0:
+                elif factor != 1.0 and value is not None:
                     value = value * factor
                 out[section][key] = value
         if self.lesion is not None:
@@ -135,7 +150,7 @@ class Scene:
         """One line: the scene, its mesh and the parameters people ask about first."""
         t, p = self.tissue, self.press
         return (
-            f"scene {self.name}: mesh {self.mesh_path.name} (x{self.scale_mm:g} mm), {self.rings} rings, "
+            f"scene {self.name}: mesh {self.mesh_path.name} (x{self.scale_mm:g} mm), {self.rings_text()}, "
             f"k_ij {t.edge_stiffness:g} N/m, k_i {t.anchor_stiffness:g} N/m, press {p.depth * 1e3:g} mm"
         )
 
@@ -157,7 +172,8 @@ SCHEMA: dict[str, dict[str, tuple[str, type, float, str]]] = {
         "anchor_damping_Ns_per_m": ("anchor_damping", float, 1.0, ">= 0"),
     },
     "region": {
-        "rings": ("rings", int, 1.0, ">= 1"),
+        "rings": ("rings", int, 1.0, ">= 1"),  # or the string "auto"
+        "tol_mm": ("tol", float, 1000.0, "> 0"),  # only with rings = "auto"
     },
     "press": {
         "depth_mm": ("depth", float, 1000.0, "> 0"),
@@ -172,6 +188,9 @@ MAGNITUDE = (1.0e-12, 1.0e12)
 """A number in a scene is 0 (where allowed) or of magnitude within these bounds, in the file's units
 as in SI: products of such values stay far inside float32 (the device's), no tissue is outside
 them, and a value outside them is a typo or a unit mix-up."""
+
+AUTO = "auto"
+"""[region] rings = "auto": the region sized to [region] tol_mm during each press (docs/adaptive.md)."""
 
 _FIELD_RULE = {(section, attr): rule for section, keys in SCHEMA.items() for attr, _k, _f, rule in keys.values()}
 _TOML_TYPE = {str: "a string", float: "a number", int: "an integer"}
@@ -200,6 +219,15 @@ def _describe(value) -> str:
     if isinstance(value, list):
         return "an array"
     return f"{type(value).__name__} {value!r}"  # dates and times
+
+
+def _check_rings(value, name: str):
+    """[region] rings: an integer >= 1 or the string "auto"."""
+    if isinstance(value, str):
+        if value != AUTO:
+            raise InputError(f"{name} must be an integer >= 1 or {AUTO!r}, got {_describe(value)}")
+        return value
+    return _check_value(value, int, ">= 1", name)
 
 
 def _check_value(value, kind: type, rule: str, name: str):
@@ -284,13 +312,20 @@ def load_scene(path) -> Scene:
                 )
             attr, kind, factor, rule = keys[key]
             try:
-                value = _check_value(value, kind, rule, f"[{section}] {key}")
+                if (section, key) == ("region", "rings"):
+                    value = _check_rings(value, f"[{section}] {key}")
+                else:
+                    value = _check_value(value, kind, rule, f"[{section}] {key}")
             except InputError as exc:
                 raise InputError(f"{where}: {exc}") from None
             if kind is float and factor != 1.0:
                 value = value / factor  # mm -> m: divide (correctly rounded: 10 mm is exactly 0.01)
             values[section][attr] = value
 
+    region = values["region"]
+    if "tol" in region and region.get("rings") != AUTO:
+        rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
+        raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
     raw_mesh = values["mesh"].get("path")
     if raw_mesh is None:
         raise InputError(f"{where}: missing [mesh] path (the mesh file, relative to the scene file)")
@@ -306,7 +341,8 @@ def load_scene(path) -> Scene:
             mesh_path=mesh_path,
             scale_mm=values["mesh"].get("scale_mm", 1.0),
             tissue=TissueParams(**values["tissue"]),
-            rings=values["region"].get("rings", Scene.rings),
+            rings=region.get("rings", Scene.rings),
+            tol=region.get("tol"),
             press=PressParams(**values["press"]),
             lesion=lesion,
         )

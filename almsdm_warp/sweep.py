@@ -26,7 +26,9 @@ from .errors import InputError
 
 FPS_MAX = 20000
 """Beyond this many points (and the mesh's vertices), points are area-uniform random, not farthest-point."""
-COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "stiffness_N_per_mm", "recovery_error_mm")
+COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "stiffness_N_per_mm", "recovery_error_mm", "rings")
+"""The table's columns; `rings`: the ring count of each point's region (the same for all but at --rings auto)."""
+_INT_COLUMNS = ("vertex", "rings")
 FORMATS = (".csv", ".npz")
 
 
@@ -85,7 +87,8 @@ class SweepPlan:
     tissue: object
     edge_scale: np.ndarray | None
     anchor_scale: np.ndarray | None
-    rings: int
+    rings: "int | np.ndarray"
+    """Rings of every point's region, or one ring count per point (--rings auto: sweep_auto.size_regions)."""
     dt: float
     depth: float
     ramp: float
@@ -95,13 +98,22 @@ class SweepPlan:
     vertices: np.ndarray
     chunk: int
     integrator: str = "explicit"
+    tol: float | None = None
+    """--rings auto: the tolerance [m] the ring counts were sized to (for the record), else None."""
+
+    @property
+    def point_rings(self) -> np.ndarray:
+        """Ring count of each point's region, int64 [points]."""
+        if isinstance(self.rings, (int, np.integer)):
+            return np.full(len(self.vertices), int(self.rings), dtype=np.int64)
+        return np.asarray(self.rings, dtype=np.int64)
 
     def key(self) -> str:
         h = hashlib.sha256()
-        scalars = [self.mesh.path, self.mesh.vertex_count, self.rings, self.dt, self.depth]
-        scalars += [self.ramp, self.hold, self.settle, self.chunk, self.integrator]
+        scalars = ["table v2 (rings column)", self.mesh.path, self.mesh.vertex_count, self.dt, self.depth]
+        scalars += [self.ramp, self.hold, self.settle, self.chunk, self.integrator, self.tol]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
-        for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale):
+        for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings):
             if a is not None:
                 h.update(np.ascontiguousarray(a).tobytes())
         return h.hexdigest()[:16]
@@ -111,39 +123,60 @@ class SweepPlan:
         n = len(self.vertices)
         return [(i, min(i + self.chunk, n)) for i in range(0, n, self.chunk)]
 
-    def batch(self, device, model=None):
-        """A BatchPalpation for this plan on `device` (with `model`, made on that device, when given)."""
-        from .batch import BatchPalpation
-
-        model = model if model is not None else self.model(device)
-        return BatchPalpation(model=model, rings=self.rings, dt=self.dt, integrator=self.integrator)
+    def batch(self, device, model=None) -> "RingBatches":
+        """The batches of this plan on `device`, one per ring count (with `model`, made on that device, when given)."""
+        return RingBatches(self, model if model is not None else self.model(device))
 
     def model(self, device):
         from .model import Model
 
         return Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale)
 
-    def columns(self, begin: int, end: int, result) -> dict:
-        """The output columns of points begin..end from their BatchResult."""
+    def columns(self, begin: int, end: int, results) -> dict:
+        """The output columns of points begin..end from [(indices in the chunk, BatchResult)], one per ring count."""
         p = self.points[begin:end] * 1e3
-        return {
-            "x_mm": p[:, 0],
-            "y_mm": p[:, 1],
-            "z_mm": p[:, 2],
-            "vertex": result.vertex.astype(np.int64),
-            "peak_force_N": result.peak_force,
-            "stiffness_N_per_mm": result.stiffness_N_per_mm,
-            "recovery_error_mm": result.recovery_error * 1e3,
-        }
+        n = end - begin
+        out = {"x_mm": p[:, 0], "y_mm": p[:, 1], "z_mm": p[:, 2], "vertex": np.empty(n, dtype=np.int64),
+               "rings": self.point_rings[begin:end].copy()}
+        for c in ("peak_force_N", "stiffness_N_per_mm", "recovery_error_mm"):
+            out[c] = np.empty(n, dtype=np.float64)
+        for idx, result in results:
+            out["vertex"][idx] = result.vertex
+            out["peak_force_N"][idx] = result.peak_force
+            out["stiffness_N_per_mm"][idx] = result.stiffness_N_per_mm
+            out["recovery_error_mm"][idx] = result.recovery_error * 1e3
+        return out
 
 
-def press_chunk(batch, plan: SweepPlan, begin: int, end: int, on_launch=None):
-    """Start the presses of points begin..end on `batch` (a BatchPalpation); returns a finisher."""
-    batch.touch(plan.vertices[begin:end])
-    launch = None if on_launch is None else (lambda steps: on_launch(steps * (end - begin)))
-    per_launch = 200 if batch.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
-    batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=launch)
-    return lambda: plan.columns(begin, end, batch.finish_press())
+class RingBatches:
+    """A plan's BatchPalpations on one device, one per ring count (made when first asked for)."""
+
+    def __init__(self, plan: SweepPlan, model):
+        self.plan, self.model, self.device = plan, model, model.device
+        self._batches = {}
+
+    def get(self, rings: int):
+        from .batch import BatchPalpation
+
+        if rings not in self._batches:
+            p = self.plan
+            self._batches[rings] = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator)
+        return self._batches[rings]
+
+
+def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_launch=None):
+    """Start the presses of points begin..end (a batch per ring count among them); returns a finisher."""
+    rings = plan.point_rings[begin:end]
+    per_launch = 200 if batches.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
+    started = []
+    for k in np.unique(rings):
+        idx = np.flatnonzero(rings == k)
+        batch = batches.get(int(k))
+        batch.touch(plan.vertices[begin:end][idx])
+        launch = None if on_launch is None else (lambda steps, n=len(idx): on_launch(steps * n))
+        batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=launch)
+        started.append((idx, batch))
+    return lambda: plan.columns(begin, end, [(idx, batch.finish_press()) for idx, batch in started])
 
 
 # -- files -------------------------------------------------------------------------------------
@@ -175,25 +208,28 @@ def write_table(path, columns: dict) -> Path:
                 f.write(",".join(COLUMNS) + "\n")
                 for row in zip(*cols):
                     # repr: the shortest text that reads back to the same float
-                    f.write(",".join(str(int(x)) if c == "vertex" else repr(float(x)) for c, x in zip(COLUMNS, row)) + "\n")
+                    f.write(",".join(str(int(x)) if c in _INT_COLUMNS else repr(float(x)) for c, x in zip(COLUMNS, row)) + "\n")
 
     _atomic(path, write)
     return path
 
 
 def read_table(path) -> dict:
-    """The columns of a sweep file (.csv or .npz), as NumPy arrays (vertex as int64)."""
+    """The columns of a sweep file (.csv or .npz), as NumPy arrays (vertex and rings as int64; a
+    table written before the rings column has none)."""
     path = Path(path)
     if path.suffix.lower() == ".npz":
         with np.load(path) as z:
-            return {c: z[c] for c in COLUMNS}
+            return {c: z[c] for c in COLUMNS if c in z.files}
     data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     with open(path, encoding="utf-8") as f:
-        header = f.readline().strip().split(",")
-    if tuple(header) != COLUMNS:
-        raise InputError(f"{path}: not a sweep table (header {header})")
-    out = {c: data[:, i] for i, c in enumerate(COLUMNS)}
-    out["vertex"] = out["vertex"].astype(np.int64)
+        header = tuple(f.readline().strip().split(","))
+    if header not in (COLUMNS, COLUMNS[:-1]):
+        raise InputError(f"{path}: not a sweep table (header {list(header)})")
+    out = {c: data[:, i] for i, c in enumerate(header)}
+    for c in _INT_COLUMNS:
+        if c in out:
+            out[c] = out[c].astype(np.int64)
     return out
 
 

@@ -272,3 +272,50 @@ def test_palpate_feels_the_lesion_of_a_lesion_scene(tmp_path_factory):
     assert plain["contact"]["vertex"] == hard["contact"]["vertex"]
     ratio = hard["presses"][0]["peak_force_N"] / plain["presses"][0]["peak_force_N"]
     assert 2.0 < ratio <= 5.0 * 1.05
+
+
+def _auto_scene(tmp_path, tol_line="tol_mm = 0.03\n"):
+    from conftest import SCENES
+
+    text = (SCENES / "stomach.toml").read_text()
+    text = text.replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
+    text = text.replace("\nrings = 4 ", f'\nrings = "auto"\n{tol_line}# was: rings = 4 ')
+    path = tmp_path / "auto.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_auto_rings_from_a_scene_are_the_flags(tmp_path_factory):
+    # [region] rings = "auto", tol_mm = T in a scene runs exactly as --rings auto --tol-mm T
+    short = ("--ramp-s", "0.05", "--hold-s", "0.1", "--settle-s", "0.05", "--dt-ms", "0.5")
+    scene = _auto_scene(tmp_path_factory.mktemp("scene"))
+    by_scene = palpate(tmp_path_factory, scene, *short)
+    by_flags = palpate(tmp_path_factory, "--rings", "auto", "--tol-mm", "0.03", *short)
+    assert by_scene["model"]["rings"] == "auto" and by_scene["model"]["tol_mm"] == pytest.approx(0.03)
+    assert by_scene["model"]["rings_chosen"] == by_flags["model"]["rings_chosen"] >= 3  # docs/adaptive.md: 4, 4, 3
+    for key in ("rings_chosen", "auto_reason", "auto_events", "region_vertices"):
+        assert by_scene["model"][key] == by_flags["model"][key], key
+    assert by_scene["presses"] == by_flags["presses"]  # the same bits
+    # flags override the scene: a fixed ring count drops its tol_mm; --tol-mm replaces it
+    fixed = palpate(tmp_path_factory, scene, "--rings", "2", *short)
+    assert fixed["model"]["rings"] == 2 and "tol_mm" not in fixed["model"]
+    assert fixed["presses"] == palpate(tmp_path_factory, "--rings", "2", *short)["presses"]
+    loose = palpate(tmp_path_factory, scene, "--tol-mm", "1", *short)
+    assert loose["model"]["tol_mm"] == 1.0 and loose["model"]["rings_chosen"] < by_scene["model"]["rings_chosen"]
+
+
+def test_auto_scene_without_tol_takes_the_default_and_tol_needs_auto(tmp_path, capsys):
+    from almsdm_warp.cli_palpate import AUTO_TOL_MM
+
+    scene = _auto_scene(tmp_path, "")
+    out = tmp_path / "o.json"
+    assert main(["palpate", scene, "--ramp-s", "0.05", "--hold-s", "0", "--settle-s", "0.05", "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["model"]["tol_mm"] == AUTO_TOL_MM
+    capsys.readouterr()
+    out.unlink()
+    assert main(["palpate", "--tol-mm", "0.1", "--json", str(out)]) == 2  # the stomach scene's rings = 4
+    err = capsys.readouterr().err
+    assert "--tol-mm is for --rings auto" in err and "the scene's [region] rings = 4" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    assert main(["touch", scene]) == 2
+    assert "give --rings K to touch" in capsys.readouterr().err

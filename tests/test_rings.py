@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import load_cached, mesh_params
+from conftest import SCENES, load_cached, mesh_params
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
@@ -142,3 +142,24 @@ def test_bad_arguments(device):
         ring_distances(mesh, 0, 1.5, device=device)
     with pytest.raises(RuntimeError, match="build"):
         Region(mesh, device).expand(1)
+
+
+def test_astronomical_ring_counts_stop_at_the_component(device):
+    """Region.build(v, 10**20) and Palpation(rings=10**20) raised OverflowError (a list of every empty
+    ring): growth now stops where the region covers its component; `rings` still says what was asked."""
+    from almsdm_warp.palpation import Palpation
+
+    stomach = load_cached(SCENES / "stomach.obj")
+    dist = bfs_hops(stomach, [0])[0]
+    dist = np.where(np.isfinite(dist), dist, -1).astype(np.int64)
+    region = Region(stomach, device).build(0, 10**20)
+    check_region(region, stomach, dist, int(dist.max()))
+    assert region.rings == 10**20 and region.outer_ring == dist.max() and region.vertex_count == (dist >= 0).sum()
+    region.expand(10**20)
+    assert region.rings == 2 * 10**20 and region.vertex_count == (dist >= 0).sum()
+    mesh = two_tetrahedra_components()  # a component of 4: the other 4 vertices stay out
+    check_region(Region(mesh, device).build(5, 10**20), mesh, np.array([-1, -1, -1, -1, 1, 0, 1, 1]), 10**20)
+    pal = Palpation(stomach, rings=10**20, device=device, dt=1e-3)
+    pal.touch(0)
+    assert pal.region_vertices == (dist >= 0).sum() and pal.region.outer_ring == dist.max()
+    np.testing.assert_array_equal(np.sort(pal.region.boundary()), np.flatnonzero(dist == dist.max()))

@@ -221,10 +221,36 @@ BAD = [
         ["[tissue] anchor_damping_Ns_per_m must be >= 0, got -0.5"],
     ),
     ("zero-rings", GOOD.replace("rings = 3", "rings = 0"), ["[region] rings must be >= 1, got 0"]),
+    ("rings-other-string", GOOD.replace("rings = 3", 'rings = "Auto"'), ["[region] rings must be an integer >= 1 or 'auto', got string 'Auto'"]),
+    ("tol-with-fixed-rings", GOOD.replace("rings = 3", "rings = 3\ntol_mm = 0.1"), ["[region] tol_mm is for rings = 'auto'", "but rings = 3"]),
+    ("tol-without-rings", GOOD.replace("rings = 3", "tol_mm = 0.1"), ["[region] tol_mm is for rings = 'auto'", "rings is not given (default 4)"]),
+    ("tol-zero", GOOD.replace("rings = 3", 'rings = "auto"\ntol_mm = 0'), ["[region] tol_mm must be > 0, got 0.0"]),
+    ("tol-string", GOOD.replace("rings = 3", 'rings = "auto"\ntol_mm = "0.1"'), ["[region] tol_mm must be a number, got string '0.1'"]),
+    ("tol-nan", GOOD.replace("rings = 3", 'rings = "auto"\ntol_mm = nan'), ["[region] tol_mm must be finite, got nan"]),
+    ("tol-typo", GOOD.replace("rings = 3", 'rings = "auto"\ntol = 0.1'), ["unknown key 'tol' in [region]", "allowed: rings, tol_mm"]),
     ("no-mesh-path", GOOD.replace('path = "organ.obj"\n', ""), ["missing [mesh] path"]),
     ("mesh-missing", GOOD.replace("organ.obj", "gone.obj"), ["mesh file not found", "gone.obj", "[mesh] path = 'gone.obj'"]),
     ("mesh-is-dir", GOOD.replace("organ.obj", "sub"), ["[mesh] path = 'sub' is a directory"]),
 ]
+
+
+def test_auto_rings_in_a_scene(tmp_path):
+    (tmp_path / "organ.obj").write_text("v 0 0 0\n")
+    (tmp_path / "a.toml").write_text(GOOD.replace("rings = 3", 'rings = "auto"\ntol_mm = 0.05'))
+    scene = load_scene(tmp_path / "a.toml")
+    assert scene.rings == "auto" and scene.tol == 0.05 / 1000.0
+    assert scene.as_dict()["region"] == {"rings": "auto", "tol_mm": 0.05}
+    assert "auto rings (tol 0.05 mm)" in scene.summary()
+    (tmp_path / "b.toml").write_text(GOOD.replace("rings = 3", 'rings = "auto"'))
+    scene = load_scene(tmp_path / "b.toml")
+    assert scene.rings == "auto" and scene.tol is None and scene.as_dict()["region"] == {"rings": "auto", "tol_mm": None}
+    fixed = load_scene(SCENES / "stomach.toml")
+    assert fixed.tol is None and fixed.as_dict()["region"] == {"rings": 4, "tol_mm": None}
+    assert Scene(path=None, mesh_path=SCENES / "stomach.obj", rings="auto", tol=1e-4).tol == 1e-4
+    with pytest.raises(InputError, match=r"Scene.tol is for rings = 'auto'.*but rings = 4"):
+        Scene(path=None, mesh_path=SCENES / "stomach.obj", tol=1e-4)
+    with pytest.raises(InputError, match=r"Scene.rings must be an integer >= 1 or 'auto', got string 'global'"):
+        Scene(path=None, mesh_path=SCENES / "stomach.obj", rings="global")
 
 
 @pytest.mark.parametrize("text, parts", [pytest.param(t, p, id=i) for i, t, p in BAD])

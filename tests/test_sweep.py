@@ -52,13 +52,21 @@ def test_tables_round_trip(tmp_path):
     rng = np.random.default_rng(1)
     cols = {c: rng.normal(size=9) for c in sw.COLUMNS}
     cols["vertex"] = rng.integers(0, 1000, size=9)
+    cols["rings"] = rng.integers(1, 9, size=9)
     cols["recovery_error_mm"][3] = np.nan
     for suffix in (".csv", ".npz"):
         back = sw.read_table(sw.write_table(tmp_path / f"t{suffix}", cols))
         for c in sw.COLUMNS:
             np.testing.assert_array_equal(back[c], cols[c])  # exact: CSV floats are written with repr
-        assert back["vertex"].dtype == np.int64
+        assert back["vertex"].dtype == np.int64 and back["rings"].dtype == np.int64
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv", "t.npz"]  # no temporary left
+    # a table of issue 6 (no rings column) still reads
+    old = tmp_path / "old.csv"
+    text = (tmp_path / "t.csv").read_text().splitlines()
+    old.write_text("\n".join(line.rsplit(",", 1)[0] for line in text) + "\n")
+    back = sw.read_table(old)
+    assert "rings" not in back
+    np.testing.assert_array_equal(back["peak_force_N"], cols["peak_force_N"])
 
 
 def test_sweep_finds_the_lesion(tmp_path, capsys):
@@ -167,6 +175,9 @@ def test_sweep_png(tmp_path):
         (["--out", "x.csv", "--device", "tpu"], "unknown device"),
         (["--out", "x.csv", "--points", "0"], "must be >= 1"),
         (["--out", "x.csv", "--depth-mm", "-1"], "must be > 0"),
+        (["--out", "x.csv", "--rings", "automatic"], "allowed: an integer >= 1 or 'auto'"),
+        (["--out", "x.csv", "--rings", "3", "--tol-mm", "0.1"], "--tol-mm is for --rings auto"),
+        (["--out", "x.csv", "--rings", "auto", "--tol-mm", "0"], "must be > 0"),
     ],
 )
 def test_sweep_bad_input(tmp_path, monkeypatch, capsys, args, message):
@@ -206,3 +217,45 @@ def test_lesion_scene_and_its_errors(tmp_path):
         path.write_text(f'[mesh]\npath = "{SCENES / "stomach.obj"}"\n[lesion]\n{table}\n')
         with pytest.raises(InputError, match=message):
             load_scene(path)
+
+
+def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
+    # --rings auto sizes each point's region as almsdm palpate --rings auto does, then presses it with that
+    # many fixed rings: its peak forces are those of a global-accurate ring count within the 1% force bound
+    from almsdm_warp.adaptive import AdaptivePalpation
+    from almsdm_warp.adaptive_eval import hold_press
+    from almsdm_warp.palpation import Palpation
+    from almsdm_warp.scene import TissueParams
+
+    press = ["--points", "6", "--ramp-s", "0.1", "--hold-s", "0.2", "--settle-s", "0.01", "--dt-ms", "1"]
+    assert main(["sweep", *press, "--rings", "auto", "--tol-mm", "0.1", "--out", str(tmp_path / "auto.npz")]) == 0
+    assert main(["sweep", *press, "--rings", "8", "--out", str(tmp_path / "eight.csv")]) == 0
+    auto, eight = sw.read_table(tmp_path / "auto.npz"), sw.read_table(tmp_path / "eight.csv")
+    for c in ("x_mm", "y_mm", "z_mm", "vertex"):
+        np.testing.assert_array_equal(auto[c], eight[c])
+    assert set(auto["rings"]) == {2, 3} and set(eight["rings"]) == {8}  # docs/adaptive.md: 3 or 2 at 0.1 mm
+    # the global anchored model (no ring boundary) under the same press: the independent answer
+    reference = Palpation(stomach, TissueParams(), rings="global", dt=1e-3, device="cpu")
+    peaks = []
+    for v in auto["vertex"]:
+        reference.touch(int(v))
+        peaks.append(hold_press(reference, 0.01, 0.1, 0.2)[0])
+        for s in reference.states:  # the next press from rest (the global model's touch keeps the state)
+            s.particle_q.assign(reference.model.particle_q_rest)
+            s.particle_qd.zero_()
+    np.testing.assert_allclose(eight["peak_force_N"], peaks, rtol=1e-3)  # 8 rings: the global reference's
+    np.testing.assert_allclose(auto["peak_force_N"], eight["peak_force_N"], rtol=0.01)
+    np.testing.assert_allclose(auto["peak_force_N"], peaks, rtol=0.01)
+    # a scene's [region] rings = "auto", tol_mm = 0.1: the same sweep
+    text = (SCENES / "stomach.toml").read_text().replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
+    (tmp_path / "auto.toml").write_text(text.replace("\nrings = 4 ", '\nrings = "auto"\ntol_mm = 0.1\n# '))
+    assert main(["sweep", str(tmp_path / "auto.toml"), *press, "--out", str(tmp_path / "scene.npz")]) == 0
+    by_scene = sw.read_table(tmp_path / "scene.npz")
+    for c in sw.COLUMNS:
+        np.testing.assert_array_equal(by_scene[c], auto[c])
+    # each point's rings are a fresh adaptive palpation's there (sized from rest, whatever the order)
+    for k in (1, 4):
+        pal = AdaptivePalpation(stomach, TissueParams(), tol=1e-4, dt=1e-3, device="cpu", retire=False)
+        pal.touch(int(auto["vertex"][k]))
+        hold_press(pal, 0.01, 0.1, 0.2)
+        assert pal.rings_chosen == auto["rings"][k]
