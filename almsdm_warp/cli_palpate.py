@@ -23,18 +23,25 @@ MAX_STEPS = 10_000_000
 typo (a dt in seconds given to --dt-ms, a hold in ms given to --hold-s), not a run to wait for."""
 
 
-def _rings_arg(text):
-    """--rings: an integer >= 1, "auto", "global" or "global-free"."""
-    allowed = "an integer >= 1, 'auto', " + " or ".join(repr(g) for g in GLOBAL_RINGS)
-    if text in GLOBAL_RINGS or text == "auto":
-        return text
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"unknown value {text!r} (allowed: {allowed})") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1 (ring 0 is the contact vertex alone; allowed: {allowed}), got {value}")
-    return value
+def rings_arg(words=("auto", *GLOBAL_RINGS)):
+    """An argparse type for --rings: an integer >= 1 or one of `words`."""
+    allowed = "an integer >= 1" + (", " if len(words) > 1 else " or ") + " or ".join(repr(w) for w in words)
+
+    def parse(text):
+        if text in words:
+            return text
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"unknown value {text!r} (allowed: {allowed})") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"must be >= 1 (ring 0 is the contact vertex alone; allowed: {allowed}), got {value}")
+        return value
+
+    return parse
+
+
+_rings_arg = rings_arg()
 
 
 def _number_arg(rule):

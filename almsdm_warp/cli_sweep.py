@@ -13,7 +13,7 @@ from .errors import InputError
 
 
 def add_parser(sub) -> None:
-    from .cli_palpate import _count_arg, _number_arg
+    from .cli_palpate import _count_arg, _number_arg, rings_arg
 
     p = sub.add_parser(
         "sweep",
@@ -26,7 +26,7 @@ def add_parser(sub) -> None:
     p.add_argument("scene", nargs="?", default=None, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     p.add_argument("--out", required=True, metavar="FILE", help="output table: .csv or .npz")
     p.add_argument("--points", type=_count_arg, default=200, metavar="N", help="points to press (default 200)")
-    p.add_argument("--rings", type=_rings_arg, default=None, metavar="{K,auto}", help="rings of each local region, or auto: each point's sized to --tol-mm as almsdm palpate --rings auto sizes it (default: the scene's)")
+    p.add_argument("--rings", type=rings_arg(("auto",)), default=None, metavar="{K,auto}", help="rings of each local region, or auto: each point's sized to --tol-mm as almsdm palpate --rings auto sizes it (default: the scene's)")
     p.add_argument("--tol-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
     p.add_argument("--depth-mm", "--depth", dest="depth_mm", type=_number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
     p.add_argument("--ramp-s", type=_number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
@@ -41,21 +41,6 @@ def add_parser(sub) -> None:
     p.add_argument("--png", default=None, metavar="PATH", help="also draw the organ coloured by stiffness (matplotlib)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
     p.set_defaults(func=cmd_sweep)
-
-
-def _rings_arg(text):
-    """--rings: an integer >= 1 or "auto"."""
-    import argparse
-
-    if text == "auto":
-        return text
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"unknown value {text!r} (allowed: an integer >= 1 or 'auto')") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
 
 
 def _devices(text: str) -> list[str]:

@@ -20,21 +20,13 @@ import pytest
 import scipy.sparse as sp
 from conftest import ROOT
 from scipy.sparse.csgraph import breadth_first_order, shortest_path
+from test_simulation_press import scene_and_mesh
 
 from almsdm_warp import Region, find_contacts
 from almsdm_warp.model import PROBE_DISPLACEMENT
 from almsdm_warp.palpation import Palpation
-from almsdm_warp.scene import resolve_scene_or_mesh
 
 DEPTH = 8.0e-3
-_scenes = {}
-
-
-def scene_and_mesh(name=None):
-    if name not in _scenes:
-        scene = resolve_scene_or_mesh(name)
-        _scenes[name] = (scene, scene.load_mesh())
-    return _scenes[name]
 
 
 def far_apart(mesh):
