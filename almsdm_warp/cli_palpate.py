@@ -25,7 +25,8 @@ typo (a dt in seconds given to --dt-ms, a hold in ms given to --hold-s), not a r
 
 def rings_arg(words=("auto", *GLOBAL_RINGS)):
     """An argparse type for --rings: an integer >= 1 or one of `words`."""
-    allowed = "an integer >= 1" + (", " if len(words) > 1 else " or ") + " or ".join(repr(w) for w in words)
+    items = ["an integer >= 1", *(repr(w) for w in words)]
+    allowed = ", ".join(items[:-1]) + " or " + items[-1]
 
     def parse(text):
         if text in words:
