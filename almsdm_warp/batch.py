@@ -97,14 +97,16 @@ class BatchPalpation:
 
     rings: the local model's rings (the outermost fixed). dt [s].
     kernel (explicit): "fast" (the CUDA default where the regions fit: as "entries", with an
-    approximate reciprocal square root and no division in the step, ~1e-6 relative from the CPU's
+    approximate reciprocal square root and no division in the step, forces within 5e-6 relative of the CPU.s
     bits; on the CPU it runs the "entries" kernel), "entries" (a block per palpation, its threads
     sharing the springs, each computed once) or "vertices" (a block's threads share
     the free vertices; a block is one thread on the CPU: the CPU default). Both give the same
     bits on the CPU. threads: threads per block on CUDA (default 64 for "entries"; for
     "vertices" enough for the largest region's free vertices, 32..256). max_registers: the
     "entries" kernel's registers per thread (default 64; 0: no cap). wide: its state as vec4.
-    lean ("fast" kernel): the probe's state in shared memory and int16 CSR codes (default True).
+    lean ("fast" kernel): 1 the probe's state in shared memory and int16 CSR codes; 2 also each
+    vertex's position and velocity packed in 24 bytes of shared memory (default); 3 also a
+    force slot per CSR entry; 0 none of these.
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
@@ -112,7 +114,7 @@ class BatchPalpation:
 
     def __init__(
         self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
-        kernel=None, threads=None, max_registers=None, wide=True, lean=True, capacity=None,
+        kernel=None, threads=None, max_registers=None, wide=True, lean=2, capacity=None,
         cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
     ):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
@@ -133,7 +135,7 @@ class BatchPalpation:
         # 64 registers a thread: 16 blocks of 64 threads per SM, the best of 0/40/64 caps measured on an H200
         self._max_registers = 64 if max_registers is None else int(max_registers)
         self._wide = bool(wide)
-        self._lean = bool(lean)
+        self._lean = int(lean)
         self._threads = threads
         self._capacity = capacity
         self.batch_size = 0
