@@ -97,7 +97,7 @@ class BatchPalpation:
 
     rings: the local model's rings (the outermost fixed). dt [s].
     kernel (explicit): "fast" (the CUDA default where the regions fit: as "entries", with an
-    approximate reciprocal square root and no division in the step, forces within 5e-6 relative of the CPU.s
+    approximate reciprocal square root and no division in the step, forces within 5e-6 relative of the CPU's
     bits; on the CPU it runs the "entries" kernel), "entries" (a block per palpation, its threads
     sharing the springs, each computed once) or "vertices" (a block's threads share
     the free vertices; a block is one thread on the CPU: the CPU default). Both give the same
