@@ -25,7 +25,7 @@ from .model import Model
 from .region import check_rings
 
 
-KERNELS = ("entries", "vertices")
+KERNELS = ("fast", "entries", "vertices")
 INTEGRATORS = ("explicit", "implicit")
 
 
@@ -96,12 +96,17 @@ class BatchPalpation:
     step; cg_max_iterations and cg_tolerance as the solver's).
 
     rings: the local model's rings (the outermost fixed). dt [s].
-    kernel (explicit): "entries" (a block per palpation, its threads sharing the springs, each
-    computed once; the CUDA default where the regions fit) or "vertices" (a block's threads share
+    kernel (explicit): "fast" (the CUDA default where the regions fit: as "entries", with an
+    approximate reciprocal square root and no division in the step, forces within 5e-6 relative of the CPU's
+    bits; on the CPU it runs the "entries" kernel), "entries" (a block per palpation, its threads
+    sharing the springs, each computed once) or "vertices" (a block's threads share
     the free vertices; a block is one thread on the CPU: the CPU default). Both give the same
     bits on the CPU. threads: threads per block on CUDA (default 64 for "entries"; for
     "vertices" enough for the largest region's free vertices, 32..256). max_registers: the
     "entries" kernel's registers per thread (default 64; 0: no cap). wide: its state as vec4.
+    lean ("fast" kernel): 1 the probe's state in shared memory and int16 CSR codes; 2 also each
+    vertex's position and velocity packed in 24 bytes of shared memory (default); 3 also a
+    force slot per CSR entry; 0 none of these.
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
@@ -109,7 +114,7 @@ class BatchPalpation:
 
     def __init__(
         self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
-        kernel=None, threads=None, max_registers=None, wide=True, capacity=None,
+        kernel=None, threads=None, max_registers=None, wide=True, lean=2, capacity=None,
         cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
     ):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
@@ -130,6 +135,7 @@ class BatchPalpation:
         # 64 registers a thread: 16 blocks of 64 threads per SM, the best of 0/40/64 caps measured on an H200
         self._max_registers = 64 if max_registers is None else int(max_registers)
         self._wide = bool(wide)
+        self._lean = int(lean)
         self._threads = threads
         self._capacity = capacity
         self.batch_size = 0
@@ -179,18 +185,21 @@ class BatchPalpation:
         self.entry_capacity = _pow2(int(entries.max(initial=1)), 16)
         springs = regions.spring_count.numpy()
         self.cuda_plan = self._entries_plan(int(counts.max()), int(entries.max(initial=1)), int(springs.max(initial=1)))
+        self.fast_plan = self._fast_plan(int(counts.max()), int(free.max()), int(entries.max(initial=1)), int(springs.max(initial=1)))
         cuda = self.device.is_cuda
-        kernel = self._kernel or ("entries" if cuda and self.cuda_plan is not None else "vertices")
+        kernel = self._kernel or ("fast" if cuda and self.fast_plan is not None else "vertices")
         if kernel not in KERNELS:
             raise ValueError(f"unknown kernel {kernel!r} (known: {', '.join(KERNELS)})")
-        if kernel == "entries" and self.cuda_plan is None:
+        if kernel in ("entries", "fast") and self.cuda_plan is None:
             raise ValueError(
                 f"the 'entries' kernel cannot hold these regions ({int(counts.max())} vertices, {int(springs.max())} springs: "
                 f"at most 16 springs a thread of 1024, and 40 KiB of shared memory)"
             )
         self.kernel = kernel
         self.shared = bool(cuda and bk.shared_bytes(self.vertex_capacity, self.entry_capacity) <= bk.SHARED_BYTES_MAX)
-        if kernel == "entries":
+        if kernel == "fast" and cuda:
+            self.threads = self.fast_plan[0]
+        elif kernel in ("entries", "fast"):
             self.threads = self.cuda_plan[0]
         elif not cuda:
             self.threads = 1
@@ -199,7 +208,7 @@ class BatchPalpation:
         else:
             self.threads = min(max(_pow2(int(free.max()), 32), 32), 256)
         # global working arrays of the "vertices" kernel where its regions do not fit in shared memory
-        nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared or kernel == "entries")
+        nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared or kernel != "vertices")
         d = self.device
         self.scratch_vec3 = wp.zeros(nv, dtype=wp.vec3, device=d)
         self.scratch_float = wp.zeros(nf, dtype=wp.float32, device=d)
@@ -210,6 +219,7 @@ class BatchPalpation:
         self.qd_state = wp.zeros((B, regions.vertex_capacity), dtype=wp.vec3, device=d)
         """Velocities [m/s], same layout."""
         self.peak_force = wp.zeros(B, dtype=wp.float64, device=d)
+        """Running largest |feedback force| [N] (its square with the "fast" kernel on CUDA), [B]."""
         self.peak_reaction = wp.zeros(B, dtype=wp.vec3, device=d)
         self.hold_reaction = wp.zeros(B, dtype=wp.vec3, device=d)
         normals = -self.model.vertex_normal_rest[self.vertices]
@@ -231,6 +241,20 @@ class BatchPalpation:
         if per_thread > 16 or bkc.shared_bytes(cv, ce, threads * per_thread) > bk.SHARED_BYTES_MAX:
             return None
         return threads, max(per_thread, 1), cv, ce, self._max_registers, self._wide
+
+    def _fast_plan(self, max_vertices, max_free, max_entries, max_springs):
+        """(threads, springs per thread, vertex, free-vertex, entry and spring capacities, register
+        cap) of the "fast" kernel, or None where it cannot hold these regions."""
+        threads = 64 if self._threads is None else int(self._threads)
+        per_thread = -(-max_springs // threads)
+        while per_thread > 16 and threads < 1024:
+            threads *= 2
+            per_thread = -(-max_springs // threads)
+        r16 = lambda x: -(-max(int(x), 1) // 16) * 16
+        cv, cf, ce, cs = r16(max_vertices), r16(max_free), r16(max_entries), r16(max_springs)
+        if per_thread > 16 or max(cv, ce) > 32767 or bkc.shared_bytes_fast(cv, cf, ce, cs, self._lean) > bk.SHARED_BYTES_MAX:
+            return None
+        return threads, max(per_thread, 1), cv, cf, ce, cs, self._max_registers, self._lean
 
     def region(self, b: int) -> np.ndarray:
         """Mesh ids of palpation b's region vertices in local order (host copy)."""
@@ -284,7 +308,7 @@ class BatchPalpation:
 
     def launch_steps(self, begin: int, count: int) -> None:
         """Launch steps begin..begin+count of the press scheduled by start_press (no wait)."""
-        if self.kernel == "entries":
+        if self.kernel in ("entries", "fast"):
             bkc.press_batch_cuda(self, begin, count)
         else:
             bk.press_batch(self, begin, count)

@@ -26,7 +26,8 @@ wp.set_module_options({"enable_backward": False})
 SHARED_BYTES_MAX = 40 * 1024
 """Working arrays larger than this per block stay in global memory (static shared memory is 48 KiB)."""
 
-_C_TYPES = {wp.vec3: "wp::vec_t<3, wp::float32>", wp.vec4: "wp::vec_t<4, wp::float32>", wp.float32: "wp::float32", wp.int32: "wp::int32"}
+_C_TYPES = {wp.vec3: "wp::vec_t<3, wp::float32>", wp.vec4: "wp::vec_t<4, wp::float32>", wp.float32: "wp::float32", wp.int32: "wp::int32",
+            wp.int16: "wp::int16", wp.float64: "wp::float64", wp.vec2: "wp::vec_t<2, wp::float32>"}
 
 
 class _Native:

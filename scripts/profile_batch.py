@@ -17,6 +17,9 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, default=10000)
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--rings", type=int, default=4)
+    ap.add_argument("--kernel", default=None)
+    ap.add_argument("--max-registers", type=int, default=None)
+    ap.add_argument("--lean", type=int, default=2)
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
     from almsdm_warp.batch import BatchPalpation
@@ -25,7 +28,7 @@ def main(argv=None):
 
     init_warp()
     mesh = load_mesh(args.mesh)
-    bp = BatchPalpation(mesh, rings=args.rings, dt=6.5e-4, device=args.device).touch(spread_vertices(mesh, args.batch))
+    bp = BatchPalpation(mesh, rings=args.rings, dt=6.5e-4, device=args.device, kernel=args.kernel, max_registers=args.max_registers, lean=args.lean).touch(spread_vertices(mesh, args.batch))
     bp.depth, bp.ramp_steps, bp.press_steps = 0.01, 100, args.steps
     bp.launch_steps(0, args.steps)
     wp.synchronize_device(bp.device)

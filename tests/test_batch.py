@@ -50,10 +50,10 @@ def test_batch_regions_match_region_and_bfs(device, stomach, rings, capacity):
             np.testing.assert_array_equal(local_edge[b, k0:k1], edges[offsets[v] : offsets[v + 1]])
 
 
-@pytest.mark.parametrize("kernel", ["vertices", "entries"])
+@pytest.mark.parametrize("kernel", ["vertices", "entries", "fast"])
 def test_batch_press_equals_palpation_bits(device, stomach, kernel):
     # same device, same points: the same force and recovery, bit for bit on the CPU, with either
-    # kernel ("entries", CUDA's default, runs on the CPU as blocks of fibers with real barriers)
+    # kernel ("entries" and "fast" run on the CPU as blocks of fibers with real barriers)
     bp = BatchPalpation(stomach, rings=4, device=device, kernel=kernel).touch(SEEDS)
     assert bp.kernel == kernel
     res = bp.press(**SHORT)
@@ -68,8 +68,12 @@ def test_batch_press_equals_palpation_bits(device, stomach, kernel):
         elif kernel == "vertices":  # CUDA, the same loop as the one-palpation kernel: the same bits too
             assert res.peak_force[b] == ref.peak_force_N
             assert res.recovery_error[b] * 1e3 == ref.recovery_error_mm
-        else:  # CUDA "entries": a spring's force is stored, then added: NVRTC cannot fuse that multiply-add
+        elif kernel == "entries":  # CUDA: a spring's force is stored, then added: NVRTC cannot fuse that multiply-add
             np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=2e-6)
+            np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=2e-5)
+        else:  # CUDA "fast": an approximate reciprocal square root, no division: the project's 1e-5
+            np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=1e-5)
+            np.testing.assert_allclose(res.hold_force[b], ref.force[ref.release_step - 1], rtol=1e-5)
             np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=2e-5)
     assert np.all(res.peak_force > 0.5)
 
@@ -89,7 +93,7 @@ def test_batch_implicit_press_equals_palpation_bits(device, stomach):
             np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=2e-5)
 
 
-@pytest.mark.parametrize("kernel", ["vertices", "entries"])
+@pytest.mark.parametrize("kernel", ["vertices", "entries", "fast"])
 def test_batch_launch_chunks_do_not_change_bits(device, stomach, kernel):
     # the state goes through global memory between launches: any split gives the same numbers
     whole = BatchPalpation(stomach, rings=3, device=device, kernel=kernel).touch(SEEDS[:3]).press(**SHORT)
@@ -129,3 +133,23 @@ def test_batch_region_covering_a_small_component(device):
         np.testing.assert_array_equal(bp.region(b), ref.vertices())
         assert bp.free_vertex_counts[b] == ref.free_count == 1
     assert np.all(np.isfinite(bp.press(**SHORT).peak_force))
+
+
+def test_batch_fast_kernel_logic_on_cpu(stomach, monkeypatch):
+    # the "fast" kernel itself (CUDA's default), run on the CPU where its reciprocal square root is
+    # exact to a rounding: within 1e-5 of Palpation's force, recovery within 2e-5 mm, and split
+    # launches give the same bits (its peak is kept squared between launches)
+    from almsdm_warp.kernels import batch_explicit_cuda as bkc
+
+    monkeypatch.setattr(bkc, "FAST_ON_CPU", True)
+    res = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast").touch(SEEDS).press(**SHORT)
+    split = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast").touch(SEEDS).press(**SHORT, steps_per_launch=7)
+    np.testing.assert_array_equal(res.peak_force, split.peak_force)
+    np.testing.assert_array_equal(res.recovery_error, split.recovery_error)
+    for b, seed in enumerate(SEEDS):
+        pal = Palpation(stomach, rings=4, device="cpu")
+        pal.touch(seed)
+        ref = pal.press(**SHORT)
+        np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=1e-5)
+        np.testing.assert_allclose(res.hold_force[b], ref.force[ref.release_step - 1], rtol=1e-5)
+        np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=2e-5)
