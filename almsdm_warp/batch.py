@@ -106,7 +106,9 @@ class BatchPalpation:
     "entries" kernel's registers per thread (default 64; 0: no cap). wide: its state as vec4.
     lean ("fast" kernel): 1 the probe's state in shared memory and int16 CSR codes; 2 also each
     vertex's position and velocity packed in 24 bytes of shared memory (default); 3 also a
-    force slot per CSR entry; 0 none of these.
+    force slot per CSR entry; 4 as 2, each thread owning a free vertex (its state and degree in
+    registers across steps) and the CSR codes transposed; 5 as 4 with the owned vertex's constants
+    in registers too; 0 none of these.
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
@@ -252,9 +254,9 @@ class BatchPalpation:
             per_thread = -(-max_springs // threads)
         r16 = lambda x: -(-max(int(x), 1) // 16) * 16
         cv, cf, ce, cs = r16(max_vertices), r16(max_free), r16(max_entries), r16(max_springs)
-        if per_thread > 16 or max(cv, ce) > 32767 or bkc.shared_bytes_fast(cv, cf, ce, cs, self._lean) > bk.SHARED_BYTES_MAX:
+        if per_thread > 16 or max(cv, ce) > 32767 or bkc.shared_bytes_fast(cv, cf, ce, cs, self._lean, self._max_degree) > bk.SHARED_BYTES_MAX:
             return None
-        return threads, max(per_thread, 1), cv, cf, ce, cs, self._max_registers, self._lean
+        return threads, max(per_thread, 1), cv, cf, ce, cs, self._max_registers, self._lean, self._max_degree
 
     def region(self, b: int) -> np.ndarray:
         """Mesh ids of palpation b's region vertices in local order (host copy)."""
