@@ -116,7 +116,7 @@ class BatchPalpation:
 
     def __init__(
         self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
-        kernel=None, threads=None, max_registers=None, wide=True, lean=2, capacity=None,
+        kernel=None, threads=None, max_registers=None, wide=True, lean=5, capacity=None,
         cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
     ):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)

@@ -23,7 +23,7 @@ def main(argv=None):
     ap.add_argument("--points", type=int, default=10000)
     ap.add_argument("--rings", type=int, default=4)
     ap.add_argument("--kernels", nargs="*", default=["fast", "entries"])
-    ap.add_argument("--lean", type=int, nargs="*", default=[2], help="the fast kernel's variants (BatchPalpation lean), each checked")
+    ap.add_argument("--lean", type=int, nargs="*", default=[5], help="the fast kernel's variants (BatchPalpation lean), each checked")
     args = ap.parse_args(argv)
     import warp as wp
 
