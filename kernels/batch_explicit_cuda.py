@@ -388,7 +388,7 @@ def load2(a: wp.array(dtype=wp.vec2), i: int) -> wp.vec2: ...
 def shared_bytes_fast(vertex_capacity: int, free_capacity: int, entry_capacity: int, spring_capacity: int, lean: int = 2, max_degree: int = 16) -> int:
     """Shared memory a block of the "fast" kernel takes [bytes]."""
     if int(lean) >= 4:  # codes transposed: max_degree rows of free_capacity (lean 6: two slot maps)
-        maps = 4 * spring_capacity if int(lean) >= 6 else 4
+        maps = 4 * spring_capacity if int(lean) == 6 else 4
         return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + max_degree * free_capacity) + 16 * spring_capacity + 112 + maps
     if int(lean) == 3:
         return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + spring_capacity) + 16 * entry_capacity + 112
@@ -409,13 +409,14 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
     with each thread owning a free vertex (its position, velocity and degree in registers across
     steps) and CSR codes stored transposed (`max_degree` rows); lean = 5: as 4, with the owned
     vertex's constants in registers too; lean = 6: as 5, with the force slots numbered by CSR level
-    (conflict-free reads of a warp's own springs in the sums)."""
+    (conflict-free reads of a warp's own springs in the sums); lean = 7: as 5, with the codes in
+    pairs (one 4-byte read for two entries)."""
     if int(lean) >= 4:
         w_qa = _work_array("oqa4", wp.vec4, int(vertex_capacity), True)
         w_qb = _shared_array("oqb2", wp.vec2, int(vertex_capacity))
         return _press_kernel_owned(
             int(threads), int(per_thread), int(vertex_capacity), int(free_capacity), int(entry_capacity), int(spring_capacity),
-            max_registers, w_qa, w_qb, max(int(max_degree), 1), int(lean) >= 5, int(lean) >= 6,
+            max_registers, w_qa, w_qb, max(int(max_degree), 1), int(lean) >= 5, int(lean) == 6, int(lean) == 7,
         )
     if lean:
         return _press_kernel_lean(threads, per_thread, vertex_capacity, free_capacity, entry_capacity, spring_capacity, max_registers, int(lean) if int(lean) >= 2 else 0)
@@ -1119,7 +1120,7 @@ def _press_kernel_slots(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb):
     return press_batch_explicit_slots
 
 
-def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, constants_in_registers, levels=False):
+def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, constants_in_registers, levels=False, pairs=False):
     # the packed kernel (lean = 2) with fewer shared-memory accesses in the vertex phase: thread `lane`
     # owns free vertex `lane` for the whole launch, so its position and velocity live in registers
     # (only the owner writes them; the springs of phase A read the shared copy the owner stores),
@@ -1129,14 +1130,16 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
     # beyond the block's threads (nf > T) take the shared path. lean = 6 also renumbers the force
     # slots by level (the k-th CSR entries of all free vertices, in vertex order, for k = 0, 1, ..),
     # so the lanes of a warp read the own springs of their k-th entries from consecutive slots (no
-    # bank conflicts there; the mirror entries stay scattered). Same arithmetic, same order as
-    # lean = 2 (the same bits).
+    # bank conflicts there; the mirror entries stay scattered). lean = 7: as 5, with two int16 codes
+    # in each 4-byte word (entries 2p and 2p + 1 of a vertex: half the code reads). Same arithmetic,
+    # same order as lean = 2 (the same bits).
     ld, st = load_xyz, store_xyz
     w_rest = _work_array("orest4", wp.vec4, cf, True)
     w_kda = _work_array("okda", wp.float32, cf, True)
     w_dtm = _work_array("odtm", wp.float32, cf, True)
     w_off = _shared_array("ooff16", wp.int16, cf + 1)
-    w_code = _shared_array("ocodet16", wp.int16, cd * cf)
+    w_code = _shared_array("ocodet16", wp.int16, cd * cf if not pairs else 2)
+    w_pair = _shared_array("ocodep32", wp.int32, (cd + 1) // 2 * cf if pairs else 1)
     w_f = _work_array("of4", wp.vec4, cs, True)
     w_p64 = _work_array("op64", wp.float64, 8, True)
     w_pv = _work_array("opv4", wp.vec4, 3, True)
@@ -1147,6 +1150,7 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
     options = {"cuda_max_registers": int(max_registers)} if max_registers else {}
     regs = bool(constants_in_registers)
     lev = bool(levels)
+    two = bool(pairs)
 
     @wp.kernel(module="unique", enable_backward=False, **options)
     def press_batch_explicit_owned(
@@ -1195,6 +1199,7 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
         dtm = w_dtm(particle_mass, 0)
         off = w_off()
         code = w_code()
+        pair = w_pair()
         fe = w_f(scratch, 0)
         p64 = w_p64(peak_force, 0)
         pv = w_pv(scratch, 0)
@@ -1210,8 +1215,17 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
             kda[i] = -anchor_scale * anchor_kd[v]
             dtm[i] = dt / particle_mass[v]
             k0 = local_offsets[b, i]
-            for k in range(k0, local_offsets[b, i + 1]):
-                code[(k - k0) * cf + i] = wp.int16(local_spring[b, k])
+            k1 = local_offsets[b, i + 1]
+            if wp.static(two):
+                for p in range((k1 - k0 + 1) // 2):
+                    c0 = local_spring[b, k0 + 2 * p]
+                    c1 = int(0)
+                    if k0 + 2 * p + 1 < k1:
+                        c1 = local_spring[b, k0 + 2 * p + 1]
+                    pair[p * cf + i] = (c0 & 0xFFFF) | (c1 << 16)
+            else:
+                for k in range(k0, k1):
+                    code[(k - k0) * cf + i] = wp.int16(local_spring[b, k])
         for i in range(lane, nf + 1, T):
             off[i] = wp.int16(local_offsets[b, i])
         slot_of = w_slot()
@@ -1311,8 +1325,15 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
                 else:
                     c4 = load4(rest4, i)
                     f = c4[3] * (xo - wp.vec3(c4[0], c4[1], c4[2])) + kda[i] * uo
-                for k in range(deg):
-                    f = add_entry16(f, fe, code, k * cf + i)
+                if wp.static(two):
+                    for p in range((deg + 1) >> 1):
+                        w = pair[p * cf + i]
+                        f = add_entry(f, fe, (w << 16) >> 16)
+                        if 2 * p + 1 < deg:
+                            f = add_entry(f, fe, w >> 16)
+                else:
+                    for k in range(deg):
+                        f = add_entry16(f, fe, code, k * cf + i)
                 if i == 0 and s < press_steps:
                     # the feedback force, then displacement control (lane 0; its state in shared memory)
                     fx = wp.float64(f[0])
@@ -1348,8 +1369,16 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
                 u = wp.vec3(av[3], bv[0], bv[1])
                 c4 = load4(rest4, i)
                 f = c4[3] * (x - wp.vec3(c4[0], c4[1], c4[2])) + kda[i] * u
-                for k in range(wp.int32(off[i + 1]) - wp.int32(off[i])):
-                    f = add_entry16(f, fe, code, k * cf + i)
+                d = wp.int32(off[i + 1]) - wp.int32(off[i])
+                if wp.static(two):
+                    for p in range((d + 1) >> 1):
+                        w = pair[p * cf + i]
+                        f = add_entry(f, fe, (w << 16) >> 16)
+                        if 2 * p + 1 < d:
+                            f = add_entry(f, fe, w >> 16)
+                else:
+                    for k in range(d):
+                        f = add_entry16(f, fe, code, k * cf + i)
                 u1 = u + f * dtm[i]
                 x1 = x + dt * u1
                 qa[i] = wp.vec4(x1[0], x1[1], x1[2], u1[0])

@@ -83,7 +83,7 @@ def main(argv=None):
     ap.add_argument("--rings", type=int, default=4)
     ap.add_argument("--batch", type=int, nargs="*", default=[1000, 10000, 100000])
     ap.add_argument("--threads", type=int, nargs="*", default=[None])
-    ap.add_argument("--max-registers", type=int, nargs="*", default=[None], help="register caps per thread to try (0: none; default 64)")
+    ap.add_argument("--max-registers", type=int, nargs="*", default=[None], help="register caps per thread to try (0: none; default 64; the fast kernel's lean 4-5: 80)")
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--sweep-points", type=int, default=10000)
     ap.add_argument("--spheres", type=int, nargs="*", default=[])
@@ -123,7 +123,7 @@ def main(argv=None):
                         continue
                     out["batch"].append(row)
                     print(
-                        f"| {b} | {row['kernel']}{' vec4' * wide if kernel not in ('vertices', 'fast') else ''}{(' lean' + ' packed' * (lean >= 2) + ' slots' * (lean == 3) + ' owned' * (lean >= 4) + ' regs' * (lean >= 5) + ' levels' * (lean >= 6)) * bool(lean) if kernel == 'fast' else ''} | {row['threads']} | {regs if regs is not None else 64} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
+                        f"| {b} | {row['kernel']}{' vec4' * wide if kernel not in ('vertices', 'fast') else ''}{(' lean' + ' packed' * (lean >= 2) + ' slots' * (lean == 3) + ' owned' * (lean >= 4) + ' regs' * (lean >= 5) + ' levels' * (lean >= 6)) * bool(lean) if kernel == 'fast' else ''} | {row['threads']} | {regs if regs is not None else 'default'} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
                         f"{row['step_us_median']:.2f} | {row['region_steps_per_s']:.3e} | {row['finite']} |",
                         flush=True,
                     )
