@@ -103,10 +103,13 @@ class BatchPalpation:
     the free vertices; a block is one thread on the CPU: the CPU default). Both give the same
     bits on the CPU. threads: threads per block on CUDA (default 64 for "entries"; for
     "vertices" enough for the largest region's free vertices, 32..256). max_registers: the
-    "entries" kernel's registers per thread (default 64; 0: no cap). wide: its state as vec4.
+    "entries" kernel's registers per thread (default 64, and 80 for the "fast" kernel's lean 4-5; 0: no cap). wide: its state as vec4.
     lean ("fast" kernel): 1 the probe's state in shared memory and int16 CSR codes; 2 also each
-    vertex's position and velocity packed in 24 bytes of shared memory (default); 3 also a
-    force slot per CSR entry; 0 none of these.
+    vertex's position and velocity packed in 24 bytes of shared memory; 3 also a
+    force slot per CSR entry; 4 as 2, each thread owning a free vertex (its state and degree in
+    registers across steps) and the CSR codes transposed; 5 as 4 with the owned vertex's constants
+    in registers too (the default); 6 as 5 with force slots numbered by CSR level; 7 as 5 with
+    the codes in pairs; 0 none of these. lean 1-7 give the same bits on the CPU (FAST_ON_CPU).
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
@@ -114,7 +117,7 @@ class BatchPalpation:
 
     def __init__(
         self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
-        kernel=None, threads=None, max_registers=None, wide=True, lean=2, capacity=None,
+        kernel=None, threads=None, max_registers=None, wide=True, lean=5, capacity=None,
         cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
     ):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
@@ -134,6 +137,8 @@ class BatchPalpation:
         self._kernel = kernel
         # 64 registers a thread: 16 blocks of 64 threads per SM, the best of 0/40/64 caps measured on an H200
         self._max_registers = 64 if max_registers is None else int(max_registers)
+        # the "fast" kernel's lean 4-5 run best at 80 registers (12 blocks of 64 threads an SM): 9.55e8 against 9.23e8 at 64 on an H200
+        self._fast_max_registers = (80 if int(lean) in (4, 5) else 64) if max_registers is None else int(max_registers)
         self._wide = bool(wide)
         self._lean = int(lean)
         self._threads = threads
@@ -252,9 +257,9 @@ class BatchPalpation:
             per_thread = -(-max_springs // threads)
         r16 = lambda x: -(-max(int(x), 1) // 16) * 16
         cv, cf, ce, cs = r16(max_vertices), r16(max_free), r16(max_entries), r16(max_springs)
-        if per_thread > 16 or max(cv, ce) > 32767 or bkc.shared_bytes_fast(cv, cf, ce, cs, self._lean) > bk.SHARED_BYTES_MAX:
+        if per_thread > 16 or max(cv, ce) > 32767 or bkc.shared_bytes_fast(cv, cf, ce, cs, self._lean, self._max_degree) > bk.SHARED_BYTES_MAX:
             return None
-        return threads, max(per_thread, 1), cv, cf, ce, cs, self._max_registers, self._lean
+        return threads, max(per_thread, 1), cv, cf, ce, cs, self._fast_max_registers, self._lean, self._max_degree
 
     def region(self, b: int) -> np.ndarray:
         """Mesh ids of palpation b's region vertices in local order (host copy)."""

@@ -56,7 +56,7 @@ def spread_vertices(mesh, count: int) -> np.ndarray:
     return np.resize(surface, count).astype(np.int64)
 
 
-def measure_batch(mesh, rings, batch, device, *, steps=1000, repeats=5, threads=None, model=None, dt=1e-3, kernel=None, max_registers=None, wide=True, lean=2):
+def measure_batch(mesh, rings, batch, device, *, steps=1000, repeats=5, threads=None, model=None, dt=1e-3, kernel=None, max_registers=None, wide=True, lean=5):
     """Region-steps per second of BatchPalpation: `batch` presses of `steps` steps of `dt` (10 mm
     ramp over the first 100 steps, then held), timed between device synchronizations; the median
     of `repeats`."""

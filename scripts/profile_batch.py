@@ -19,7 +19,7 @@ def main(argv=None):
     ap.add_argument("--rings", type=int, default=4)
     ap.add_argument("--kernel", default=None)
     ap.add_argument("--max-registers", type=int, default=None)
-    ap.add_argument("--lean", type=int, default=2)
+    ap.add_argument("--lean", type=int, default=5)
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
     from almsdm_warp.batch import BatchPalpation

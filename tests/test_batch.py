@@ -153,3 +153,19 @@ def test_batch_fast_kernel_logic_on_cpu(stomach, monkeypatch):
         np.testing.assert_allclose(res.peak_force[b], ref.peak_force_N, rtol=1e-5)
         np.testing.assert_allclose(res.hold_force[b], ref.force[ref.release_step - 1], rtol=1e-5)
         np.testing.assert_allclose(res.recovery_error[b] * 1e3, ref.recovery_error_mm, rtol=1e-3, atol=2e-5)
+
+
+def test_batch_fast_kernel_owned_variants_same_bits_on_cpu(stomach, monkeypatch):
+    # lean 4-7 (a thread owns a free vertex; codes transposed, paired; slots by level) change where
+    # the step's data lives, not its arithmetic or order: the same bits as lean 2, also with 32
+    # threads, where the free vertices beyond the block's threads take the shared-memory path
+    from almsdm_warp.kernels import batch_explicit_cuda as bkc
+
+    monkeypatch.setattr(bkc, "FAST_ON_CPU", True)
+    ref = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast", lean=2).touch(SEEDS).press(**SHORT)
+    for lean, threads in [(4, None), (5, 32), (6, None), (7, 32)]:
+        bp = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast", lean=lean, threads=threads).touch(SEEDS)
+        assert threads is None or bp.free_vertex_counts.max() > threads
+        res = bp.press(**SHORT, steps_per_launch=7)
+        for name in ("peak_force", "hold_force", "recovery_error"):
+            np.testing.assert_array_equal(getattr(res, name), getattr(ref, name), err_msg=f"lean {lean}, {name}")
