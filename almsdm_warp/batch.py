@@ -19,6 +19,7 @@ import warp as wp
 from .device_mesh import check_vertex
 from .kernels import batch_explicit as bk
 from .kernels import batch_explicit_cuda as bkc
+from .kernels.batch_fast_common import shared_bytes_fast
 from .kernels import batch_implicit as bki
 from .kernels import batch_region as br
 from .model import Model
@@ -257,7 +258,7 @@ class BatchPalpation:
             per_thread = -(-max_springs // threads)
         r16 = lambda x: -(-max(int(x), 1) // 16) * 16
         cv, cf, ce, cs = r16(max_vertices), r16(max_free), r16(max_entries), r16(max_springs)
-        if per_thread > 16 or max(cv, ce) > 32767 or bkc.shared_bytes_fast(cv, cf, ce, cs, self._lean, self._max_degree) > bk.SHARED_BYTES_MAX:
+        if per_thread > 16 or max(cv, ce) > 32767 or shared_bytes_fast(cv, cf, ce, cs, self._lean, self._max_degree) > bk.SHARED_BYTES_MAX:
             return None
         return threads, max(per_thread, 1), cv, cf, ce, cs, self._fast_max_registers, self._lean, self._max_degree
 
