@@ -4,13 +4,14 @@ import warp as wp
 
 from .batch_explicit import _work_array, block_sync
 from .batch_explicit_cuda import load_xyz, store_xyz
+from .batch_fast_slots import greedy_slots
 from .batch_fast_common import _shared_array, add_entry, add_entry16, EPS_LENGTH2, load2, load4, opaque, rsqrt_approx
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
 
-def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, constants_in_registers, levels=False, pairs=False, unhoisted=False, tail=False):
+def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, constants_in_registers, levels=False, pairs=False, unhoisted=False, tail=False, greedy=False):
     # the packed kernel (lean = 2) with fewer shared-memory accesses in the vertex phase: thread `lane`
     # owns free vertex `lane` for the whole launch, so its position and velocity live in registers
     # (only the owner writes them; the springs of phase A read the shared copy the owner stores),
@@ -35,11 +36,19 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
     w_off = _shared_array("ooff16", wp.int16, cf + 1)
     w_code = _shared_array("ocodet16", wp.int16, cd * cf if not pairs else 2)
     w_pair = _shared_array("ocodep32", wp.int32, (cd + 1) // 2 * cf if pairs else 1)
-    w_f = _work_array("of4", wp.vec4, cs, True)
+    w_f = _work_array("of4", wp.vec4, cs + 32 if bool(greedy) else cs, True)
     w_p64 = _work_array("op64", wp.float64, 8, True)
     w_pv = _work_array("opv4", wp.vec4, 3, True)
-    w_slot = _shared_array("oslot16", wp.int16, cs if levels else 1)  # a spring's slot
-    w_spring = _shared_array("ospring16", wp.int16, cs if levels else 1)  # a slot's spring
+    gr = bool(greedy)  # lean = 11: slots spread over the banks (kernels/batch_fast_slots.py)
+    cs2 = cs + 32 if gr else cs  # room for the slots it leaves empty
+    limit = min(P * T, cs2)
+    ncell = (cf // 8 + 1) * cd
+    w_slot = _shared_array("oslot16", wp.int16, cs if levels or gr else 1)  # a spring's slot
+    w_spring = _shared_array("ospring16", wp.int16, cs2 if levels or gr else 1)  # a slot's spring
+    w_cell1 = _shared_array("ocell1", wp.int16, cs if gr else 1)
+    w_cell2 = _shared_array("ocell2", wp.int16, cs if gr else 1)
+    w_mask = _shared_array("omask", wp.int32, ncell if gr else 1)
+    w_nsl = _shared_array("onsl", wp.int32, 1)
     PV = max((P - 1 if int(tail) == 1 else 0) if bool(tail) and P > 1 else P, 1)
     vec_i = wp.types.vector(length=PV, dtype=wp.int32)
     vec_f = wp.types.vector(length=PV, dtype=wp.float32)
@@ -155,6 +164,31 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
                         code[k * cf + i] = wp.int16(wp.int32(slot_of[cc - 1]) + 1)
                     else:
                         code[k * cf + i] = wp.int16(-wp.int32(slot_of[-cc - 1]) - 1)
+        nsl = ns  # the spring slots' end
+        if wp.static(gr):
+            cell1 = w_cell1()
+            cell2 = w_cell2()
+            mask = w_mask()
+            nslot = w_nsl()
+            for xx in range(lane, cs2, T):
+                spring_at[xx] = wp.int16(-1)
+            for xx in range(lane, cs, T):
+                cell1[xx] = wp.int16(-1)
+                cell2[xx] = wp.int16(-1)
+            for xx in range(lane, ncell, T):
+                mask[xx] = 0
+            block_sync()
+            if lane == 0:
+                nslot[0] = greedy_slots(code, off, slot_of, spring_at, cell1, cell2, mask, nf, ns, cf, cd, limit)
+            block_sync()
+            for i in range(lane, nf, T):
+                for k in range(wp.int32(off[i + 1]) - wp.int32(off[i])):
+                    cc = wp.int32(code[k * cf + i])
+                    if cc > 0:
+                        code[k * cf + i] = wp.int16(wp.int32(slot_of[cc - 1]) + 1)
+                    else:
+                        code[k * cf + i] = wp.int16(-wp.int32(slot_of[-cc - 1]) - 1)
+            nsl = nslot[0]
         # the owned vertex (lane < nf): state, degree and (lean = 5) constants in registers
         own = lane < nf
         ow = wp.min(lane, wp.max(nf - 1, 0))
@@ -174,17 +208,20 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
         l0 = vec_f(0.0)
         for m in range(PR):
             sp = lane + m * T
-            if sp < ns:
+            if sp < nsl:
                 k = int(0)
-                if wp.static(lev):
-                    k = spring_entry[b, wp.int32(spring_at[sp])]
+                if wp.static(lev or gr):
+                    k = wp.int32(spring_at[sp])  # an empty slot (lean 11): vertex 0 to itself, no force
+                    if k >= 0:
+                        k = spring_entry[b, k]
                 else:
                     k = spring_entry[b, sp]
-                ends[m] = local_owner[b, k] | (local_neighbour[b, k] << 16)
-                e = local_edge[b, k]
-                ke[m] = spring_ke[e]
-                kd[m] = spring_kd[e]
-                l0[m] = spring_rest_length[e]
+                if k >= 0:
+                    ends[m] = local_owner[b, k] | (local_neighbour[b, k] << 16)
+                    e = local_edge[b, k]
+                    ke[m] = spring_ke[e]
+                    kd[m] = spring_kd[e]
+                    l0[m] = spring_rest_length[e]
         tail4 = w_tail(scratch, 0)
         for m in range(PR, P):
             sp = lane + m * T
@@ -207,7 +244,7 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
         block_sync()
         for s in range(step_begin, step_begin + step_count):
             # (A) each spring: elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
-            nsx = ns
+            nsx = nsl
             if wp.static(late):
                 nsx = opaque(ns)  # each slot's `sp < ns` recomputed a step, not held (spilled) as a flag
             for m in range(PR):

@@ -123,7 +123,7 @@ def main(argv=None):
                         continue
                     out["batch"].append(row)
                     print(
-                        f"| {b} | {row['kernel']}{' vec4' * wide if kernel not in ('vertices', 'fast') else ''}{(' lean' + ' packed' * (lean >= 2) + ' slots' * (lean == 3) + ' owned' * (lean >= 4) + ' regs' * (lean >= 5) + ' levels' * (lean == 6) + ' pairs' * (lean == 7) + ' late' * (lean == 8) + ' tail' * (lean == 9) + ' kshared' * (lean == 10)) * bool(lean) if kernel == 'fast' else ''} | {row['threads']} | {regs if regs is not None else 'default'} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
+                        f"| {b} | {row['kernel']}{' vec4' * wide if kernel not in ('vertices', 'fast') else ''}{(' lean' + ' packed' * (lean >= 2) + ' slots' * (lean == 3) + ' owned' * (lean >= 4) + ' regs' * (lean >= 5) + ' levels' * (lean == 6) + ' pairs' * (lean == 7) + ' late' * (lean == 8) + ' tail' * (lean == 9) + ' kshared' * (lean == 10) + ' banks' * (lean == 11)) * bool(lean) if kernel == 'fast' else ''} | {row['threads']} | {regs if regs is not None else 'default'} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
                         f"{row['step_us_median']:.2f} | {row['region_steps_per_s']:.3e} | {row['finite']} |",
                         flush=True,
                     )

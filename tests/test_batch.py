@@ -164,7 +164,7 @@ def test_batch_fast_kernel_owned_variants_same_bits_on_cpu(stomach, monkeypatch)
 
     monkeypatch.setattr(bkc, "FAST_ON_CPU", True)
     ref = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast", lean=2).touch(SEEDS).press(**SHORT)
-    for lean, threads in [(4, None), (5, 32), (6, None), (7, 32), (8, 32), (9, 32), (10, 32), (10, None)]:
+    for lean, threads in [(4, None), (5, 32), (6, None), (7, 32), (8, 32), (9, 32), (10, 32), (10, None), (11, 32), (11, None)]:
         bp = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast", lean=lean, threads=threads).touch(SEEDS)
         assert threads is None or bp.free_vertex_counts.max() > threads
         res = bp.press(**SHORT, steps_per_launch=7)
