@@ -32,13 +32,16 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
     steps) and CSR codes stored transposed (`max_degree` rows); lean = 5: as 4, with the owned
     vertex's constants in registers too; lean = 6: as 5, with the force slots numbered by CSR level
     (conflict-free reads of a warp's own springs in the sums); lean = 7: as 5, with the codes in
-    pairs (one 4-byte read for two entries)."""
+    pairs (one 4-byte read for two entries); lean = 8: as 5, the springs' end indices not hoisted
+    out of the step loop (fewer live registers); lean = 9: as 5, each thread's last spring slot in shared memory;
+    lean = 10: as 5, all spring constants in shared memory (fewer registers); lean = 11: as 5, force slots spread over
+    the shared-memory banks (kernels/batch_fast_slots.py)."""
     if int(lean) >= 4:
         w_qa = _work_array("oqa4", wp.vec4, int(vertex_capacity), True)
         w_qb = _shared_array("oqb2", wp.vec2, int(vertex_capacity))
         return _press_kernel_owned(
             int(threads), int(per_thread), int(vertex_capacity), int(free_capacity), int(entry_capacity), int(spring_capacity),
-            max_registers, w_qa, w_qb, max(int(max_degree), 1), int(lean) >= 5, int(lean) == 6, int(lean) == 7,
+            max_registers, w_qa, w_qb, max(int(max_degree), 1), int(lean) >= 5, int(lean) == 6, int(lean) == 7, int(lean) == 8, {9: 1, 10: 2}.get(int(lean), 0), int(lean) == 11,
         )
     if lean:
         return _press_kernel_lean(threads, per_thread, vertex_capacity, free_capacity, entry_capacity, spring_capacity, max_registers, int(lean) if int(lean) >= 2 else 0)

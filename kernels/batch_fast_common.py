@@ -117,8 +117,26 @@ def shared_bytes_fast(vertex_capacity: int, free_capacity: int, entry_capacity: 
     """Shared memory a block of the "fast" kernel takes [bytes]."""
     if int(lean) >= 4:  # codes transposed: max_degree rows of free_capacity (lean 6: two slot maps)
         maps = 4 * spring_capacity if int(lean) == 6 else 4
+        if int(lean) in (9, 10):  # the spring slots kept in shared memory; vertex constants only for vertices 64 and up
+            maps += 16 * (spring_capacity if int(lean) == 10 else 64) - 24 * min(free_capacity, 64)
+        if int(lean) == 11:  # slot maps, cells, masks, 32 spare slots
+            maps += 2 * spring_capacity + 2 * (spring_capacity + 32) + 4 * spring_capacity + 4 * (free_capacity // 8 + 1) * max_degree + 16 * 32 + 4
         return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + max_degree * free_capacity) + 16 * spring_capacity + 112 + maps
     if int(lean) == 3:
         return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + spring_capacity) + 16 * entry_capacity + 112
     index = 2 if lean else 4
     return 32 * vertex_capacity + 24 * free_capacity + index * (free_capacity + 1 + entry_capacity) + 16 * spring_capacity + 112 * bool(lean)
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    int r;
+    asm volatile("mov.b32 %0, %1;" : "=r"(r) : "r"(x));  // opaque: nothing derived from x is hoisted out of the step loop
+    return r;
+#else
+    return x;
+#endif
+"""
+)
+def opaque(x: int) -> int: ...

@@ -4,13 +4,14 @@ import warp as wp
 
 from .batch_explicit import _work_array, block_sync
 from .batch_explicit_cuda import load_xyz, store_xyz
-from .batch_fast_common import _shared_array, add_entry, add_entry16, EPS_LENGTH2, load2, load4, rsqrt_approx
+from .batch_fast_slots import greedy_slots
+from .batch_fast_common import _shared_array, add_entry, add_entry16, EPS_LENGTH2, load2, load4, opaque, rsqrt_approx
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
 
-def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, constants_in_registers, levels=False, pairs=False):
+def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, constants_in_registers, levels=False, pairs=False, unhoisted=False, tail=False, greedy=False):
     # the packed kernel (lean = 2) with fewer shared-memory accesses in the vertex phase: thread `lane`
     # owns free vertex `lane` for the whole launch, so its position and velocity live in registers
     # (only the owner writes them; the springs of phase A read the shared copy the owner stores),
@@ -21,26 +22,47 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
     # slots by level (the k-th CSR entries of all free vertices, in vertex order, for k = 0, 1, ..),
     # so the lanes of a warp read the own springs of their k-th entries from consecutive slots (no
     # bank conflicts there; the mirror entries stay scattered). lean = 7: as 5, with two int16 codes
-    # in each 4-byte word (entries 2p and 2p + 1 of a vertex: half the code reads). Same arithmetic,
+    # in each 4-byte word (entries 2p and 2p + 1 of a vertex: half the code reads). lean = 8: as 5,
+    # with each spring's packed ends made opaque in the step loop, so that the compiler does not
+    # hoist the end indices and their shared addresses out of it (~16 fewer live registers, for
+    # 16 blocks of 64 threads an SM at 64 registers without spills). Same arithmetic,
     # same order as lean = 2 (the same bits).
     ld, st = load_xyz, store_xyz
-    w_rest = _work_array("orest4", wp.vec4, cf, True)
-    w_kda = _work_array("okda", wp.float32, cf, True)
-    w_dtm = _work_array("odtm", wp.float32, cf, True)
+    # lean 9-10: with the owned constants in registers, the shared copies only for vertices T and up
+    sh = T if bool(constants_in_registers) and bool(tail) else 0
+    w_rest = _work_array("orest4", wp.vec4, max(cf - sh, 1), True)
+    w_kda = _work_array("okda", wp.float32, max(cf - sh, 1), True)
+    w_dtm = _work_array("odtm", wp.float32, max(cf - sh, 1), True)
     w_off = _shared_array("ooff16", wp.int16, cf + 1)
     w_code = _shared_array("ocodet16", wp.int16, cd * cf if not pairs else 2)
     w_pair = _shared_array("ocodep32", wp.int32, (cd + 1) // 2 * cf if pairs else 1)
-    w_f = _work_array("of4", wp.vec4, cs, True)
+    w_f = _work_array("of4", wp.vec4, cs + 32 if bool(greedy) else cs, True)
     w_p64 = _work_array("op64", wp.float64, 8, True)
     w_pv = _work_array("opv4", wp.vec4, 3, True)
-    w_slot = _shared_array("oslot16", wp.int16, cs if levels else 1)  # a spring's slot
-    w_spring = _shared_array("ospring16", wp.int16, cs if levels else 1)  # a slot's spring
-    vec_i = wp.types.vector(length=P, dtype=wp.int32)
-    vec_f = wp.types.vector(length=P, dtype=wp.float32)
+    gr = bool(greedy)  # lean = 11: slots spread over the banks (kernels/batch_fast_slots.py)
+    cs2 = cs + 32 if gr else cs  # room for the slots it leaves empty
+    limit = min(P * T, cs2)
+    ncell = (cf // 8 + 1) * cd
+    w_slot = _shared_array("oslot16", wp.int16, cs if levels or gr else 1)  # a spring's slot
+    w_spring = _shared_array("ospring16", wp.int16, cs2 if levels or gr else 1)  # a slot's spring
+    w_cell1 = _shared_array("ocell1", wp.int16, cs if gr else 1)
+    w_cell2 = _shared_array("ocell2", wp.int16, cs if gr else 1)
+    w_mask = _shared_array("omask", wp.int32, ncell if gr else 1)
+    w_nsl = _shared_array("onsl", wp.int32, 1)
+    PV = max((P - 1 if int(tail) == 1 else 0) if bool(tail) and P > 1 else P, 1)
+    vec_i = wp.types.vector(length=PV, dtype=wp.int32)
+    vec_f = wp.types.vector(length=PV, dtype=wp.float32)
     options = {"cuda_max_registers": int(max_registers)} if max_registers else {}
     regs = bool(constants_in_registers)
     lev = bool(levels)
     two = bool(pairs)
+    late = bool(unhoisted)
+    # lean = 9: the last spring slot of each thread (springs P - 1 x T and up: only the largest
+    # regions have them) kept in shared memory, (ke, kd, l0, ends as an exact float), not registers;
+    # lean = 10: all slots so (tail = 2)
+    tl = bool(tail) and P > 1
+    PR = (P - 1 if int(tail) == 1 else 0) if tl else P
+    w_tail = _work_array("otail4", wp.vec4, max(cs - PR * T, 1) if tl else 1, True)
 
     @wp.kernel(module="unique", enable_backward=False, **options)
     def press_batch_explicit_owned(
@@ -101,9 +123,10 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
         for i in range(lane, nf, T):
             v = region_vertex[b, i]
             x0 = q_rest[v]
-            rest4[i] = wp.vec4(x0[0], x0[1], x0[2], -anchor_scale * anchor_ke[v])
-            kda[i] = -anchor_scale * anchor_kd[v]
-            dtm[i] = dt / particle_mass[v]
+            if i >= sh:
+                rest4[i - sh] = wp.vec4(x0[0], x0[1], x0[2], -anchor_scale * anchor_ke[v])
+                kda[i - sh] = -anchor_scale * anchor_kd[v]
+                dtm[i - sh] = dt / particle_mass[v]
             k0 = local_offsets[b, i]
             k1 = local_offsets[b, i + 1]
             if wp.static(two):
@@ -141,6 +164,31 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
                         code[k * cf + i] = wp.int16(wp.int32(slot_of[cc - 1]) + 1)
                     else:
                         code[k * cf + i] = wp.int16(-wp.int32(slot_of[-cc - 1]) - 1)
+        nsl = ns  # the spring slots' end
+        if wp.static(gr):
+            cell1 = w_cell1()
+            cell2 = w_cell2()
+            mask = w_mask()
+            nslot = w_nsl()
+            for xx in range(lane, cs2, T):
+                spring_at[xx] = wp.int16(-1)
+            for xx in range(lane, cs, T):
+                cell1[xx] = wp.int16(-1)
+                cell2[xx] = wp.int16(-1)
+            for xx in range(lane, ncell, T):
+                mask[xx] = 0
+            block_sync()
+            if lane == 0:
+                nslot[0] = greedy_slots(code, off, slot_of, spring_at, cell1, cell2, mask, nf, ns, cf, cd, limit)
+            block_sync()
+            for i in range(lane, nf, T):
+                for k in range(wp.int32(off[i + 1]) - wp.int32(off[i])):
+                    cc = wp.int32(code[k * cf + i])
+                    if cc > 0:
+                        code[k * cf + i] = wp.int16(wp.int32(slot_of[cc - 1]) + 1)
+                    else:
+                        code[k * cf + i] = wp.int16(-wp.int32(slot_of[-cc - 1]) - 1)
+            nsl = nslot[0]
         # the owned vertex (lane < nf): state, degree and (lean = 5) constants in registers
         own = lane < nf
         ow = wp.min(lane, wp.max(nf - 1, 0))
@@ -158,19 +206,29 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
         ke = vec_f(0.0)
         kd = vec_f(0.0)
         l0 = vec_f(0.0)
-        for m in range(P):
+        for m in range(PR):
             sp = lane + m * T
-            if sp < ns:
+            if sp < nsl:
                 k = int(0)
-                if wp.static(lev):
-                    k = spring_entry[b, wp.int32(spring_at[sp])]
+                if wp.static(lev or gr):
+                    k = wp.int32(spring_at[sp])  # an empty slot (lean 11): vertex 0 to itself, no force
+                    if k >= 0:
+                        k = spring_entry[b, k]
                 else:
                     k = spring_entry[b, sp]
-                ends[m] = local_owner[b, k] | (local_neighbour[b, k] << 16)
+                if k >= 0:
+                    ends[m] = local_owner[b, k] | (local_neighbour[b, k] << 16)
+                    e = local_edge[b, k]
+                    ke[m] = spring_ke[e]
+                    kd[m] = spring_kd[e]
+                    l0[m] = spring_rest_length[e]
+        tail4 = w_tail(scratch, 0)
+        for m in range(PR, P):
+            sp = lane + m * T
+            if sp < ns:
+                k = spring_entry[b, sp]
                 e = local_edge[b, k]
-                ke[m] = spring_ke[e]
-                kd[m] = spring_kd[e]
-                l0[m] = spring_rest_length[e]
+                tail4[sp - PR * T] = wp.vec4(spring_ke[e], spring_kd[e], spring_rest_length[e], float(local_owner[b, k] | (local_neighbour[b, k] << 16)))
         if lane == 0:
             rest0 = wp.vec3d(q_rest[region_vertex[b, 0]])
             dd = press_direction[b] * depth
@@ -186,11 +244,17 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
         block_sync()
         for s in range(step_begin, step_begin + step_count):
             # (A) each spring: elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
-            for m in range(P):
+            nsx = nsl
+            if wp.static(late):
+                nsx = opaque(ns)  # each slot's `sp < ns` recomputed a step, not held (spilled) as a flag
+            for m in range(PR):
                 sp = lane + m * T
-                if sp < ns:
-                    i = ends[m] & 0xFFFF
-                    j = ends[m] >> 16
+                if sp < nsx:
+                    e2 = ends[m]
+                    if wp.static(late and not tl):
+                        e2 = opaque(e2)
+                    i = e2 & 0xFFFF
+                    j = e2 >> 16
                     ai = load4(qa, i)
                     aj = load4(qa, j)
                     bi = load2(qb, i)
@@ -202,6 +266,26 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
                         inv_l = rsqrt_approx(l2)
                         dv = wp.vec3(aj[3] - ai[3], bj[0] - bi[0], bj[1] - bi[1])
                         sf = ke[m] * (l2 * inv_l - l0[m]) + kd[m] * wp.dot(dv, r) * inv_l
+                        c = (sf * inv_l) * r
+                    st(fe, sp, c)
+            for m in range(PR, P):
+                sp = lane + m * T
+                if sp < nsx:
+                    t4 = load4(tail4, sp - PR * T)
+                    e2 = int(t4[3])
+                    i = e2 & 0xFFFF
+                    j = e2 >> 16
+                    ai = load4(qa, i)
+                    aj = load4(qa, j)
+                    bi = load2(qb, i)
+                    bj = load2(qb, j)
+                    r = wp.vec3(aj[0] - ai[0], aj[1] - ai[1], aj[2] - ai[2])
+                    l2 = wp.dot(r, r)
+                    c = wp.vec3(0.0)
+                    if l2 > EPS_LENGTH2:
+                        inv_l = rsqrt_approx(l2)
+                        dv = wp.vec3(aj[3] - ai[3], bj[0] - bi[0], bj[1] - bi[1])
+                        sf = t4[0] * (l2 * inv_l - t4[2]) + t4[1] * wp.dot(dv, r) * inv_l
                         c = (sf * inv_l) * r
                     st(fe, sp, c)
             block_sync()
@@ -235,12 +319,15 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
                         st(pv, 0, f)
                     if s == press_steps - 1:
                         st(pv, 2, f)
-                    tf = load4(pv, 1)
+                    o = int(0)
+                    if wp.static(late):
+                        o = opaque(0)  # the probe's constants read each step (lane 0), not held in registers
+                    tf = load4(pv, o + 1)
                     target = wp.vec3(tf[0], tf[1], tf[2])
                     if s < ramp_steps:
-                        r0 = wp.vec3d(p64[0], p64[1], p64[2])
-                        d0 = wp.vec3d(p64[3], p64[4], p64[5])
-                        target = wp.vec3(r0 + d0 * (wp.float64(s + 1) * p64[6]))
+                        r0 = wp.vec3d(p64[o], p64[o + 1], p64[o + 2])
+                        d0 = wp.vec3d(p64[o + 3], p64[o + 4], p64[o + 5])
+                        target = wp.vec3(r0 + d0 * (wp.float64(s + 1) * p64[o + 6]))
                     uo = (target - xo) * tf[3]
                     xo = target
                 else:
@@ -257,8 +344,8 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
                 bv = load2(qb, i)
                 x = wp.vec3(av[0], av[1], av[2])
                 u = wp.vec3(av[3], bv[0], bv[1])
-                c4 = load4(rest4, i)
-                f = c4[3] * (x - wp.vec3(c4[0], c4[1], c4[2])) + kda[i] * u
+                c4 = load4(rest4, i - sh)
+                f = c4[3] * (x - wp.vec3(c4[0], c4[1], c4[2])) + kda[i - sh] * u
                 d = wp.int32(off[i + 1]) - wp.int32(off[i])
                 if wp.static(two):
                     for p in range((d + 1) >> 1):
@@ -269,7 +356,7 @@ def _press_kernel_owned(T, P, cv, cf, ce, cs, max_registers, w_qa, w_qb, cd, con
                 else:
                     for k in range(d):
                         f = add_entry16(f, fe, code, k * cf + i)
-                u1 = u + f * dtm[i]
+                u1 = u + f * dtm[i - sh]
                 x1 = x + dt * u1
                 qa[i] = wp.vec4(x1[0], x1[1], x1[2], u1[0])
                 qb[i] = wp.vec2(u1[1], u1[2])

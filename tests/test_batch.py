@@ -156,14 +156,15 @@ def test_batch_fast_kernel_logic_on_cpu(stomach, monkeypatch):
 
 
 def test_batch_fast_kernel_owned_variants_same_bits_on_cpu(stomach, monkeypatch):
-    # lean 4-7 (a thread owns a free vertex; codes transposed, paired; slots by level) change where
+    # lean 4-10 (a thread owns a free vertex; codes transposed, paired; slots by level; spring
+    # constants in shared memory) change where
     # the step's data lives, not its arithmetic or order: the same bits as lean 2, also with 32
     # threads, where the free vertices beyond the block's threads take the shared-memory path
     from almsdm_warp.kernels import batch_explicit_cuda as bkc
 
     monkeypatch.setattr(bkc, "FAST_ON_CPU", True)
     ref = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast", lean=2).touch(SEEDS).press(**SHORT)
-    for lean, threads in [(4, None), (5, 32), (6, None), (7, 32)]:
+    for lean, threads in [(4, None), (5, 32), (6, None), (7, 32), (8, 32), (9, 32), (10, 32), (10, None), (11, 32), (11, None)]:
         bp = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast", lean=lean, threads=threads).touch(SEEDS)
         assert threads is None or bp.free_vertex_counts.max() > threads
         res = bp.press(**SHORT, steps_per_launch=7)
