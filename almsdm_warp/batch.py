@@ -105,14 +105,13 @@ class BatchPalpation:
     bits on the CPU. threads: threads per block on CUDA (default 64 for "entries"; for
     "vertices" enough for the largest region's free vertices, 32..256). max_registers: the
     "entries" kernel's registers per thread (default 64, and for the "fast" kernel 80 for lean 4-5, 9, 11 and 72 for 10; 0: no cap). wide: its state as vec4.
-    lean ("fast" kernel): 1 the probe's state in shared memory and int16 CSR codes; 2 also each
-    vertex's position and velocity packed in 24 bytes of shared memory; 3 also a
-    force slot per CSR entry; 4 as 2, each thread owning a free vertex (its state and degree in
+    lean ("fast" kernel): 2 the probe's state in shared memory, int16 CSR codes and each vertex's
+    position and velocity packed in 24 bytes of shared memory; 4 as 2, each thread owning a free vertex (its state and degree in
     registers across steps) and the CSR codes transposed; 5 as 4 with the owned vertex's constants
     in registers too (the default); 6 as 5 with force slots numbered by CSR level; 7 as 5 with
     the codes in pairs; 8 as 5 with the spring ends not hoisted out of the step loop; 9 / 10 as 5
     with the last / all spring slots' constants in shared memory; 11 as 5 with the force slots
-    spread over the shared-memory banks; 0 none of these. lean 1-11 give the same bits on the CPU.
+    spread over the shared-memory banks. All give the same bits on the CPU.
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
@@ -144,6 +143,8 @@ class BatchPalpation:
         # (lean 9 also 80, 9.55e8; lean 10 best at 72, 9.35e8; lean 11 derived from 5: 80, not measured)
         self._fast_max_registers = {4: 80, 5: 80, 9: 80, 10: 72, 11: 80}.get(int(lean), 64) if max_registers is None else int(max_registers)
         self._wide = bool(wide)
+        if int(lean) not in (2, *range(4, 12)):
+            raise ValueError(f"lean must be 2 or 4..11, got {lean}")
         self._lean = int(lean)
         self._threads = threads
         self._capacity = capacity

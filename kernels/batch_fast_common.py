@@ -122,10 +122,7 @@ def shared_bytes_fast(vertex_capacity: int, free_capacity: int, entry_capacity: 
         if int(lean) == 11:  # slot maps, cells, masks, 32 spare slots
             maps += 2 * spring_capacity + 2 * (spring_capacity + 32) + 4 * spring_capacity + 4 * (free_capacity // 8 + 1) * max_degree + 16 * 32 + 4
         return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + max_degree * free_capacity) + 16 * spring_capacity + 112 + maps
-    if int(lean) == 3:
-        return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + spring_capacity) + 16 * entry_capacity + 112
-    index = 2 if lean else 4
-    return 32 * vertex_capacity + 24 * free_capacity + index * (free_capacity + 1 + entry_capacity) + 16 * spring_capacity + 112 * bool(lean)
+    return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + entry_capacity) + 16 * spring_capacity + 112
 
 
 @wp.func_native(

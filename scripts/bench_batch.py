@@ -90,7 +90,7 @@ def main(argv=None):
     ap.add_argument("--sphere-batch", type=int, default=10000)
     ap.add_argument("--dt-ms", type=float, default=None, help="default: 1 ms, or less where the mesh's critical step asks")
     ap.add_argument("--wide", type=int, nargs="*", default=[1], help="entries kernel: 1 vec4 shared state, 0 vec3")
-    ap.add_argument("--lean", type=int, nargs="*", default=[5], help="fast kernel: 1 probe state in shared memory and int16 codes, 2 also packed positions and velocities, 3 also a force slot per entry, 4 as 2 with owned vertices in registers and transposed codes, 5 also their constants, 6 also slots by level, 7 as 5 with codes in pairs, 8 as 5 with spring ends not hoisted, 9 as 5 with the last spring slot in shared memory, 10 all spring constants there, 0 none")
+    ap.add_argument("--lean", type=int, nargs="*", default=[5], help="fast kernel: 2 probe state in shared memory, int16 codes and packed positions and velocities, 4 as 2 with owned vertices in registers and transposed codes, 5 also their constants, 6 also slots by level, 7 as 5 with codes in pairs, 8 as 5 with spring ends not hoisted, 9 as 5 with the last spring slot in shared memory, 10 all spring constants there, 11 force slots spread over the banks")
     ap.add_argument("--kernels", nargs="*", default=[None], help="entries, vertices (default: the device's default)")
     ap.add_argument("--implicit-batch", type=int, nargs="*", default=[], help="batch sizes for the implicit integrator")
     ap.add_argument("--json", type=Path, default=None)
@@ -123,7 +123,7 @@ def main(argv=None):
                         continue
                     out["batch"].append(row)
                     print(
-                        f"| {b} | {row['kernel']}{' vec4' * wide if kernel not in ('vertices', 'fast') else ''}{(' lean' + ' packed' * (lean >= 2) + ' slots' * (lean == 3) + ' owned' * (lean >= 4) + ' regs' * (lean >= 5) + ' levels' * (lean == 6) + ' pairs' * (lean == 7) + ' late' * (lean == 8) + ' tail' * (lean == 9) + ' kshared' * (lean == 10) + ' banks' * (lean == 11)) * bool(lean) if kernel == 'fast' else ''} | {row['threads']} | {regs if regs is not None else 'default'} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
+                        f"| {b} | {row['kernel']}{' vec4' * wide if kernel not in ('vertices', 'fast') else ''}{(' lean' + ' packed' * (lean >= 2) + ' owned' * (lean >= 4) + ' regs' * (lean >= 5) + ' levels' * (lean == 6) + ' pairs' * (lean == 7) + ' late' * (lean == 8) + ' tail' * (lean == 9) + ' kshared' * (lean == 10) + ' banks' * (lean == 11)) * bool(lean) if kernel == 'fast' else ''} | {row['threads']} | {regs if regs is not None else 'default'} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
                         f"{row['step_us_median']:.2f} | {row['region_steps_per_s']:.3e} | {row['finite']} |",
                         flush=True,
                     )
