@@ -23,12 +23,12 @@ def _map_source_kernels():
 
 _map_source_kernels()
 
-from .contact import ContactQuery, Contacts, find_contacts  # noqa: E402
-from .device_mesh import DeviceMesh  # noqa: E402
+from .region.contact import ContactQuery, Contacts, find_contacts  # noqa: E402
+from .mesh.device_mesh import DeviceMesh  # noqa: E402
 from .errors import InputError  # noqa: E402
-from .io import load_mesh  # noqa: E402
-from .mesh import TissueMesh  # noqa: E402
-from .region import Region, ring_distances  # noqa: E402
+from .mesh.io import load_mesh  # noqa: E402
+from .mesh.tissue_mesh import TissueMesh  # noqa: E402
+from .region.region import Region, ring_distances  # noqa: E402
 
 __version__ = "0.1.0"
 

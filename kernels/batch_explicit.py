@@ -288,7 +288,7 @@ def shared_bytes(vertex_capacity: int, entry_capacity: int) -> int:
 
 
 def press_batch(batch, step_begin, step_count):
-    """Advance every palpation of `batch` (an almsdm_warp.batch.BatchPalpation) `step_count` steps."""
+    """Advance every palpation of `batch` (an almsdm_warp.batch.batch_palpation.BatchPalpation) `step_count` steps."""
     m, r, p = batch.model, batch.regions, batch
     kernel = press_kernel(p.vertex_capacity, p.entry_capacity, p.shared)
     wp.launch(

@@ -1,6 +1,6 @@
 """How far each ring of a region has moved, and how far its fixed ring would move if freed.
 
-The adaptive region (almsdm_warp.adaptive) checks these every few steps instead of the whole
+The adaptive region (almsdm_warp.protocol.adaptive) checks these every few steps instead of the whole
 state: one launch and a read-back of a few floats. One thread walks the region (a few hundred
 vertices at most between checks), so the maxima need no atomics and the launch no clearing.
 """

@@ -6,7 +6,7 @@
 Default: the stomach and liver scenes and every mesh in ../shared/meshes (a bare mesh gets the
 default tissue and is scaled to a 150 mm organ when its file units are not millimetres). At each
 contact vertex (the highest surface vertex, then vertices spread over the surface), the protocol
-of almsdm_warp.adaptive_eval (10 mm, ramp 0.1 s, hold 0.2 s, implicit, dt 5 ms) on the global
+of almsdm_warp.evaluation.adaptive_accuracy (10 mm, ramp 0.1 s, hold 0.2 s, implicit, dt 5 ms) on the global
 anchored model, on rings 1..8 and on `auto` at each tolerance. For each (contact, tolerance):
 N* = the fewest fixed rings with peak-force error <= 1% and displacement error <= T; whether auto
 meets both; and auto's vertices against N*'s. Prints a Markdown table, one row per mesh and tolerance.
@@ -26,8 +26,8 @@ SHARED = ROOT.parent / "shared" / "meshes"
 
 
 def load(name):
-    from almsdm_warp.io import load_mesh
-    from almsdm_warp.scene import resolve_scene_or_mesh
+    from almsdm_warp.mesh.io import load_mesh
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
 
     if name in ("stomach", "liver") or name.endswith(".toml"):
         scene = resolve_scene_or_mesh(name)
@@ -50,7 +50,7 @@ def main(argv=None):
     ap.add_argument("--force-tol", type=float, default=None, help="AdaptivePalpation's force_tol (default: adaptive.FORCE_TOL)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
-    from almsdm_warp.adaptive_eval import auto_point, fixed_point, global_reference, top_vertex
+    from almsdm_warp.evaluation.adaptive_accuracy import auto_point, fixed_point, global_reference, top_vertex
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

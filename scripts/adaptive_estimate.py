@@ -1,4 +1,4 @@
-"""How good the fixed-ring estimate is: e_N (almsdm_warp.adaptive) against ring N's true displacement.
+"""How good the fixed-ring estimate is: e_N (almsdm_warp.protocol.adaptive) against ring N's true displacement.
 
     python scripts/adaptive_estimate.py [MESH_OR_SCENE ...] [--seeds 4] [--rings 2 3 4 5]
 
@@ -29,11 +29,11 @@ def main(argv=None):
     import warp as wp
     from adaptive_accuracy import load
 
-    from almsdm_warp.adaptive import fixed_ring_estimate
+    from almsdm_warp.protocol.adaptive import fixed_ring_estimate
     from almsdm_warp.kernels.ring_motion import eval_region_motion
-    from almsdm_warp.model import PROBE_DISPLACEMENT
-    from almsdm_warp.palpation import Palpation
-    from almsdm_warp.region import ring_distances
+    from almsdm_warp.sim.model import PROBE_DISPLACEMENT
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.region.region import ring_distances
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

@@ -30,8 +30,8 @@ def main(argv=None):
     ap.add_argument("--blocks", type=int, default=30)
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
-    from almsdm_warp.adaptive import AdaptivePalpation
-    from almsdm_warp.palpation import Palpation
+    from almsdm_warp.protocol.adaptive import AdaptivePalpation
+    from almsdm_warp.protocol.palpation import Palpation
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

@@ -25,8 +25,8 @@ def callgrind(*args):
 
 def main():
     from almsdm_warp import load_mesh
-    from almsdm_warp.adaptive import AdaptivePalpation
-    from almsdm_warp.palpation import Palpation
+    from almsdm_warp.protocol.adaptive import AdaptivePalpation
+    from almsdm_warp.protocol.palpation import Palpation
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

@@ -31,8 +31,8 @@ def sweep_time(mesh, points, device, rings=4, repeats=3, dt=1e-3):
     build, all steps, read-back; points chosen before the clock starts."""
     import warp as wp
 
-    from almsdm_warp.batch import BatchPalpation
-    from almsdm_warp.sweep import sample_points
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
+    from almsdm_warp.batch.sweep import sample_points
 
     t0 = time.perf_counter()
     _, vertices = sample_points(mesh, points)
@@ -66,8 +66,8 @@ def sphere(subdivisions, stomach_mean_mass):
     (so the explicit step stays stable at 1 ms on every size)."""
     import trimesh
 
-    from almsdm_warp.mesh import TissueMesh
-    from almsdm_warp.scene import TissueParams
+    from almsdm_warp.mesh.tissue_mesh import TissueMesh
+    from almsdm_warp.scene.loader import TissueParams
 
     s = trimesh.creation.icosphere(subdivisions=subdivisions, radius=50.0)
     mesh = TissueMesh.from_arrays(np.asarray(s.vertices), np.asarray(s.faces))
@@ -96,14 +96,14 @@ def main(argv=None):
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
-    from almsdm_warp.bench import measure_batch
-    from almsdm_warp.scene import TissueParams
+    from almsdm_warp.evaluation.bench import measure_batch
+    from almsdm_warp.scene.loader import TissueParams
     from almsdm_warp.warp_init import init_warp
 
     init_warp()
     mesh = load_mesh(args.mesh or default_mesh())
-    from almsdm_warp.model import Model
-    from almsdm_warp.sweep import auto_dt
+    from almsdm_warp.sim.model import Model
+    from almsdm_warp.batch.sweep import auto_dt
 
     dt = args.dt_ms * 1e-3 if args.dt_ms else auto_dt(Model(mesh, None, "cpu"))
     print(f"{mesh.summary()}; device {args.device}; {args.rings} rings; dt {dt * 1e3:g} ms")
@@ -128,8 +128,8 @@ def main(argv=None):
                         flush=True,
                     )
     for b in args.implicit_batch:
-        from almsdm_warp.batch import BatchPalpation
-        from almsdm_warp.bench import spread_vertices
+        from almsdm_warp.batch.batch_palpation import BatchPalpation
+        from almsdm_warp.evaluation.bench import spread_vertices
 
         bp = BatchPalpation(mesh, rings=args.rings, dt=1e-3, device=args.device, integrator="implicit").touch(spread_vertices(mesh, b))
         bp.press(0.01, 0.01, 0.0, 0.01)  # compile and load
@@ -152,8 +152,8 @@ def main(argv=None):
         stomach_mass = mesh.vertex_masses(t.density, t.thickness).mean()
         print("| sphere vertices | single explicit step us (median) | batch region-steps/s |")
         print("|---|---|---|")
-        from almsdm_warp.model import Model
-        from almsdm_warp.palpation import Palpation
+        from almsdm_warp.sim.model import Model
+        from almsdm_warp.protocol.palpation import Palpation
 
         for k in args.spheres:
             s_mesh, tissue = sphere(k, stomach_mass)

@@ -3,7 +3,7 @@ surface mesh, and the 4-ring model on a tet mesh (the paper's Table 2, normals o
 
     python scripts/bench_normals.py [--surface MESH] [--volume MESH] [--device cpu] [--blocks 15] [--json out.json]
 
-Each case calls almsdm_warp.normals.benchmark_strategies: the update of each strategy captured in
+Each case calls almsdm_warp.sim.normals.benchmark_strategies: the update of each strategy captured in
 a Warp graph and replayed (median and best per frame over blocks), and one uncaptured update
 (Python and the launch included). The region is built around the highest surface vertex. A
 benchmark, not a test: the machine is shared, so read medians, and compare strategies within a run.
@@ -37,7 +37,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     from almsdm_warp import load_mesh
-    from almsdm_warp.normals import STRATEGIES, benchmark_strategies
+    from almsdm_warp.sim.normals import STRATEGIES, benchmark_strategies
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

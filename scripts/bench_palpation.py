@@ -25,8 +25,8 @@ def default_mesh():
 
 
 def measure(mesh, rings, integrator, device, blocks, steps=2000):
-    """One configuration's timing: moved to almsdm_warp.bench (shared with `almsdm bench`)."""
-    from almsdm_warp.bench import measure as _measure
+    """One configuration's timing: moved to almsdm_warp.evaluation.bench (shared with `almsdm bench`)."""
+    from almsdm_warp.evaluation.bench import measure as _measure
 
     return _measure(mesh, rings, integrator, device, blocks, steps)
 

@@ -24,8 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def palpation(scene, rings):
-    from almsdm_warp.palpation import Palpation
-    from almsdm_warp.scene import resolve_scene_or_mesh
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
 
     sc = resolve_scene_or_mesh(scene)
     mesh = sc.load_mesh()
@@ -53,7 +53,7 @@ def record(scene, rings, presses, every, flush_every, suffix):
     """Seconds per recorded frame, file size; run in a child for the memory figure."""
     import resource
 
-    from almsdm_warp.usd_export import UsdRecorder
+    from almsdm_warp.export.usd import UsdRecorder
 
     pal = palpation(scene, rings)
     with tempfile.TemporaryDirectory() as tmp:

@@ -23,8 +23,8 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=12)
     ap.add_argument("--target-N", type=float, nargs="*", default=None, help="target force per scene [N]")
     args = ap.parse_args(argv)
-    from almsdm_warp.palpation import Palpation
-    from almsdm_warp.scene import resolve_scene_or_mesh
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

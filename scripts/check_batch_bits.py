@@ -21,9 +21,9 @@ def main(argv=None):
     ap.add_argument("--kernel", default=None, help="entries or vertices (default: the device's)")
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
-    from almsdm_warp.batch import BatchPalpation
-    from almsdm_warp.palpation import Palpation
-    from almsdm_warp.sweep import sample_points
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.batch.sweep import sample_points
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

@@ -28,9 +28,9 @@ def main(argv=None):
     import warp as wp
 
     from almsdm_warp import load_mesh
-    from almsdm_warp.batch import BatchPalpation
-    from almsdm_warp.model import Model
-    from almsdm_warp.sweep import auto_dt, sample_points
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
+    from almsdm_warp.sim.model import Model
+    from almsdm_warp.batch.sweep import auto_dt, sample_points
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

@@ -9,4 +9,4 @@ mkdir -p "$out"
 python3 -c "import warp as wp; wp.init(); print('CUDA devices:', [d.alias for d in wp.get_cuda_devices()])"
 python3 -m pytest -q -p no:cacheprovider -rs 2>&1 | tee "$out/pytest.log" | tail -6
 python3 -m pytest -q -p no:cacheprovider -v -k cuda tests/test_determinism.py 2>&1 | tee "$out/determinism.log" | grep -E "PASS|FAIL|SKIP|passed|failed"
-python3 -m almsdm_warp.cli bench stomach --device cuda:0 --blocks 3 --json "$out/bench_stomach_cuda.json" 2>&1 | tee "$out/bench.log" | tail -25
+python3 -m almsdm_warp.cli.main bench stomach --device cuda:0 --blocks 3 --json "$out/bench_stomach_cuda.json" 2>&1 | tee "$out/bench.log" | tail -25

@@ -22,8 +22,8 @@ def main(argv=None):
     ap.add_argument("--lean", type=int, default=5)
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
-    from almsdm_warp.batch import BatchPalpation
-    from almsdm_warp.bench import spread_vertices
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
+    from almsdm_warp.evaluation.bench import spread_vertices
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

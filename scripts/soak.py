@@ -71,7 +71,7 @@ def largest_offset(pal) -> float:
 
 def press_cycles(pal, steps: int, rec: Recorder, sample_every: int = 10_000) -> int:
     """Press cycles at the touched vertex for `steps` steps; the steps taken."""
-    from almsdm_warp.model import PROBE_DISPLACEMENT, PROBE_OFF
+    from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF
 
     dt = pal.dt
     ramp, hold, settle = (max(int(round(x / dt)), 1) for x in CYCLE)
@@ -98,7 +98,7 @@ def press_cycles(pal, steps: int, rec: Recorder, sample_every: int = 10_000) -> 
 
 def relocations(pal, count: int, rec: Recorder, seed: int = 0, sample_every: int = 100) -> None:
     """`count` relocations to random surface vertices, each with a short press and release."""
-    from almsdm_warp.model import PROBE_DISPLACEMENT, PROBE_OFF
+    from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF
 
     rng = np.random.default_rng(seed)
     surface = pal.mesh.surface_vertices
@@ -129,8 +129,8 @@ def growth(samples, skip: int):
 def soak(scene=None, *, steps=1_000_000, relocation_count=10_000, rings=4, integrator="explicit", device="cpu", dt=1e-3,
          press_sample_every=10_000, relocation_sample_every=100, warmup_samples=2, log=None):
     """Run both phases; returns a dict of what was measured (see the module docstring)."""
-    from almsdm_warp.palpation import Palpation
-    from almsdm_warp.scene import resolve_scene_or_mesh
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
     from almsdm_warp.warp_init import init_warp
 
     init_warp()
@@ -153,7 +153,7 @@ def soak(scene=None, *, steps=1_000_000, relocation_count=10_000, rings=4, integ
     if log:
         log(f"relocate: {relocation_count:,} relocations in {relocate_s:.1f} s ({relocate_s / max(relocation_count, 1) * 1e3:.2f} ms each)")
     # let the last region settle, then everything must be back at rest
-    from almsdm_warp.model import PROBE_OFF
+    from almsdm_warp.sim.model import PROBE_OFF
 
     pal.set_probe(PROBE_OFF)
     for _ in range(int(round(CYCLE[2] / dt))):
@@ -216,7 +216,7 @@ def main(argv=None) -> int:
     print(f"rest shape: largest offset after a settled cycle {r['settled_offset_max_mm']:.3g} mm (last {r['settled_offset_last_mm']:.3g}), "
           f"at the end {r['final_offset_mm']:.3g} mm; rest arrays unchanged: {r['rest_shape_bits_unchanged']}")
     if args.json:
-        from almsdm_warp.output import write_json
+        from almsdm_warp.export.output import write_json
 
         write_json(args.json, r)
         print(f"wrote {args.json}")

@@ -14,12 +14,12 @@ import time
 
 import numpy as np
 
-from almsdm_warp.adaptive_eval import hold_press
-from almsdm_warp.palpation import Palpation
-from almsdm_warp.scene import resolve_scene_or_mesh
-from almsdm_warp.model import Model
-from almsdm_warp.sweep import SweepPlan, auto_dt, press_chunk, sample_points
-from almsdm_warp.sweep_auto import rings_summary, size_regions
+from almsdm_warp.evaluation.adaptive_accuracy import hold_press
+from almsdm_warp.protocol.palpation import Palpation
+from almsdm_warp.scene.loader import resolve_scene_or_mesh
+from almsdm_warp.sim.model import Model
+from almsdm_warp.batch.sweep import SweepPlan, auto_dt, press_chunk, sample_points
+from almsdm_warp.batch.sweep_auto import rings_summary, size_regions
 from almsdm_warp.warp_init import init_warp
 
 DEPTH, RAMP, HOLD, SETTLE = 0.01, 0.1, 0.2, 0.01

@@ -74,16 +74,16 @@ def hang_guard(seconds: int = HANG_S):
 
 # -- the command line, in-process ------------------------------------------------------------
 def run_main(argv, fuzz_limits=False):
-    """almsdm_warp.cli.main(argv) with stdout and stderr captured: (exit code, stdout, stderr).
+    """almsdm_warp.cli.main.main(argv) with stdout and stderr captured: (exit code, stdout, stderr).
     fuzz_limits: run under FUZZ_MAX_STEPS.
 
     Any exception that escapes main() is a bug (a traceback for the user): it propagates."""
     from unittest import mock
 
-    from almsdm_warp.cli import main
+    from almsdm_warp.cli.main import main
 
     out, err = io.StringIO(), io.StringIO()
-    limit = mock.patch("almsdm_warp.cli_palpate.MAX_STEPS", FUZZ_MAX_STEPS) if fuzz_limits else contextlib.nullcontext()
+    limit = mock.patch("almsdm_warp.cli.palpate.MAX_STEPS", FUZZ_MAX_STEPS) if fuzz_limits else contextlib.nullcontext()
     with hang_guard(), limit, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main([str(a) for a in argv])
     return code, out.getvalue(), err.getvalue()

@@ -3,7 +3,7 @@ float64 NumPy re-implementation, the fixed-ring estimate against the closed-form
 the chosen region against the global anchored reference and every fixed ring count (the fewest
 rings meeting the same tolerance), retirement, and `almsdm palpate --rings auto --tol-mm`.
 
-Accuracy runs the short protocol of almsdm_warp.adaptive_eval (10 mm, ramp 0.1 s, hold 0.2 s,
+Accuracy runs the short protocol of almsdm_warp.evaluation.adaptive_accuracy (10 mm, ramp 0.1 s, hold 0.2 s,
 implicit, dt 5 ms: 60 steps, quasi-static at the end of the hold)."""
 
 import json
@@ -15,12 +15,12 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import shortest_path
 from test_simulation_press import scene_and_mesh, top_vertex
 
-from almsdm_warp.adaptive import AdaptivePalpation, fixed_ring_estimate
-from almsdm_warp.adaptive_eval import auto_point, fixed_point, global_reference
-from almsdm_warp.cli import main
+from almsdm_warp.protocol.adaptive import AdaptivePalpation, fixed_ring_estimate
+from almsdm_warp.evaluation.adaptive_accuracy import auto_point, fixed_point, global_reference
+from almsdm_warp.cli.main import main
 from almsdm_warp.kernels.ring_motion import eval_region_motion
-from almsdm_warp.model import PROBE_DISPLACEMENT
-from almsdm_warp.palpation import Palpation
+from almsdm_warp.sim.model import PROBE_DISPLACEMENT
+from almsdm_warp.protocol.palpation import Palpation
 
 _references = {}
 

@@ -6,8 +6,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import shortest_path
 
 from almsdm_warp import Region
-from almsdm_warp.batch import BatchPalpation
-from almsdm_warp.palpation import Palpation
+from almsdm_warp.batch.batch_palpation import BatchPalpation
+from almsdm_warp.protocol.palpation import Palpation
 from conftest import SCENES, load_cached
 
 SEEDS = [0, 17, 311, 500, 693, 1001]
@@ -121,7 +121,7 @@ def test_batch_rejects_bad_vertices(stomach):
 
 def test_batch_region_covering_a_small_component(device):
     # a tetrahedron's surface: 2 rings cover it, the outer non-empty ring (1) is fixed, as in Region
-    from almsdm_warp.mesh import TissueMesh
+    from almsdm_warp.mesh.tissue_mesh import TissueMesh
 
     tet = TissueMesh.from_arrays(
         np.array([[0, 0, 0], [30, 0, 0], [0, 30, 0], [0, 0, 30]], dtype=float),

@@ -5,7 +5,7 @@ reads of its springs' forces at one CSR level fall in the same 16-byte bank colu
 import numpy as np
 import warp as wp
 
-from almsdm_warp.batch import BatchPalpation
+from almsdm_warp.batch.batch_palpation import BatchPalpation
 from almsdm_warp.kernels.batch_fast_slots import greedy_slots
 from conftest import SCENES, load_cached
 

@@ -2,7 +2,7 @@
 
 import json
 
-from almsdm_warp.cli import main
+from almsdm_warp.cli.main import main
 
 
 def test_bench_json_keys(tmp_path, capsys):

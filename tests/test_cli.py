@@ -8,14 +8,14 @@ import sys
 import pytest
 from conftest import ROOT, SHARED_MESHES
 
-from almsdm_warp.cli import main
+from almsdm_warp.cli.main import main
 
 
 def run_cli(*args, cwd=None):
-    """Run `python -m almsdm_warp.cli` in a fresh process, as a user would."""
+    """Run `python -m almsdm_warp.cli.main` in a fresh process, as a user would."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
     return subprocess.run(
-        [sys.executable, "-m", "almsdm_warp.cli", *args], capture_output=True, text=True, cwd=cwd or ROOT, env=env, timeout=300
+        [sys.executable, "-m", "almsdm_warp.cli.main", *args], capture_output=True, text=True, cwd=cwd or ROOT, env=env, timeout=300
     )
 
 

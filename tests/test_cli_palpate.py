@@ -9,7 +9,7 @@ import pytest
 from conftest import SHARED_MESHES
 from test_cli import run_cli
 
-from almsdm_warp.cli import main
+from almsdm_warp.cli.main import main
 from almsdm_warp.progress import Progress
 
 _runs = {}
@@ -255,7 +255,7 @@ def test_json_output_gets_the_mode_of_a_new_file(tmp_path):
     # written through a private temporary file, published with the umask's mode (not owner-only)
     import os
 
-    from almsdm_warp.output import write_json
+    from almsdm_warp.export.output import write_json
 
     out = write_json(tmp_path / "r.json", {"a": 1})
     mask = os.umask(0)
@@ -305,7 +305,7 @@ def test_auto_rings_from_a_scene_are_the_flags(tmp_path_factory):
 
 
 def test_auto_scene_without_tol_takes_the_default_and_tol_needs_auto(tmp_path, capsys):
-    from almsdm_warp.cli_palpate import AUTO_TOL_MM
+    from almsdm_warp.cli.palpate import AUTO_TOL_MM
 
     scene = _auto_scene(tmp_path, "")
     out = tmp_path / "o.json"

@@ -10,7 +10,7 @@ import pytest
 from conftest import ROOT
 from test_cli import run_cli
 
-from almsdm_warp.cli import main
+from almsdm_warp.cli.main import main
 
 SHORT = ("--ramp-s", "0.05", "--hold-s", "0.02", "--settle-s", "0.05")  # 120 steps
 
@@ -112,7 +112,7 @@ def test_recording_does_not_change_the_physics(tmp_path, capsys):
 
 def test_usd_and_matplotlib_are_imported_only_when_asked_for(tmp_path):
     code = (
-        "import sys; from almsdm_warp.cli import main; "
+        "import sys; from almsdm_warp.cli.main import main; "
         "rc = main(['palpate', '--settle-s', '0.05'] + sys.argv[1:]); "
         "print('modules', rc, 'pxr' in sys.modules, 'matplotlib' in sys.modules)"
     )

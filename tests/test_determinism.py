@@ -23,8 +23,8 @@ from scipy.sparse.csgraph import breadth_first_order, shortest_path
 from test_simulation_press import scene_and_mesh
 
 from almsdm_warp import Region, find_contacts
-from almsdm_warp.model import PROBE_DISPLACEMENT
-from almsdm_warp.palpation import Palpation
+from almsdm_warp.sim.model import PROBE_DISPLACEMENT
+from almsdm_warp.protocol.palpation import Palpation
 
 DEPTH = 8.0e-3
 

@@ -16,11 +16,11 @@ from conftest import SHARED_MESHES
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from almsdm_warp.cli import main
+from almsdm_warp.cli.main import main
 from almsdm_warp.errors import InputError
-from almsdm_warp.evaluate_accuracy import join_extra_points, read_extra_points
-from almsdm_warp.evaluate_stability import DIVERGED, NOT_RECOVERED, OSCILLATING, STABLE, classify
-from almsdm_warp.palpation import PressResult
+from almsdm_warp.evaluation.accuracy import join_extra_points, read_extra_points
+from almsdm_warp.evaluation.stability import DIVERGED, NOT_RECOVERED, OSCILLATING, STABLE, classify
+from almsdm_warp.protocol.palpation import PressResult
 
 GPU_STEP_US = 1.25  # an input of the test: a made-up GPU time that must reach the table as given
 
@@ -50,7 +50,7 @@ def quick(tmp_path_factory):
 
 
 def stomach_mesh():
-    from almsdm_warp.scene import resolve_scene_or_mesh
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
 
     return resolve_scene_or_mesh("stomach").load_mesh()
 
@@ -142,7 +142,7 @@ def test_speed_accuracy_errors_shrink_with_rings_and_gpu_points_join(quick):
     assert extra[0]["disp_error_mm"] == cpu["disp_error_mm"]
     assert f"| stomach (cuda:0) | explicit | 4 | {cpu['region_vertices']} | {GPU_STEP_US:.1f} |" in md
     try:
-        from almsdm_warp.evaluate_accuracy import find_auto_factory
+        from almsdm_warp.evaluation.accuracy import find_auto_factory
 
         auto = find_auto_factory() is not None
     except ImportError:
@@ -170,7 +170,7 @@ def test_stability_map_agrees_with_the_critical_step(quick):
 
 def test_table2_and_anatomy(quick):
     _, results, md, _ = quick
-    from almsdm_warp.normals import STRATEGIES
+    from almsdm_warp.sim.normals import STRATEGIES
 
     # a frame is a step and a normals update: slower than the step alone, with every strategy
     assert results["table2"]["strategies"] == list(STRATEGIES)
@@ -245,9 +245,9 @@ def test_hold_press_errors_against_the_global_reference(device):
     the error of a local model falls with its rings (anchors damp the deformation within a few rings)
     and stays inside its region's reach: outside the region nothing moves, so the largest
     displacement error is at most the global model's largest displacement outside the region."""
-    from almsdm_warp.evaluate_common import hold_press, top_vertex
-    from almsdm_warp.evaluate_paper import _scene
-    from almsdm_warp.palpation import Palpation
+    from almsdm_warp.evaluation.common import hold_press, top_vertex
+    from almsdm_warp.evaluation.paper import _scene
+    from almsdm_warp.protocol.palpation import Palpation
 
     scene, mesh = _scene("stomach")
     v = top_vertex(mesh)

@@ -1,4 +1,4 @@
-"""Fuzzing the command line (hypothesis), in-process through almsdm_warp.cli.main: extreme and
+"""Fuzzing the command line (hypothesis), in-process through almsdm_warp.cli.main.main: extreme and
 impossible parameters, probes far from the mesh, unwritable and odd output paths. Every run ends
 in a result (exit 0, complete JSON) or one line on stderr with exit code 2 (no JSON, no
 temporary file left); never a traceback or a hang. A few runs in a real process check that
@@ -160,7 +160,7 @@ def test_touch_with_more_rings_than_the_mesh_holds(rings, tmp_path):
     import scipy.sparse as sp
     from scipy.sparse.csgraph import shortest_path
 
-    from almsdm_warp.scene import resolve_scene_or_mesh
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
 
     out = tmp_path / "touch.json"
     code, stdout, err = run_main(["touch", "--rings", rings, "--json", out])
@@ -186,7 +186,7 @@ def test_far_probe_within_reach_still_touches(tmp_path):
 
     import numpy as np
 
-    from almsdm_warp.scene import resolve_scene_or_mesh
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
 
     mesh = resolve_scene_or_mesh(None).load_mesh()
     got = json.loads(out.read_text())["contact"]["vertex"]
@@ -197,7 +197,7 @@ def test_far_probe_within_reach_still_touches(tmp_path):
 
 def _subprocess(*args):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
-    return subprocess.run([sys.executable, "-m", "almsdm_warp.cli", *args], capture_output=True, text=True, cwd=ROOT, env=env,
+    return subprocess.run([sys.executable, "-m", "almsdm_warp.cli.main", *args], capture_output=True, text=True, cwd=ROOT, env=env,
                           timeout=300)
 
 

@@ -15,7 +15,7 @@ from hypothesis.extra import numpy as hnp
 
 from almsdm_warp import load_mesh
 from almsdm_warp.errors import InputError
-from almsdm_warp.mesh import TissueMesh
+from almsdm_warp.mesh.tissue_mesh import TissueMesh
 
 SMALL_SHARED = {"gca_stomach_1002v.obj", "liver.msh", "mor_liverTinyMesh.vtu", "mor_liverVeryCOARSE.vtu", "sofa_liver_tets.vtu",
                 "sofa_liver2_tets.vtu", "mor_liverCoarse.vtu", "liver2.msh"}

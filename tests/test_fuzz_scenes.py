@@ -15,7 +15,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from almsdm_warp.errors import InputError
-from almsdm_warp.scene import SCHEMA, Scene, load_scene
+from almsdm_warp.scene.loader import SCHEMA, Scene, load_scene
 
 KEYS = [(section, key) for section, keys in SCHEMA.items() for key in keys]
 TOML_VALUES = ["nan", "-nan", "inf", "-inf", "0", "0.0", "-0.0", "-1", "-1e-300", "1e-300", "5e-324", "1e300", "1.7976931348623157e308",

@@ -1,4 +1,4 @@
-"""Loading and validating meshes (almsdm_warp.io, almsdm_warp.validate): CPU only, no Warp kernels.
+"""Loading and validating meshes (almsdm_warp.mesh.io, almsdm_warp.mesh.validate): CPU only, no Warp kernels.
 
 Every format is written here in tmp_path and read back; counts, coordinates (file mm -> m) and
 the surface of a tet mesh are checked against independent answers (trimesh, closed forms).
@@ -13,8 +13,8 @@ import pytest
 import trimesh
 
 from almsdm_warp.errors import InputError
-from almsdm_warp.io import KNOWN_FORMATS, load_mesh
-from almsdm_warp.validate import build_mesh
+from almsdm_warp.mesh.io import KNOWN_FORMATS, load_mesh
+from almsdm_warp.mesh.validate import build_mesh
 
 from conftest import SHARED_MESHES as MESHES  # noqa: E402
 EXTENT_MM = np.array([20.0, 30.0, 10.0])  # the test box
@@ -353,7 +353,7 @@ def test_unreadable_file(tmp_path, monkeypatch):
         def refuse(*args, **kwargs):
             raise PermissionError(13, "Permission denied", str(path))
 
-        monkeypatch.setattr("almsdm_warp.io.open", refuse, raising=False)
+        monkeypatch.setattr("almsdm_warp.mesh.io.open", refuse, raising=False)
     with pytest.raises(InputError, match=r"locked\.obj: permission denied"):
         load_mesh(path)
 

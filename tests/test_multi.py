@@ -9,9 +9,9 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import shortest_path
 from test_simulation_press import scene_and_mesh, static_reactions, top_vertex
 
-from almsdm_warp.adaptive import AdaptivePalpation
-from almsdm_warp.model import PROBE_DISPLACEMENT
-from almsdm_warp.multi import MultiPalpation, MultiRegion
+from almsdm_warp.protocol.adaptive import AdaptivePalpation
+from almsdm_warp.sim.model import PROBE_DISPLACEMENT
+from almsdm_warp.protocol.multi import MultiPalpation, MultiRegion
 
 DEPTH = 10.0e-3
 

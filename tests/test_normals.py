@@ -1,4 +1,4 @@
-"""Vertex normals (kernels/normals.py, almsdm_warp/normals.py) against independent answers:
+"""Vertex normals (kernels/normals.py, almsdm_warp/sim/normals.py) against independent answers:
 trimesh's normals on the rest shape, a float64 NumPy sum on deformed shapes, and the three
 strategies against each other, on every device; surface meshes and a tet mesh's surface."""
 
@@ -8,7 +8,7 @@ import trimesh
 from test_simulation_press import palpation, scene_and_mesh, top_vertex
 
 from almsdm_warp import TissueMesh
-from almsdm_warp.normals import STRATEGIES, SurfaceNormals, benchmark_strategies
+from almsdm_warp.sim.normals import STRATEGIES, SurfaceNormals, benchmark_strategies
 
 SCENES = [pytest.param(None, id="stomach-surface"), pytest.param("liver", id="liver-volume")]
 

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from test_simulation_press import DEPTH, internal_forces, scene_and_mesh, static_reaction
 
-from almsdm_warp.mesh import TissueMesh
-from almsdm_warp.model import PROBE_DISPLACEMENT, PROBE_OFF
-from almsdm_warp.palpation import Palpation
-from almsdm_warp.region import Region
-from almsdm_warp.scene import TissueParams
+from almsdm_warp.mesh.tissue_mesh import TissueMesh
+from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF
+from almsdm_warp.protocol.palpation import Palpation
+from almsdm_warp.region.region import Region
+from almsdm_warp.scene.loader import TissueParams
 
 
 def signed_volumes(x, tets):
@@ -259,7 +259,7 @@ def test_runaway_under_the_critical_step_is_not_blamed_on_dt(device, integrator)
     it): the state runs away, and the error said 'dt = 1 ms exceeds the critical step of about
     1.609 ms', which is false (and meaningless for the implicit integrator). It now says what
     happened."""
-    from almsdm_warp.palpation import SimulationDiverged
+    from almsdm_warp.protocol.palpation import SimulationDiverged
 
     scene, mesh = scene_and_mesh()
     p = Palpation(mesh, scene.tissue, rings=4, integrator=integrator, dt=1e-3, device=device)

@@ -23,7 +23,7 @@ def test_json_where_os_access_lies(tmp_path):
 def test_write_failure_after_the_run_is_one_line(tmp_path, monkeypatch):
     """The folder is writable when checked but the write fails at the end (disk full, say): one
     line and exit 2, and no temporary file left."""
-    import almsdm_warp.output as output
+    import almsdm_warp.export.output as output
 
     real = os.replace
 

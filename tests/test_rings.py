@@ -147,7 +147,7 @@ def test_bad_arguments(device):
 def test_astronomical_ring_counts_stop_at_the_component(device):
     """Region.build(v, 10**20) and Palpation(rings=10**20) raised OverflowError (a list of every empty
     ring): growth now stops where the region covers its component; `rings` still says what was asked."""
-    from almsdm_warp.palpation import Palpation
+    from almsdm_warp.protocol.palpation import Palpation
 
     stomach = load_cached(SCENES / "stomach.obj")
     dist = bfs_hops(stomach, [0])[0]

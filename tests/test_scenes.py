@@ -1,4 +1,4 @@
-"""The project's own meshes (scripts/make_scenes.py) and scene files (almsdm_warp.scene)."""
+"""The project's own meshes (scripts/make_scenes.py) and scene files (almsdm_warp.scene.loader)."""
 
 import importlib.util
 import math
@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 from almsdm_warp.errors import InputError
-from almsdm_warp.scene import (
+from almsdm_warp.scene.loader import (
     PressParams,
     Scene,
     TissueParams,
@@ -152,7 +152,7 @@ def test_resolve_scene_or_mesh():
 
 
 def test_scene_load_mesh():
-    pytest.importorskip("almsdm_warp.io")
+    pytest.importorskip("almsdm_warp.mesh.io")
     stomach = resolve_scene_or_mesh(None).load_mesh()
     assert stomach.vertex_count == 1002 and stomach.triangle_count == 2000 and not stomach.is_volume
     assert np.ptp(stomach.vertices, axis=0).max() == pytest.approx(0.128, abs=0.01)  # metres

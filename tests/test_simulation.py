@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from almsdm_warp import Region, TissueMesh
-from almsdm_warp.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from almsdm_warp.scene import TissueParams
-from almsdm_warp.solver import SolverALMSDM
+from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
+from almsdm_warp.scene.loader import TissueParams
+from almsdm_warp.solvers.solver import SolverALMSDM
 
 LEG = 10.0e-3  # [m]
 EPS32 = float(np.finfo(np.float32).eps)

@@ -15,9 +15,9 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from almsdm_warp import Region
-from almsdm_warp.model import PROBE_DISPLACEMENT, PROBE_OFF
-from almsdm_warp.palpation import Palpation, SimulationDiverged
-from almsdm_warp.scene import resolve_scene_or_mesh
+from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF
+from almsdm_warp.protocol.palpation import Palpation, SimulationDiverged
+from almsdm_warp.scene.loader import resolve_scene_or_mesh
 
 DEPTH = 10.0e-3  # [m]
 INTEGRATORS = ("explicit", "implicit")
@@ -432,8 +432,8 @@ def test_replay_keeps_its_graph_alive(device):
     """The bound replay must own its captured graph: collecting garbage between steps is safe."""
     import gc
 
-    from almsdm_warp.palpation import Palpation
-    from almsdm_warp.scene import resolve_scene_or_mesh
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
 
     mesh = resolve_scene_or_mesh(None).load_mesh()
     pal = Palpation(mesh, None, rings=2, dt=1e-3, device=device)

@@ -40,9 +40,9 @@ def test_short_soak(device, soak_module, integrator, steps, relocations):
 def test_soak_sees_what_it_should(soak_module):
     """Not vacuous: the drift measure reads a deformed tissue as deformed, and the RSS reader
     sees an allocation of 64 MB."""
-    from almsdm_warp.model import PROBE_DISPLACEMENT
-    from almsdm_warp.palpation import Palpation
-    from almsdm_warp.scene import resolve_scene_or_mesh
+    from almsdm_warp.sim.model import PROBE_DISPLACEMENT
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
 
     scene = resolve_scene_or_mesh(None)
     mesh = scene.load_mesh()

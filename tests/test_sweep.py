@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from almsdm_warp import sweep as sw
-from almsdm_warp.cli import main
-from almsdm_warp.scene import resolve_scene_or_mesh
+from almsdm_warp.batch import sweep as sw
+from almsdm_warp.cli.main import main
+from almsdm_warp.scene.loader import resolve_scene_or_mesh
 from conftest import SCENES, load_cached
 
 FAST = ["--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05", "--dt-ms", "0.5"]
@@ -122,7 +122,7 @@ def test_interrupted_sweep_resumes_to_the_same_file(tmp_path, monkeypatch, capsy
 def test_chunks_over_several_devices_interleave(stomach, tmp_path):
     # two batches in flight at once (as on two GPUs), here both on the CPU: the same numbers
     points, vertices = sw.sample_points(stomach, 12)
-    from almsdm_warp.scene import TissueParams
+    from almsdm_warp.scene.loader import TissueParams
 
     plan = sw.SweepPlan(stomach, TissueParams(), None, None, 3, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 5)
     results = []
@@ -153,7 +153,7 @@ def test_sweep_implicit_matches_the_batch(tmp_path, stomach):
     out = tmp_path / "imp.npz"
     assert main(["sweep", "--points", "6", "--rings", "2", "--integrator", "implicit", "--out", str(out), *FAST]) == 0
     table = sw.read_table(out)
-    from almsdm_warp.batch import BatchPalpation
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
 
     res = BatchPalpation(stomach, rings=2, dt=5e-4, device="cpu", integrator="implicit").touch(table["vertex"]).press(0.01, 0.05, 0.05, 0.05)
     np.testing.assert_array_equal(table["peak_force_N"], res.peak_force)
@@ -190,8 +190,8 @@ def test_sweep_bad_input(tmp_path, monkeypatch, capsys, args, message):
 
 def test_lesion_scene_and_its_errors(tmp_path):
     from almsdm_warp.errors import InputError
-    from almsdm_warp.model import Model
-    from almsdm_warp.scene import load_scene
+    from almsdm_warp.sim.model import Model
+    from almsdm_warp.scene.loader import load_scene
 
     scene = resolve_scene_or_mesh("stomach_lesion")
     lesion = scene.lesion
@@ -222,10 +222,10 @@ def test_lesion_scene_and_its_errors(tmp_path):
 def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     # --rings auto sizes each point's region as almsdm palpate --rings auto does, then presses it with that
     # many fixed rings: its peak forces are those of a global-accurate ring count within the 1% force bound
-    from almsdm_warp.adaptive import AdaptivePalpation
-    from almsdm_warp.adaptive_eval import hold_press
-    from almsdm_warp.palpation import Palpation
-    from almsdm_warp.scene import TissueParams
+    from almsdm_warp.protocol.adaptive import AdaptivePalpation
+    from almsdm_warp.evaluation.adaptive_accuracy import hold_press
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.scene.loader import TissueParams
 
     press = ["--points", "6", "--ramp-s", "0.1", "--hold-s", "0.2", "--settle-s", "0.01", "--dt-ms", "1"]
     assert main(["sweep", *press, "--rings", "auto", "--tol-mm", "0.1", "--out", str(tmp_path / "auto.npz")]) == 0

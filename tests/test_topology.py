@@ -6,8 +6,8 @@ import trimesh
 from conftest import load_cached, mesh_params
 from scipy.sparse import coo_matrix
 
-from almsdm_warp import topology as topo
-from almsdm_warp.mesh import TissueMesh
+from almsdm_warp.mesh import topology as topo
+from almsdm_warp.mesh.tissue_mesh import TissueMesh
 
 
 def box_tets(n=3, size=1.0):

@@ -1,4 +1,4 @@
-"""USD recording (almsdm_warp/usd_export.py): stages reopened and checked against what the
+"""USD recording (almsdm_warp/export/usd.py): stages reopened and checked against what the
 palpation did, sample by sample (points, normals by a float64 loop, displacement, ring colours
 by a NumPy BFS, springs, probe, force), metadata, USD's own validators, the temporary file."""
 
@@ -8,7 +8,7 @@ from test_normals import area_weighted_f64
 from test_simulation_press import palpation, scene_and_mesh
 
 from almsdm_warp.errors import InputError
-from almsdm_warp.usd_export import CONTACT_COLOR, FIXED_COLOR, PLAIN_COLOR, UsdRecorder
+from almsdm_warp.export.usd import CONTACT_COLOR, FIXED_COLOR, PLAIN_COLOR, UsdRecorder
 
 pxr = pytest.importorskip("pxr")
 from pxr import Sdf, Usd, UsdGeom  # noqa: E402

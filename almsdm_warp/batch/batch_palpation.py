@@ -1,0 +1,353 @@
+"""Many palpations at once on one mesh: B contacts, each with its own region, probe and state.
+
+``BatchPalpation(mesh).touch(vertices)`` builds B ring regions on the device in one launch
+(kernels/batch_region.py); ``press(depth, ramp, hold, settle)`` runs the press protocol of
+``Palpation.press`` on all of them, many steps per launch, one block per palpation with the
+region on chip on CUDA (kernels/batch_explicit.py). The physics, summation order and
+integration formula are the one-palpation explicit step's, so a palpation of the batch gives the
+same bits as ``Palpation`` on the same device.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from ..mesh.device_mesh import check_vertex
+from ..kernels import batch_explicit as bk
+from ..kernels import batch_explicit_cuda as bkc
+from ..kernels.batch_fast_common import shared_bytes_fast
+from ..kernels import batch_implicit as bki
+from ..kernels import batch_region as br
+from ..sim.model import Model
+from ..region.region import check_rings
+
+
+KERNELS = ("fast", "entries", "vertices")
+INTEGRATORS = ("explicit", "implicit")
+
+
+def _pow2(n: int, minimum: int = 1) -> int:
+    return max(minimum, 1 << max(int(n) - 1, 0).bit_length())
+
+
+@dataclass
+class BatchResult:
+    """One press at each of B contact vertices (SI inside; the properties give people's units)."""
+
+    vertex: np.ndarray
+    """Contact vertex of each palpation, int64 [B]."""
+    depth: float
+    """Press depth [m]."""
+    peak_force: np.ndarray = field(repr=False)
+    """Largest |feedback force| while pressed [N], [B] (as PressResult.peak_force_N computes it)."""
+    hold_force: np.ndarray = field(repr=False)
+    """|feedback force| at the last pressed step (full depth, end of hold) [N], [B]."""
+    recovery_error: np.ndarray = field(repr=False)
+    """Distance of the contact vertex from rest at the end of the settle window [m], [B]."""
+    region_vertices: np.ndarray = field(repr=False)
+    free_vertices: np.ndarray = field(repr=False)
+
+    @property
+    def stiffness_N_per_mm(self) -> np.ndarray:
+        """Hold force over depth [N/mm]: the tissue's stiffness under the probe."""
+        return self.hold_force / (self.depth * 1e3)
+
+
+class BatchRegions:
+    """Compacted per-palpation regions of fixed capacity, on the device (see kernels/batch_region.py)."""
+
+    def __init__(self, batch_size: int, vertex_capacity: int, entry_capacity: int, rings: int, device):
+        B, cv, ce, d = batch_size, vertex_capacity, entry_capacity, device
+        self.vertex_capacity = cv
+        self.entry_capacity = ce
+        self.region_vertex = wp.zeros((B, cv), dtype=wp.int32, device=d)
+        """Mesh id of each region vertex in local order (ring after ring), shape [B, capacity]."""
+        self.ring_offsets = wp.zeros((B, rings + 2), dtype=wp.int32, device=d)
+        """Ring r of palpation b is region_vertex[b, ring_offsets[b, r]:ring_offsets[b, r + 1]]."""
+        self.region_count = wp.zeros(B, dtype=wp.int32, device=d)
+        self.free_count = wp.zeros(B, dtype=wp.int32, device=d)
+        """Free vertices (all but the fixed outer ring): the first free_count in local order."""
+        self.local_offsets = wp.zeros((B, cv + 1), dtype=wp.int32, device=d)
+        """CSR offsets of the free vertices' neighbour lists, shape [B, capacity + 1]."""
+        self.local_neighbour = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        """Local index of each CSR neighbour (mesh CSR order), shape [B, entry capacity]."""
+        self.local_edge = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        """Mesh edge id (spring) of each CSR entry, shape [B, entry capacity]."""
+        self.local_owner = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        """Local index of the free vertex each CSR entry belongs to, shape [B, entry capacity]."""
+        self.local_spring = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        """Per CSR entry: s + 1 when it reads spring s as is, -(s + 1) negated (its mirror entry's)."""
+        self.spring_entry = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        """The CSR entry that computes each spring (each spring of the region once), [B, entry capacity]."""
+        self.spring_count = wp.zeros(B, dtype=wp.int32, device=d)
+        self.entry_count = wp.zeros(B, dtype=wp.int32, device=d)
+        """CSR entries of each palpation's free vertices (its local_offsets[b, free_count[b]])."""
+        self.status = wp.zeros(B, dtype=wp.int32, device=d)
+
+
+class BatchPalpation:
+    """B palpations of one mesh, built and stepped together.
+
+    integrator: "explicit" (semi-implicit Euler, many steps per launch, a block per palpation) or
+    "implicit" (backward Euler with CG, as SolverALMSDM's: one thread per palpation, one launch a
+    step; cg_max_iterations and cg_tolerance as the solver's).
+
+    rings: the local model's rings (the outermost fixed). dt [s].
+    kernel (explicit): "fast" (the CUDA default where the regions fit: as "entries", with an
+    approximate reciprocal square root and no division in the step, forces within 5e-6 relative of the CPU's
+    bits; on the CPU it runs the "entries" kernel), "entries" (a block per palpation, its threads
+    sharing the springs, each computed once) or "vertices" (a block's threads share
+    the free vertices; a block is one thread on the CPU: the CPU default). Both give the same
+    bits on the CPU. threads: threads per block on CUDA (default 64 for "entries"; for
+    "vertices" enough for the largest region's free vertices, 32..256). max_registers: the
+    "entries" kernel's registers per thread (default 64, and for the "fast" kernel 80 for lean 4-5, 9, 11 and 72 for 10; 0: no cap). wide: its state as vec4.
+    lean ("fast" kernel): 2 the probe's state in shared memory, int16 CSR codes and each vertex's
+    position and velocity packed in 24 bytes of shared memory; 4 as 2, each thread owning a free vertex (its state and degree in
+    registers across steps) and the CSR codes transposed; 5 as 4 with the owned vertex's constants
+    in registers too (the default); 6 as 5 with force slots numbered by CSR level; 7 as 5 with
+    the codes in pairs; 8 as 5 with the spring ends not hoisted out of the step loop; 9 / 10 as 5
+    with the last / all spring slots' constants in shared memory; 11 as 5 with the force slots
+    spread over the shared-memory banks. All give the same bits on the CPU.
+    capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
+    that overflows it is redone with twice the capacity.
+    Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
+    """
+
+    def __init__(
+        self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
+        kernel=None, threads=None, max_registers=None, wide=True, lean=5, capacity=None,
+        cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
+    ):
+        self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
+        self.device = self.model.device
+        self.mesh = self.model.mesh
+        self.rings = check_rings(rings)
+        if self.rings < 1:
+            raise ValueError(f"rings must be >= 1, got {rings}")
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be > 0, got {dt}")
+        self.dt = float(dt)
+        if integrator not in INTEGRATORS:
+            raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(INTEGRATORS)})")
+        self.integrator = integrator
+        self.cg_max_iterations = int(cg_max_iterations)
+        self.cg_tolerance = float(cg_tolerance)
+        self._kernel = kernel
+        # 64 registers a thread: 16 blocks of 64 threads per SM, the best of 0/40/64 caps measured on an H200
+        self._max_registers = 64 if max_registers is None else int(max_registers)
+        # the "fast" kernel's lean 4-5 run best at 80 registers (12 blocks of 64 threads an SM): 9.55e8 against 9.23e8 at 64 on an H200
+        # (lean 9 also 80, 9.55e8; lean 10 best at 72, 9.35e8; lean 11 derived from 5: 80, not measured)
+        self._fast_max_registers = {4: 80, 5: 80, 9: 80, 10: 72, 11: 80}.get(int(lean), 64) if max_registers is None else int(max_registers)
+        self._wide = bool(wide)
+        if int(lean) not in (2, *range(4, 12)):
+            raise ValueError(f"lean must be 2 or 4..11, got {lean}")
+        self._lean = int(lean)
+        self._threads = threads
+        self._capacity = capacity
+        self.batch_size = 0
+        self.regions = None
+        self.vertices = np.zeros(0, dtype=np.int64)
+        offsets = self.mesh.adjacency[0]
+        self._max_degree = int(np.diff(offsets).max(initial=1))
+
+    # -- regions -------------------------------------------------------------------------------
+    def touch(self, vertices) -> "BatchPalpation":
+        """Put a probe on each of `vertices` and build their regions (one launch, on the device)."""
+        verts = np.asarray(vertices)
+        if verts.ndim != 1 or len(verts) == 0:
+            raise ValueError(f"vertices must be a non-empty 1-D list of vertex ids, got shape {verts.shape}")
+        if not np.issubdtype(verts.dtype, np.integer):
+            raise TypeError(f"vertices must be integers, got {verts.dtype}")
+        n = self.mesh.vertex_count
+        bad = np.flatnonzero((verts < 0) | (verts >= n))
+        if len(bad):
+            check_vertex(self.mesh, int(verts[bad[0]]), f"contact vertex (palpation {bad[0]})")
+        self.vertices = verts.astype(np.int64)
+        B = self.batch_size = len(verts)
+        seeds = wp.array(verts.astype(np.int32), dtype=wp.int32, device=self.device)
+        k = self.rings
+        cv = _pow2(2 * (3 * k * (k + 1) + 1), 32) if self._capacity is None else int(self._capacity)
+        # CSR entries of the free vertices: ~3.6 per region vertex on a surface (60% free, degree 6)
+        ce = _pow2(cv * min(self._max_degree, 4), 8)
+        while True:
+            regions = BatchRegions(B, cv, ce, k, self.device)
+            br.build_regions(self.model.dmesh, seeds, k, regions)
+            status = regions.status.numpy()
+            if not np.any(status):
+                break
+            if np.any(status & br.BUILD_OVERFLOW):
+                cv *= 2
+            ce = ce * 2 if np.any(status & br.BUILD_CSR_OVERFLOW) else max(ce, _pow2(cv * min(self._max_degree, 4)))
+            if cv > max(4 * n, 64):  # cannot happen for a valid mesh: a region never exceeds it
+                raise RuntimeError("batch region build did not converge")
+        self.regions = regions
+        counts = regions.region_count.numpy()
+        free = regions.free_count.numpy()
+        entries = regions.entry_count.numpy()
+        self.region_vertex_counts = counts
+        self.free_vertex_counts = free
+        # the kernel's capacities: the largest region of this batch, not the build's guess
+        self.vertex_capacity = _pow2(int(counts.max()), 16)
+        self.entry_capacity = _pow2(int(entries.max(initial=1)), 16)
+        springs = regions.spring_count.numpy()
+        self.cuda_plan = self._entries_plan(int(counts.max()), int(entries.max(initial=1)), int(springs.max(initial=1)))
+        self.fast_plan = self._fast_plan(int(counts.max()), int(free.max()), int(entries.max(initial=1)), int(springs.max(initial=1)))
+        cuda = self.device.is_cuda
+        kernel = self._kernel or ("fast" if cuda and self.fast_plan is not None else "vertices")
+        if kernel not in KERNELS:
+            raise ValueError(f"unknown kernel {kernel!r} (known: {', '.join(KERNELS)})")
+        if kernel in ("entries", "fast") and self.cuda_plan is None:
+            raise ValueError(
+                f"the 'entries' kernel cannot hold these regions ({int(counts.max())} vertices, {int(springs.max())} springs: "
+                f"at most 16 springs a thread of 1024, and 40 KiB of shared memory)"
+            )
+        self.kernel = kernel
+        self.shared = bool(cuda and bk.shared_bytes(self.vertex_capacity, self.entry_capacity) <= bk.SHARED_BYTES_MAX)
+        if kernel == "fast" and cuda:
+            self.threads = self.fast_plan[0]
+        elif kernel in ("entries", "fast"):
+            self.threads = self.cuda_plan[0]
+        elif not cuda:
+            self.threads = 1
+        elif self._threads is not None:
+            self.threads = int(self._threads)
+        else:
+            self.threads = min(max(_pow2(int(free.max()), 32), 32), 256)
+        # global working arrays of the "vertices" kernel where its regions do not fit in shared memory
+        nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared or kernel != "vertices")
+        d = self.device
+        self.scratch_vec3 = wp.zeros(nv, dtype=wp.vec3, device=d)
+        self.scratch_float = wp.zeros(nf, dtype=wp.float32, device=d)
+        self.scratch_int = wp.zeros(ni, dtype=wp.int32, device=d)
+        self.scratch_wide = wp.zeros(1, dtype=wp.vec4, device=d)  # a typed placeholder (shared memory is used)
+        self.q_state = wp.zeros((B, regions.vertex_capacity), dtype=wp.vec3, device=d)
+        """Positions of each palpation's region vertices [m], local order, shape [B, capacity]."""
+        self.qd_state = wp.zeros((B, regions.vertex_capacity), dtype=wp.vec3, device=d)
+        """Velocities [m/s], same layout."""
+        self.peak_force = wp.zeros(B, dtype=wp.float64, device=d)
+        """Running largest |feedback force| [N] (its square with the "fast" kernel on CUDA), [B]."""
+        self.peak_reaction = wp.zeros(B, dtype=wp.vec3, device=d)
+        self.hold_reaction = wp.zeros(B, dtype=wp.vec3, device=d)
+        normals = -self.model.vertex_normal_rest[self.vertices]
+        self.press_direction = wp.array(normals, dtype=wp.vec3d, device=d)
+        """Inward unit normal at each contact vertex (float64, as the host computes the target)."""
+        br.rest_states(self)
+        return self
+
+    def _entries_plan(self, max_vertices, max_entries, max_springs):
+        """(threads, springs per thread, vertex capacity, entry capacity, register cap) of the
+        "entries" kernel, or None where it cannot hold these regions."""
+        threads = 64 if self._threads is None else int(self._threads)
+        per_thread = -(-max_springs // threads)
+        while per_thread > 16 and threads < 1024:  # registers are unrolled up to 16 springs a thread
+            threads *= 2
+            per_thread = -(-max_springs // threads)
+        cv = -(-max_vertices // 16) * 16
+        ce = -(-max_entries // 16) * 16
+        if per_thread > 16 or bkc.shared_bytes(cv, ce, threads * per_thread) > bk.SHARED_BYTES_MAX:
+            return None
+        return threads, max(per_thread, 1), cv, ce, self._max_registers, self._wide
+
+    def _fast_plan(self, max_vertices, max_free, max_entries, max_springs):
+        """(threads, springs per thread, vertex, free-vertex, entry and spring capacities, register
+        cap) of the "fast" kernel, or None where it cannot hold these regions."""
+        threads = 64 if self._threads is None else int(self._threads)
+        per_thread = -(-max_springs // threads)
+        while per_thread > 16 and threads < 1024:
+            threads *= 2
+            per_thread = -(-max_springs // threads)
+        r16 = lambda x: -(-max(int(x), 1) // 16) * 16
+        cv, cf, ce, cs = r16(max_vertices), r16(max_free), r16(max_entries), r16(max_springs)
+        if per_thread > 16 or max(cv, ce) > 32767 or shared_bytes_fast(cv, cf, ce, cs, self._lean, self._max_degree) > bk.SHARED_BYTES_MAX:
+            return None
+        return threads, max(per_thread, 1), cv, cf, ce, cs, self._fast_max_registers, self._lean, self._max_degree
+
+    def region(self, b: int) -> np.ndarray:
+        """Mesh ids of palpation b's region vertices in local order (host copy)."""
+        return self.regions.region_vertex.numpy()[b, : self.region_vertex_counts[b]].copy()
+
+    # -- the press -----------------------------------------------------------------------------
+    def schedule(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0):
+        """Steps of the press protocol: (ramp, pressed = ramp + hold, total), as Palpation.press counts."""
+        for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"press {name} must be >= 0, got {value}")
+        ramp_n = max(int(round(ramp / self.dt)), 1)
+        hold_n = int(round(hold / self.dt))
+        settle_n = max(int(round(settle / self.dt)), 1)
+        return ramp_n, ramp_n + hold_n, ramp_n + hold_n + settle_n
+
+    def start_press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, steps_per_launch=None, on_launch=None):
+        """Launch the whole press (asynchronous on CUDA); `finish_press()` reads the results.
+
+        steps_per_launch: steps in one launch (default: all); on_launch(steps) is called after each.
+        """
+        if self.regions is None:
+            raise RuntimeError("touch(vertices) first: the batch has no contacts")
+        ramp_n, press_n, total = self.schedule(depth, ramp, hold, settle)
+        self.depth = float(depth)
+        self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
+        br.rest_states(self)
+        if self.integrator == "implicit":
+            self._implicit_press(total, on_launch)
+            return
+        chunk = total if steps_per_launch is None else max(int(steps_per_launch), 1)
+        for begin in range(0, total, chunk):
+            count = min(chunk, total - begin)
+            self.launch_steps(begin, count)
+            if on_launch is not None:
+                on_launch(count)
+
+    def _implicit_press(self, total, on_launch):
+        # two states (the fixed ring at rest in both) and CG scratch per palpation; one launch a step
+        d, r = self.device, self.regions
+        other = (wp.clone(self.q_state), wp.clone(self.qd_state))
+        scratch = bki.BatchCGScratch(self.batch_size, r.vertex_capacity, r.entry_capacity, d)
+        states = [(self.q_state, self.qd_state), other]
+        for s in range(total):
+            bki.step_batch(self, s, states[s % 2], states[1 - s % 2], scratch, self.cg_max_iterations, self.cg_tolerance)
+            if on_launch is not None and (s % 100 == 99 or s == total - 1):
+                on_launch(s % 100 + 1)
+        if total % 2 == 1:  # the last step wrote the other state
+            wp.copy(self.q_state, other[0])
+            wp.copy(self.qd_state, other[1])
+
+    def launch_steps(self, begin: int, count: int) -> None:
+        """Launch steps begin..begin+count of the press scheduled by start_press (no wait)."""
+        if self.kernel in ("entries", "fast"):
+            bkc.press_batch_cuda(self, begin, count)
+        else:
+            bk.press_batch(self, begin, count)
+
+    def finish_press(self) -> BatchResult:
+        """Wait for the press and read it back (the force magnitudes as Palpation's host code takes them)."""
+        peak = self.peak_reaction.numpy()
+        hold = self.hold_reaction.numpy()
+        q0 = self.q_state.numpy()[:, 0, :]
+        rest = self.mesh.vertices[self.vertices].astype(np.float32).astype(np.float64)
+        # PressResult's expressions, vectorized: float32 components squared in float64 (Python's
+        # x ** 2 and NumPy's agree), summed left to right; the norm of the float64 difference
+        f64 = peak.astype(np.float64)
+        peak_n = np.sqrt(f64[:, 0] ** 2 + f64[:, 1] ** 2 + f64[:, 2] ** 2)
+        h64 = hold.astype(np.float64)
+        hold_n = np.sqrt(h64[:, 0] ** 2 + h64[:, 1] ** 2 + h64[:, 2] ** 2)
+        recovery = np.linalg.norm(q0 - rest, axis=1)
+        return BatchResult(
+            vertex=self.vertices.copy(),
+            depth=self.depth,
+            peak_force=peak_n,
+            hold_force=hold_n,
+            recovery_error=recovery,
+            region_vertices=self.region_vertex_counts.copy(),
+            free_vertices=self.free_vertex_counts.copy(),
+        )
+
+    def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, **kw) -> BatchResult:
+        """Press every contact: ramp to `depth` [m] along the inward normal over `ramp` [s], hold
+        `hold` [s], release and settle `settle` [s] (Palpation.press's protocol)."""
+        self.start_press(depth, ramp, hold, settle, **kw)
+        return self.finish_press()

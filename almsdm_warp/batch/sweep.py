@@ -1,0 +1,370 @@
+"""Palpation sweeps: a press at N points spread over an organ's surface, a force map as a table.
+
+The points are spread evenly (farthest-point sampling of the surface vertices, or of a dense
+surface sample snapped to the nearest vertex when N exceeds them). The work is cut into chunks of
+points; each chunk is pressed as one batch (BatchPalpation) on one device and written at once, as
+its own file, atomically, beside the output (``OUT.parts/``), so an interrupted sweep resumes
+from what it wrote. Chunks go round-robin to every device given (several GPUs of one process run
+at once: launches are asynchronous), or to Ray tasks of one GPU each (``ray`` extra). When all
+are done they are gathered, in point order, into the output (.csv or .npz) and the parts removed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+FPS_MAX = 20000
+"""Beyond this many points (and the mesh's vertices), points are area-uniform random, not farthest-point."""
+COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "stiffness_N_per_mm", "recovery_error_mm", "rings")
+"""The table's columns; `rings`: the ring count of each point's region (the same for all but at --rings auto)."""
+_INT_COLUMNS = ("vertex", "rings")
+FORMATS = (".csv", ".npz")
+
+
+# -- points ------------------------------------------------------------------------------------
+def farthest_points(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
+    """Indices of `n` of `points` chosen greedily, each farthest from those already chosen."""
+    p = np.asarray(points, dtype=np.float64)
+    n = min(int(n), len(p))
+    chosen = np.empty(n, dtype=np.int64)
+    chosen[0] = start
+    diff = p - p[start]
+    d2 = np.einsum("ij,ij->i", diff, diff)
+    tmp = np.empty_like(d2)
+    for i in range(1, n):  # buffers reused: no allocation per point
+        chosen[i] = k = int(np.argmax(d2))
+        np.subtract(p, p[k], out=diff)
+        np.einsum("ij,ij->i", diff, diff, out=tmp)
+        np.minimum(d2, tmp, out=d2)
+    return chosen
+
+
+def sample_points(mesh, n: int, seed: int = 0):
+    """`n` contact points spread evenly over the surface: (points [n, 3] m, contact vertex [n]).
+
+    Up to the number of surface vertices: farthest-point sampling of the vertices themselves
+    (distinct contacts), starting from the highest one. Beyond: of an area-uniform sample of
+    the surface (seeded, so a rerun picks the same points; beyond FPS_MAX points that sample
+    itself), each snapped to its nearest vertex, as the probe's contact moves to the nearest
+    vertex (the paper's model).
+    """
+    surface = mesh.surface_vertices
+    v = mesh.vertices
+    if n <= len(surface):
+        start = int(np.argmax(v[surface, 2]))
+        idx = surface[farthest_points(v[surface], n, start)]
+        return v[idx].copy(), idx.astype(np.int64)
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    tm = trimesh.Trimesh(vertices=v, faces=mesh.triangles, process=False)
+    if n <= FPS_MAX:
+        dense, _ = trimesh.sample.sample_surface(tm, 3 * n, seed=seed)
+        pts = dense[farthest_points(dense, n, int(np.argmax(dense[:, 2])))]
+    else:  # farthest-point sampling costs n x 3n: beyond FPS_MAX, area-uniform random points
+        pts, _ = trimesh.sample.sample_surface(tm, n, seed=seed)
+    _, near = cKDTree(v[surface]).query(pts)
+    return pts, surface[near].astype(np.int64)
+
+
+# -- the plan ----------------------------------------------------------------------------------
+@dataclass
+class SweepPlan:
+    """Everything that decides a sweep's numbers (its key names the parts a resume may reuse)."""
+
+    mesh: object
+    tissue: object
+    edge_scale: np.ndarray | None
+    anchor_scale: np.ndarray | None
+    rings: "int | np.ndarray"
+    """Rings of every point's region, or one ring count per point (--rings auto: sweep_auto.size_regions)."""
+    dt: float
+    depth: float
+    ramp: float
+    hold: float
+    settle: float
+    points: np.ndarray
+    vertices: np.ndarray
+    chunk: int
+    integrator: str = "explicit"
+    tol: float | None = None
+    """--rings auto: the tolerance [m] the ring counts were sized to (for the record), else None."""
+
+    @property
+    def point_rings(self) -> np.ndarray:
+        """Ring count of each point's region, int64 [points]."""
+        if isinstance(self.rings, (int, np.integer)):
+            return np.full(len(self.vertices), int(self.rings), dtype=np.int64)
+        return np.asarray(self.rings, dtype=np.int64)
+
+    def key(self) -> str:
+        h = hashlib.sha256()
+        scalars = ["table v2 (rings column)", self.mesh.path, self.mesh.vertex_count, self.dt, self.depth]
+        scalars += [self.ramp, self.hold, self.settle, self.chunk, self.integrator, self.tol]
+        h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
+        for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings):
+            if a is not None:
+                h.update(np.ascontiguousarray(a).tobytes())
+        return h.hexdigest()[:16]
+
+    @property
+    def chunks(self) -> list[tuple[int, int]]:
+        n = len(self.vertices)
+        return [(i, min(i + self.chunk, n)) for i in range(0, n, self.chunk)]
+
+    def batch(self, device, model=None) -> "RingBatches":
+        """The batches of this plan on `device`, one per ring count (with `model`, made on that device, when given)."""
+        return RingBatches(self, model if model is not None else self.model(device))
+
+    def model(self, device):
+        from ..sim.model import Model
+
+        return Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale)
+
+    def columns(self, begin: int, end: int, results) -> dict:
+        """The output columns of points begin..end from [(indices in the chunk, BatchResult)], one per ring count."""
+        p = self.points[begin:end] * 1e3
+        n = end - begin
+        out = {"x_mm": p[:, 0], "y_mm": p[:, 1], "z_mm": p[:, 2], "vertex": np.empty(n, dtype=np.int64),
+               "rings": self.point_rings[begin:end].copy()}
+        for c in ("peak_force_N", "stiffness_N_per_mm", "recovery_error_mm"):
+            out[c] = np.empty(n, dtype=np.float64)
+        for idx, result in results:
+            out["vertex"][idx] = result.vertex
+            out["peak_force_N"][idx] = result.peak_force
+            out["stiffness_N_per_mm"][idx] = result.stiffness_N_per_mm
+            out["recovery_error_mm"][idx] = result.recovery_error * 1e3
+        return out
+
+
+class RingBatches:
+    """A plan's BatchPalpations on one device, one per ring count (made when first asked for)."""
+
+    def __init__(self, plan: SweepPlan, model):
+        self.plan, self.model, self.device = plan, model, model.device
+        self._batches = {}
+
+    def get(self, rings: int):
+        from .batch_palpation import BatchPalpation
+
+        if rings not in self._batches:
+            p = self.plan
+            self._batches[rings] = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator)
+        return self._batches[rings]
+
+
+def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_launch=None):
+    """Start the presses of points begin..end (a batch per ring count among them); returns a finisher."""
+    rings = plan.point_rings[begin:end]
+    per_launch = 200 if batches.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
+    started = []
+    for k in np.unique(rings):
+        idx = np.flatnonzero(rings == k)
+        batch = batches.get(int(k))
+        batch.touch(plan.vertices[begin:end][idx])
+        launch = None if on_launch is None else (lambda steps, n=len(idx): on_launch(steps * n))
+        batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=launch)
+        started.append((idx, batch))
+    return lambda: plan.columns(begin, end, [(idx, batch.finish_press()) for idx, batch in started])
+
+
+# -- files -------------------------------------------------------------------------------------
+def _atomic(path: Path, write) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_table(path, columns: dict) -> Path:
+    """Write the sweep's columns to `path` (.csv with a header, or .npz), atomically."""
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+
+        def write(tmp):
+            with open(tmp, "wb") as f:
+                np.savez(f, **{c: np.asarray(columns[c]) for c in COLUMNS})
+
+    else:
+
+        def write(tmp):
+            cols = [np.asarray(columns[c]) for c in COLUMNS]
+            with open(tmp, "w", encoding="utf-8") as f:
+                f.write(",".join(COLUMNS) + "\n")
+                for row in zip(*cols):
+                    # repr: the shortest text that reads back to the same float
+                    f.write(",".join(str(int(x)) if c in _INT_COLUMNS else repr(float(x)) for c, x in zip(COLUMNS, row)) + "\n")
+
+    _atomic(path, write)
+    return path
+
+
+def read_table(path) -> dict:
+    """The columns of a sweep file (.csv or .npz), as NumPy arrays (vertex and rings as int64; a
+    table written before the rings column has none)."""
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        with np.load(path) as z:
+            return {c: z[c] for c in COLUMNS if c in z.files}
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    with open(path, encoding="utf-8") as f:
+        header = tuple(f.readline().strip().split(","))
+    if header not in (COLUMNS, COLUMNS[:-1]):
+        raise InputError(f"{path}: not a sweep table (header {list(header)})")
+    out = {c: data[:, i] for i, c in enumerate(header)}
+    for c in _INT_COLUMNS:
+        if c in out:
+            out[c] = out[c].astype(np.int64)
+    return out
+
+
+class Parts:
+    """The chunks a sweep has written so far, beside its output: OUT.parts/{plan.json, chunk_*.npz}."""
+
+    def __init__(self, out: Path, plan: SweepPlan):
+        self.dir = Path(str(out) + ".parts")
+        self.plan = plan
+        self.key = plan.key()
+
+    def open(self) -> list[int]:
+        """Create or reuse the parts folder; returns the chunk indices already done."""
+        manifest = self.dir / "plan.json"
+        if self.dir.exists():
+            try:
+                found = json.loads(manifest.read_text())["key"]
+            except (OSError, ValueError, KeyError):
+                found = None
+            if found != self.key:
+                raise InputError(
+                    f"{self.dir} holds parts of a different sweep (other mesh, points or parameters): "
+                    f"delete it, or give another --out"
+                )
+        else:
+            self.dir.mkdir()
+            _atomic(manifest, lambda tmp: Path(tmp).write_text(json.dumps({"key": self.key, "points": len(self.plan.vertices)})))
+        return [i for i in range(len(self.plan.chunks)) if (self.dir / f"chunk_{i:06d}.npz").exists()]
+
+    def write(self, i: int, columns: dict) -> None:
+        def write(tmp):
+            with open(tmp, "wb") as f:
+                np.savez(f, **columns)
+
+        _atomic(self.dir / f"chunk_{i:06d}.npz", write)
+
+    def gather(self) -> dict:
+        parts = []
+        for i in range(len(self.plan.chunks)):
+            with np.load(self.dir / f"chunk_{i:06d}.npz") as z:
+                parts.append({c: z[c] for c in COLUMNS})
+        return {c: np.concatenate([p[c] for p in parts]) for c in COLUMNS}
+
+    def remove(self) -> None:
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+# -- running -----------------------------------------------------------------------------------
+def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str], progress=None) -> None:
+    """Press the chunks `todo` round-robin over `devices` (each chunk written when it is done).
+
+    Several CUDA devices: a host thread each (region builds, read-backs and writes overlap; Warp's
+    calls release the GIL while they wait). Otherwise one thread, chunks interleaved over them.
+    """
+    models = {d: plan.model(d) for d in devices}
+    batches = [plan.batch(d, models[d]) for d in devices]
+    advance = None if progress is None else progress.advance
+    todo = list(todo)
+    if len(set(devices)) > 1 and all(d.startswith("cuda") for d in devices):
+        _run_threads(plan, parts, [todo[k :: len(batches)] for k in range(len(batches))], batches, advance)
+        return
+    while todo:
+        running = []
+        for batch in batches:
+            if todo:
+                i = todo.pop(0)
+                running.append((i, press_chunk(batch, plan, *plan.chunks[i], on_launch=advance)))
+        for i, finish in running:
+            parts.write(i, finish())
+
+
+def _run_threads(plan, parts, queues, batches, advance):
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    stop = threading.Event()
+
+    def work(batch, queue):
+        for i in queue:
+            if stop.is_set():
+                return
+            parts.write(i, press_chunk(batch, plan, *plan.chunks[i], on_launch=advance)())
+
+    with ThreadPoolExecutor(len(batches)) as pool:
+        futures = [pool.submit(work, b, q) for b, q in zip(batches, queues)]
+        try:
+            for f in futures:
+                f.result()
+        except BaseException:  # an interrupt: the other threads end after their current chunk
+            stop.set()
+            raise
+
+
+def _ray_chunk(plan: SweepPlan, begin: int, end: int, gpu: bool) -> dict:
+    # a Ray task: one chunk on this worker's GPU (Ray sets CUDA_VISIBLE_DEVICES) or its CPU
+    from ..warp_init import init_warp
+
+    init_warp()
+    batch = plan.batch("cuda:0" if gpu else "cpu")
+    return press_chunk(batch, plan, begin, end)()
+
+
+def run_ray(plan: SweepPlan, parts: Parts, todo: list[int], gpu: bool, address=None, progress=None) -> None:
+    """Press the chunks `todo` as Ray tasks of one GPU each (or one CPU); written as they come back."""
+    try:
+        import ray
+    except ImportError as exc:
+        raise InputError("--ray needs Ray: pip install 'almsdm_warp[ray]'") from exc
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    task = ray.remote(num_gpus=1, num_cpus=1)(_ray_chunk) if gpu else ray.remote(num_cpus=1)(_ray_chunk)
+    plan_ref = ray.put(plan)
+    pending = {task.remote(plan_ref, *plan.chunks[i], gpu): i for i in todo}
+    while pending:
+        done, _ = ray.wait(list(pending), num_returns=1)
+        i = pending.pop(done[0])
+        parts.write(i, ray.get(done[0]))
+        if progress is not None:
+            b, e = plan.chunks[i]
+            progress.advance((e - b) * _steps(plan))
+
+
+def _steps(plan: SweepPlan) -> int:
+    ramp_n = max(int(round(plan.ramp / plan.dt)), 1)
+    return ramp_n + int(round(plan.hold / plan.dt)) + max(int(round(plan.settle / plan.dt)), 1)
+
+
+def auto_dt(model, limit: float = 1e-3, safety: float = 0.9) -> float:
+    """The step for a sweep: `limit` [s], or less where the model's critical step asks (a stiff lesion).
+
+    Below the critical step of semi-implicit Euler over the whole mesh (Model.critical_dt, which
+    bounds every region's), the step is `safety` x that, rounded down to a multiple of 0.05 ms.
+    """
+    crit = model.critical_dt()
+    if not math.isfinite(crit) or crit >= limit:
+        return limit
+    step = math.floor(safety * crit / 5e-5) * 5e-5
+    return step if step > 0 else safety * crit

@@ -1,0 +1,1 @@
+"""The `almsdm` command line."""

@@ -1,0 +1,59 @@
+"""`almsdm evaluate`: regenerate docs/results.md and its figures (the paper's experiments, speed
+against accuracy, the stability map, real anatomy)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+from ..errors import InputError
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "evaluate",
+        help="run the evaluation and write results.md and its figures",
+        description="Run the paper's experiments (recovery, Table 1, force against displacement, Table 2), speed "
+        "against accuracy, the stability map and the real-anatomy runs; write OUT/results.md, OUT/results.json and "
+        "OUT/figures/*.png (nothing is written until every experiment has run).",
+    )
+    p.add_argument("--quick", action="store_true", help="reduced versions of every part (under 2 minutes on 2 CPU cores)")
+    p.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ... (default cpu)")
+    p.add_argument("--out", default="docs", metavar="DIR", help="folder for results.md and figures/ (default docs)")
+    p.add_argument("--extra-json", default=None, metavar="PATH", help="step times measured elsewhere (e.g. `almsdm bench` on a GPU) to add to the speed-accuracy figure")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
+    p.add_argument("--settings", choices=("full", "quick", "tiny"), default=None, help=argparse.SUPPRESS)  # tests: "tiny"
+    p.set_defaults(func=cmd_evaluate)
+
+
+def cmd_evaluate(args) -> int:
+    from .main import _device, _quiet_warp
+    from ..evaluation.evaluate import run_evaluation
+
+    out = Path(args.out)
+    if not out.is_dir():
+        raise InputError(f"--out {out}: no such folder")
+    if not os.access(out, os.W_OK) or ((out / "figures").exists() and not os.access(out / "figures", os.W_OK)):
+        raise InputError(f"--out {out}: folder is not writable")
+    if args.extra_json is not None:
+        from ..evaluation.accuracy import read_extra_points
+
+        read_extra_points(args.extra_json)  # bad input fails now, not after the run
+    _quiet_warp()
+    device = _device(args.device)
+    settings = args.settings or ("quick" if args.quick else "full")
+    results = run_evaluation(out, settings, str(device), command=_command(args, settings), extra_json=args.extra_json, progress=args.progress)
+    print(f"wrote {out / 'results.md'}, {out / 'results.json'} and {len(results['figures'])} figures in {out / 'figures'} ({results['elapsed_s']:.0f} s)")
+    return 0
+
+
+def _command(args, settings) -> str:
+    """The command that reproduces this run, for results.md."""
+    parts = ["almsdm evaluate"]
+    if settings != "full":
+        parts.append("--quick" if settings == "quick" else f"--settings {settings}")
+    parts += ["--device", str(args.device), "--out", str(args.out)]
+    if args.extra_json:
+        parts += ["--extra-json", str(args.extra_json)]
+    return " ".join(parts)

@@ -1,0 +1,174 @@
+"""`almsdm sweep`: press N points spread over an organ (a batch on the device), write the force map."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+
+def add_parser(sub) -> None:
+    from .palpate import _count_arg, _number_arg, rings_arg
+
+    p = sub.add_parser(
+        "sweep",
+        help="press N points spread over a scene or mesh at once (batched); write a force map (.csv/.npz)",
+        description="Press N points spread evenly over the surface, all at once on the device (the local ALMSDM "
+        "region of each; explicit or implicit integrator), and write per point: x_mm, y_mm, z_mm, vertex, peak_force_N, "
+        "stiffness_N_per_mm (force at full depth / depth), recovery_error_mm. An interrupted sweep resumes "
+        "from the chunks it wrote (OUT.parts/) when run again with the same arguments.",
+    )
+    p.add_argument("scene", nargs="?", default=None, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
+    p.add_argument("--out", required=True, metavar="FILE", help="output table: .csv or .npz")
+    p.add_argument("--points", type=_count_arg, default=200, metavar="N", help="points to press (default 200)")
+    p.add_argument("--rings", type=rings_arg(("auto",)), default=None, metavar="{K,auto}", help="rings of each local region, or auto: each point's sized to --tol-mm as almsdm palpate --rings auto sizes it (default: the scene's)")
+    p.add_argument("--tol-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
+    p.add_argument("--depth-mm", "--depth", dest="depth_mm", type=_number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
+    p.add_argument("--ramp-s", type=_number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
+    p.add_argument("--hold-s", type=_number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
+    p.add_argument("--settle-s", type=_number_arg(">= 0"), default=None, metavar="S", help="settle window [s] (default: the scene's)")
+    p.add_argument("--integrator", choices=("explicit", "implicit"), default="explicit", help="explicit (semi-implicit Euler, the paper's; default) or implicit (backward Euler, CG: one thread a palpation)")
+    p.add_argument("--dt-ms", type=_number_arg("> 0"), default=None, metavar="MS", help="time step [ms] (default 1, less where the model's critical step asks)")
+    p.add_argument("--scale-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
+    p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
+    p.add_argument("--chunk", type=_count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU, all points split over the GPUs)")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks as Ray tasks (one GPU each with a CUDA --device, else one CPU); ADDRESS of a cluster, or a local one")
+    p.add_argument("--png", default=None, metavar="PATH", help="also draw the organ coloured by stiffness (matplotlib)")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
+    p.set_defaults(func=cmd_sweep)
+
+
+def _devices(text: str) -> list[str]:
+    import warp as wp
+
+    from .main import _device
+
+    if text == "all":
+        found = [d.alias for d in wp.get_cuda_devices()]
+        if not found:
+            raise InputError("--device all: no CUDA device present (use --device cpu)")
+        return found
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    if not names:
+        raise InputError(f"--device: no device in {text!r}")
+    return list(dict.fromkeys(_device(n).alias for n in names))
+
+
+def cmd_sweep(args) -> int:
+    from .main import _quiet_warp
+    from ..export.output import check_writable
+    from ..progress import Progress
+    from ..scene.loader import resolve_scene_or_mesh
+    from ..batch.sweep import FORMATS, Parts, SweepPlan, auto_dt, run_local, run_ray, sample_points, write_table
+    from ..batch.sweep_auto import rings_summary
+
+    out = Path(args.out)
+    if out.suffix.lower() not in FORMATS:
+        raise InputError(f"--out {out}: unknown format {out.suffix or '(none)'!r} (allowed: {', '.join(FORMATS)})")
+    check_writable(out)
+    if args.png:
+        check_writable(args.png)
+    _quiet_warp()
+    devices = _devices(args.device)
+    scene = resolve_scene_or_mesh(args.scene, scale_mm=args.scale_mm or 1.0)
+    mesh = scene.load_mesh()
+    for note in mesh.notes:
+        print(f"note: {note}", file=sys.stderr)
+    press = scene.press
+    rings = scene.rings if args.rings is None else args.rings
+    from .palpate import _auto_tol
+
+    tol = _auto_tol(args, rings, scene)
+    depth = press.depth if args.depth_mm is None else args.depth_mm * 1e-3
+    ramp = press.ramp if args.ramp_s is None else args.ramp_s
+    hold = press.hold if args.hold_s is None else args.hold_s
+    settle = press.settle if args.settle_s is None else args.settle_s
+    scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
+    points, vertices = sample_points(mesh, args.points)
+    cuda = devices[0] != "cpu"
+    chunk = args.chunk or (64 if not cuda else min(-(-len(vertices) // len(devices)), 16384))
+    plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, 1e-3, depth, ramp, hold, settle, points,
+                     vertices, chunk, args.integrator, tol)
+    if args.dt_ms is not None:
+        plan.dt = args.dt_ms * 1e-3
+    elif args.integrator == "explicit":
+        plan.dt = auto_dt(plan.model("cpu"))  # 1 ms, or less where the mesh's critical step asks
+    print(mesh.summary())
+    if tol is not None:
+        plan.rings = _size(plan, scene, scales, tol, args.progress)
+        rings_text = f"auto rings (tol {tol * 1e3:g} mm: {rings_summary(plan.rings)})"
+    else:
+        rings_text = f"{rings} rings"
+    lesion = f"; lesion {scene.lesion.as_dict()}" if scene.lesion is not None else ""
+    where = f"Ray ({'GPU' if cuda else 'CPU'} tasks)" if args.ray else ", ".join(devices)
+    print(
+        f"sweep: {len(vertices)} points ({len(np.unique(vertices))} distinct vertices), {rings_text}, press {depth * 1e3:g} mm "
+        f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s), {args.integrator}, dt {plan.dt * 1e3:g} ms, chunks of {chunk} on {where}{lesion}"
+    )
+    parts = Parts(out, plan)
+    done = parts.open()
+    todo = [i for i in range(len(plan.chunks)) if i not in set(done)]
+    if done:
+        print(f"resuming: {len(done)} of {len(plan.chunks)} chunks already in {parts.dir}")
+    steps = _total_steps(plan)
+    left = sum(e - b for i, (b, e) in enumerate(plan.chunks) if i in set(todo))
+    t0 = time.perf_counter()
+    try:
+        with Progress(left * steps, enabled=args.progress, label="sweep") as bar:
+            if args.ray:
+                run_ray(plan, parts, todo, cuda, None if args.ray == "local" else args.ray, bar)
+            else:
+                run_local(plan, parts, todo, devices, bar)
+    except KeyboardInterrupt:
+        print(f"almsdm: interrupted; the chunks done are in {parts.dir}: run the same command again to resume", file=sys.stderr)
+        return 130
+    elapsed = time.perf_counter() - t0
+    columns = parts.gather()
+    write_table(out, columns)
+    parts.remove()
+    stiff = columns["stiffness_N_per_mm"]
+    k = int(np.nanargmax(stiff)) if np.isfinite(stiff).any() else 0
+    print(
+        f"pressed {left} points in {elapsed:.2f} s ({left * steps / max(elapsed, 1e-9):,.0f} region-steps/s, with start-up); "
+        f"peak force {np.nanmin(columns['peak_force_N']):.3f}..{np.nanmax(columns['peak_force_N']):.3f} N; "
+        f"stiffest at vertex {columns['vertex'][k]} {np.round([columns['x_mm'][k], columns['y_mm'][k], columns['z_mm'][k]], 1).tolist()} mm "
+        f"({stiff[k]:.4f} N/mm)"
+    )
+    print(f"wrote {out}")
+    if args.png:
+        from ..export.sweep_png import plot_sweep
+
+        plot_sweep(mesh, columns, args.png, title=f"{scene.name}: stiffness under a {depth * 1e3:g} mm press, {rings_text}")
+        print(f"wrote {args.png}")
+    return 0
+
+
+def _size(plan, scene, scales, tol, progress):
+    """--rings auto: the ring count of each point (sweep_auto.size_regions, on the CPU), timed and said."""
+    from ..protocol.palpation import SimulationDiverged
+    from ..progress import Progress
+    from ..batch.sweep_auto import rings_summary, size_regions
+
+    distinct = len(np.unique(plan.vertices))
+    t0 = time.perf_counter()
+    try:
+        with Progress(distinct, enabled=progress, label="sizing regions") as bar:
+            rings = size_regions(plan.mesh, scene.tissue, plan.vertices, tol, depth=plan.depth, ramp=plan.ramp, hold=plan.hold,
+                                 integrator=plan.integrator, dt=plan.dt, edge_scale=scales[0], anchor_scale=scales[1],
+                                 on_point=bar.advance)
+    except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
+        raise InputError(str(exc)) from exc
+    print(f"auto rings: {distinct} contacts sized to {tol * 1e3:g} mm in {time.perf_counter() - t0:.2f} s "
+          f"(an adaptive press each, CPU): {rings_summary(rings)}")
+    return rings
+
+
+def _total_steps(plan) -> int:
+    from ..batch.sweep import _steps
+
+    return _steps(plan)

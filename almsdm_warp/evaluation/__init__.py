@@ -1,0 +1,1 @@
+"""Evaluation and benchmarks: imports the product, never imported by it."""

@@ -1,0 +1,122 @@
+"""Accuracy of a region against the global anchored reference, for the adaptive region and fixed rings.
+
+One protocol for all (DESIGN.md, evaluation): the contact vertex is driven along the inward normal
+to `depth` over `ramp` and held for `hold`; the peak feedback force is the largest over ramp and
+hold, and the displacement error the largest distance, over every mesh vertex, between the model's
+and the reference's positions at the end of the hold. `auto_point` is one point of the
+speed-accuracy chart (issue 5) for the adaptive region at one tolerance.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import numpy as np
+import warp as wp
+
+from ..sim.model import PROBE_DISPLACEMENT
+from ..protocol.palpation import Palpation
+
+PROTOCOL = {"depth": 0.01, "ramp": 0.1, "hold": 0.2}
+"""The default press [m, s, s]: the scenes' depth, ramp and hold (no settle: accuracy is at the hold)."""
+
+
+def top_vertex(mesh) -> int:
+    """The highest surface vertex: the command line's default press from above."""
+    sv = mesh.surface_vertices
+    return int(sv[np.argmax(mesh.vertices[sv, 2])])
+
+
+def hold_press(pal, depth, ramp, hold):
+    """Drive the touched vertex to `depth` [m] over `ramp` [s], hold `hold` [s]: (peak |force| [N],
+    positions at the end of the hold [m], float64 [vertex_count, 3])."""
+    ramp_n = max(int(round(ramp / pal.dt)), 1)
+    total = ramp_n + int(round(hold / pal.dt))
+    rest, n = pal.rest_position(), pal.inward_normal()
+    peak = 0.0
+    for s in range(total):
+        pal.set_probe(PROBE_DISPLACEMENT, rest + n * depth * min((s + 1) / ramp_n, 1.0))
+        f = pal.step()
+        peak = max(peak, float(np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])))
+    pal.check_finite(total)
+    return peak, pal.positions()
+
+
+def _median_step_us(pal, batches=10, batch=20):
+    """Median wall time of a step [us] with the probe held where it is (the region as grown)."""
+    for _ in range(5):
+        pal.step()
+    times = []
+    for _ in range(batches):
+        wp.synchronize_device(pal.device)
+        t0 = time.perf_counter()
+        for _ in range(batch):
+            pal.step()
+        wp.synchronize_device(pal.device)
+        times.append((time.perf_counter() - t0) / batch * 1e6)
+    return statistics.median(times)
+
+
+def _point(pal, reference, protocol, time_steps):
+    peak, q = hold_press(pal, **protocol)
+    g_peak, g_q = reference
+    point = {
+        "rings": int(pal.region.outer_ring) if pal.region is not None else None,
+        "region_vertices": int(pal.region_vertices),
+        "region_springs": int(pal.region_springs),
+        "peak_force_N": peak,
+        "force_error": abs(peak - g_peak) / g_peak,
+        "displacement_error_mm": float(np.linalg.norm(q - g_q, axis=1).max() * 1e3),
+        "reference_peak_force_N": g_peak,
+    }
+    if time_steps:
+        point["step_us"] = _median_step_us(pal)
+    return point
+
+
+def global_reference(mesh, tissue=None, device=None, *, vertex=None, integrator="implicit", dt=5e-3, **protocol):
+    """(peak force [N], hold-end positions [m]) of the global anchored model under the protocol."""
+    prot = {**PROTOCOL, **protocol}
+    pal = Palpation(mesh, tissue, rings="global", integrator=integrator, dt=dt, device=device)
+    pal.touch(top_vertex(pal.mesh) if vertex is None else vertex)
+    return hold_press(pal, **prot)
+
+
+def fixed_point(mesh, tissue, rings, device=None, *, vertex=None, integrator="implicit", dt=5e-3, reference=None,
+                time_steps=False, **protocol):
+    """The same as auto_point for a fixed ring count (the chart's other points, and the comparison)."""
+    prot = {**PROTOCOL, **protocol}
+    pal = Palpation(mesh, tissue, rings=rings, integrator=integrator, dt=dt, device=device)
+    v = top_vertex(pal.mesh) if vertex is None else vertex
+    pal.touch(v)
+    if reference is None:
+        reference = global_reference(mesh, tissue, device, vertex=v, integrator=integrator, dt=dt, **prot)
+    return _point(pal, reference, prot, time_steps)
+
+
+def auto_point(mesh, tissue=None, tol=1e-4, device=None, *, vertex=None, integrator="implicit", dt=5e-3, reference=None,
+               time_steps=False, options=None, **protocol):
+    """The adaptive region at tolerance `tol` [m], pressed by the protocol and compared to the global
+    anchored model: dict(rings, region_vertices, region_springs, peak_force_N, force_error (relative),
+    displacement_error_mm, tol_mm, reason, events, reference_peak_force_N[, step_us]).
+
+    mesh: a TissueMesh (SI) or a path; vertex: the contact (default: the highest surface vertex);
+    reference: a global_reference() result to reuse across tolerances; time_steps: also time a step
+    of the grown region (median of 10 batches of 20, the probe held); options: more keyword
+    arguments of AdaptivePalpation (margin, force_tol, start_rings, ...).
+    """
+    from ..protocol.adaptive import AdaptivePalpation
+    from ..mesh.io import load_mesh
+
+    if isinstance(mesh, (str, bytes)) or hasattr(mesh, "__fspath__"):
+        mesh = load_mesh(mesh)
+    prot = {**PROTOCOL, **protocol}
+    pal = AdaptivePalpation(mesh, tissue, tol=tol, integrator=integrator, dt=dt, device=device, retire=False, **(options or {}))
+    v = top_vertex(pal.mesh) if vertex is None else vertex
+    pal.touch(v)
+    if reference is None:
+        reference = global_reference(mesh, tissue, device, vertex=v, integrator=integrator, dt=dt, **prot)
+    point = _point(pal, reference, prot, time_steps)
+    point.update(tol_mm=tol * 1e3, reason=pal.auto_reason, events=list(pal.events), vertex=int(v))
+    return point

@@ -1,0 +1,202 @@
+"""The figures of `almsdm evaluate` (matplotlib, Agg backend: no display needed). Each function
+takes an experiment's result dict and a path, and writes one PNG through a temporary file."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from .common import PAPER
+from ..export.output import atomic_path
+
+FLOOR = 1e-6
+"""Errors of exactly zero (the reference against itself) are drawn at this floor on log axes."""
+
+STATE_COLOURS = {"stable": "#2a9d4b", "oscillating": "#f0a500", "not recovered": "#7b5ea7", "diverged": "#d1343a"}
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    try:
+        with atomic_path(path, ".png") as tmp:
+            fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    finally:
+        _plt().close(fig)
+    return path
+
+
+def plot_recovery(rec, path):
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    top = 10.0
+    for row in rec["rows"]:
+        res = [x for x in row["residual_mm"] if x is not None and math.isfinite(x)]
+        label = f"{row['rings']} ring{'s' if row['rings'] != 1 else ''}" if isinstance(row["rings"], int) else "global, no anchors"
+        line = ax.plot(range(1, len(res) + 1), res, marker="o", label=label)
+        top = max([top] + [x * 10 for x in res])
+        if row.get("ran_away_at_press"):
+            k = row["ran_away_at_press"]
+            y = max(res + [1.0]) * 3
+            ax.plot([k], [y], marker="x", ms=9, color=line[0].get_color())
+            ax.annotate(f"ran away at press {k}", (k, y), fontsize=7, xytext=(-105, 4), textcoords="offset points")
+            top = max(top, y * 10)
+    for value, text in ((0.11, "paper rings 1-2 < 0.11"), (0.48, "paper ring 3 ~0.48"), (1.15, "paper ring 4 ~1.15")):
+        ax.axhline(value, color="grey", lw=0.8, ls=":")
+        ax.text(1.02, value, text, fontsize=7, va="bottom", color="grey")
+    ax.set_yscale("symlog", linthresh=1e-3)
+    ax.set_ylim(0, top)
+    ax.set_xlim(0.7, len(rec["rows"][0]["residual_mm"]) + 0.3)
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.set_xlabel("press at the same spot")
+    ax.set_ylabel(f"residual of the contact vertex after {rec['settle_s']:g} s [mm]")
+    ax.set_title("Recovery after repeated 10 mm presses (stomach; paper Fig. 9)")
+    ax.legend(fontsize=8, loc="center right")
+    return _save(fig, path)
+
+
+def plot_force_displacement(rec, table1, path):
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.0))
+    ax = axes[0]
+    for rings, (d, f) in rec["curves"].items():
+        if rings not in ("4", "global-free"):
+            ax.plot(d, f, label=f"{rings} ring(s)")
+    for row in table1["rows"]:
+        d, f = row["curve"]
+        ax = axes[0] if row["scene"] == "stomach" else axes[1]
+        ax.plot(d, f, label=row["label"].split(", ", 1)[1], ls="--" if "global" in row["label"] else "-")
+    for ax, name, paper in ((axes[0], "stomach (surface)", 2.402), (axes[1], "liver (volume)", 2.312)):
+        ax.axhline(paper, color="grey", lw=0.8, ls=":")
+        ax.text(5.0, paper, f"paper, 4 rings at 10 mm: {paper} N", fontsize=7, va="bottom", color="grey")
+        ax.set_title(name)
+        ax.set_xlabel("displacement of the contact vertex [mm]")
+        ax.set_ylabel("feedback force [N]")
+        ax.legend(fontsize=7, loc="upper left")
+    fig.suptitle("Force against displacement during the ramp and hold (paper Fig. 10)", y=1.02)
+    return _save(fig, path)
+
+
+def plot_speed_accuracy(acc, extra, path):
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4))
+    rows = acc["rows"] + list(extra)
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["scene"], r["integrator"], r["device"]), []).append(r)
+    for (scene, integrator, device), rs in groups.items():
+        local = [r for r in rs if r["rings"] != "global" and not str(r["rings"]).startswith("auto")]
+        auto = [r for r in rs if str(r["rings"]).startswith("auto")]
+        for ax, key in ((axes[0], "force_error_N"), (axes[1], "disp_error_mm")):
+            line = ax.plot([r["step_us"] for r in local], [max(r[key], FLOOR) for r in local], marker="o", ms=4, label=f"{scene}, {integrator}, {device}")
+            for r in local:
+                ax.annotate(str(r["rings"]), (r["step_us"], max(r[key], FLOOR)), fontsize=6, xytext=(2, 2), textcoords="offset points")
+            for r in auto:  # the adaptive region: one point per tolerance, not on the fixed-ring line
+                y = max(r[key], FLOOR)
+                ax.plot([r["step_us"]], [y], marker="*", ms=8, ls="none", color=line[0].get_color(), mec="k", mew=0.4)
+                ax.annotate(f"tol {str(r['rings']).split(':', 1)[-1]}", (r["step_us"], y), fontsize=6, xytext=(3, -7), textcoords="offset points")
+            for r in rs:
+                if r["rings"] == "global":
+                    ax.plot([r["step_us"]], [FLOOR], marker="s", color=line[0].get_color(), mfc="none")
+                    ax.annotate("global", (r["step_us"], FLOOR), fontsize=6, xytext=(2, 3), textcoords="offset points")
+    for ax, label in ((axes[0], "error of the peak force at the probe [N]"), (axes[1], "largest displacement error over the mesh [mm]")):
+        ax.axvline(1000.0, color="k", lw=0.8, ls="--")
+        ax.text(1000.0, 0.5, " 1 kHz haptic budget", fontsize=7, transform=ax.get_xaxis_transform())
+        for fps, text in ((PAPER["fps_4_rings"], "paper 4 rings: 120 fps"), (PAPER["fps_global_surface"], "paper global: 34.5 fps")):
+            ax.axvline(1e6 / fps, color="grey", lw=0.8, ls=":")
+            ax.text(1e6 / fps, 0.05, " " + text, fontsize=7, rotation=90, color="grey", transform=ax.get_xaxis_transform())
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("time per step [us] (paper: per rendered frame)")
+        ax.set_ylabel(label)
+        ax.legend(fontsize=7, loc="upper right")
+    fig.suptitle(
+        "Speed against accuracy: rings 1..N against the global anchored reference "
+        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})"
+    )
+    return _save(fig, path)
+
+
+def plot_stability(stab, path):
+    plt = _plt()
+    from matplotlib.patches import Patch
+
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2), gridspec_kw={"width_ratios": [1, 1, 0.8]})
+    scales = sorted(stab["critical_dt_ms"], key=float)
+    dts = [c["dt_ms"] for c in stab["cells"]] + [stab["critical_dt_ms"][s] for s in scales]
+    ys = [float(s) for s in scales]
+    for ax, integrator in ((axes[0], "explicit"), (axes[1], "implicit")):
+        for c in stab["cells"]:
+            if c["integrator"] == integrator:
+                ax.scatter([c["dt_ms"]], [c["scale"]], marker="s", s=100, color=STATE_COLOURS[c["state"]], edgecolors="k", linewidths=0.3)
+        ax.plot([stab["critical_dt_ms"][s] for s in scales], ys, "k-", lw=1.2)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlim(min(dts) / 1.6, max(dts) * 1.6)
+        ax.set_ylim(min(ys) / 1.6, max(ys) * 1.6)
+        ax.set_xlabel("time step [ms]")
+        ax.set_ylabel("stiffness scale (k_ij and k_i)")
+        ax.set_title(f"{integrator}, 4 rings (stomach)")
+    ax = axes[2]
+    for c in stab["global_free_cells"]:
+        y = 1 if c["integrator"] == "explicit" else 0
+        ax.scatter([c["dt_ms"]], [y], marker="s", s=100, color=STATE_COLOURS[c["state"]], edgecolors="k", linewidths=0.3)
+    if stab.get("global_free_critical_dt_ms"):
+        ax.axvline(stab["global_free_critical_dt_ms"], color="k", lw=1.2)
+    ax.set_xscale("log")
+    free_dts = [c["dt_ms"] for c in stab["global_free_cells"]] + [stab.get("global_free_critical_dt_ms") or 1.0]
+    ax.set_xlim(min(free_dts) / 1.6, max(free_dts) * 1.6)
+    ax.set_yticks([0, 1], ["implicit", "explicit"])
+    ax.set_ylim(-0.7, 1.7)
+    ax.set_xlabel("time step [ms]")
+    ax.set_title("paper's global surface model\n(no anchors, no fixed ring), stiffness 1")
+    from matplotlib.lines import Line2D
+
+    handles = [Patch(color=col, label=state) for state, col in STATE_COLOURS.items()]
+    handles.append(Line2D([], [], color="k", label="critical dt of semi-implicit Euler (Model.critical_dt, linearized)"))
+    fig.legend(handles=handles, loc="lower center", ncol=5, fontsize=8, bbox_to_anchor=(0.5, -0.08))
+    fig.suptitle("Stability of a 10 mm press at the top of the stomach", y=1.06)
+    return _save(fig, path)
+
+
+def plot_anatomy_cost(anat, path):
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    rows = sorted(anat["rows"], key=lambda r: r["vertices"])
+    for subset, tag in (([r for r in rows if r["file"].startswith("mor_")], "MOR liver series"), ([r for r in rows if not r["file"].startswith("mor_")], "other meshes")):
+        if not subset:
+            continue
+        x = [r["vertices"] for r in subset]
+        ls, marker = ("-", "o") if tag.startswith("MOR") else ("none", "^")
+        ax.plot(x, [r["local_step_us"] for r in subset], ls=ls, marker=marker, color="C0", label=f"4 rings, {tag}")
+        ax.plot(x, [r["global_step_us"] for r in subset], ls=ls, marker=marker, color="C3", label=f"global, {tag}")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("mesh vertices")
+    ax.set_ylabel("time per step [us] (implicit, dt 1 ms, CPU)")
+    ax.set_title("Cost of a step against mesh size (real meshes)")
+    ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def plot_anatomy_force(anat, path):
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for i, r in enumerate(anat["rows"]):
+        d, f = r["local_curve"]
+        ax.plot(d, f, color=f"C{i % 10}", label=f"{r['file']} ({r['vertices']} v)")
+        d, f = r["global_curve"]
+        ax.plot(d, f, color=f"C{i % 10}", ls=":")
+    ax.set_xlabel("displacement of the contact vertex [mm]")
+    ax.set_ylabel("feedback force [N]")
+    ax.set_title("Force against displacement on real meshes (solid: 4 rings, dotted: global)")
+    ax.legend(fontsize=6)
+    return _save(fig, path)

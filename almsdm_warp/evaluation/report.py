@@ -1,0 +1,308 @@
+"""docs/results.md from the results of `almsdm evaluate`: the tables beside the paper's numbers,
+the figures, and what they show in words (the sentences that depend on the numbers are computed
+from them, so a rerun that changes a conclusion changes the text too)."""
+
+from __future__ import annotations
+
+import math
+
+from .common import PAPER, fmt
+from .stability import OSCILLATING, STABLE, explicit_boundary
+from .summary import _header, _stability_verdicts, _summary
+
+
+def _rings_label(rings) -> str:
+    if rings == "global-free":
+        return "global, no anchors"
+    if isinstance(rings, str) and rings.startswith("auto:"):
+        return f"auto, tol {rings.split(':', 1)[1]} mm"
+    if rings in ("global", "auto"):
+        return str(rings)
+    return f"{rings} ring{'s' if rings != 1 else ''}"
+
+
+def _recovery(r) -> list[str]:
+    rec = r["recovery"]
+    n = len(rec["rows"][0]["residual_mm"])
+    lines = [
+        "## 1. Recovery after repeated presses (paper Fig. 9)",
+        "",
+        f"{n} presses at vertex {rec['vertex']} of the stomach, explicit; residual = distance of the contact vertex "
+        f"from rest {rec['settle_s']:g} s after each release.",
+        "",
+        "| model | region vertices / springs | paper (vertices / springs) | residual after each press [mm] | paper |",
+        "|---|---|---|---|---|",
+    ]
+    for row in rec["rows"]:
+        rings = row["rings"]
+        paper_size = PAPER["regions"].get(rings)
+        lines.append(
+            f"| {_rings_label(rings)} | {row['region_vertices']} / {row['region_springs']} | "
+            f"{f'{paper_size[0]} / {paper_size[1]}' if paper_size else '-'} | "
+            f"{', '.join(fmt(x, 3) for x in row['residual_mm'])} | {PAPER['recovery_mm'].get(rings, '-')} |"
+        )
+    local = [x for row in rec["rows"] if row["rings"] != "global-free" for x in row["residual_mm"]]
+    free_row = next(row for row in rec["rows"] if row["rings"] == "global-free")
+    free = [x for x in free_row["residual_mm"] if math.isfinite(x)]
+    away = free_row.get("ran_away_at_press")
+    lines += [
+        "",
+        f"![recovery]({r['figures']['recovery']})",
+        "",
+        f"The local models come back to within {fmt(max(local), 3)} mm of rest after every press (measured in float32 "
+        "against the float32 rest position): better than the paper's, and the residual does not grow with the ring count "
+        "as the paper's does (0.48 mm at 3 rings, 1.15 mm at 4). The paper's residual is that of a model that has not "
+        "settled in its window; ours settles in tens of milliseconds (its damping is chosen for an explicit step of 1 ms, "
+        "docs/calibration.md), so this is a difference in calibration, not a better model. "
+        + (
+            f"The unanchored global surface model does not recover: {', '.join(fmt(x, 1) for x in free)} mm after the "
+            "successive presses, as in the paper (15.2 mm in its Table 1): with nothing tying the surface to its rest "
+            "shape (and no damping of absolute motion), a press leaves a dent and sets the whole mesh drifting, and the "
+            "next press, which drives the vertex back to its rest-frame target, yanks it further."
+            if free and min(free) > 1.0
+            else f"The unanchored global model's residuals: {', '.join(fmt(x, 2) for x in free)} mm."
+        )
+        + (
+            f" At press {away} it ran away (more than twice the mesh's size from rest, Palpation's divergence guard), "
+            "so the presses after it were not run (\"inf\" in the table)."
+            if away
+            else ""
+        ),
+        "",
+    ]
+    return lines
+
+
+def _table1(r) -> list[str]:
+    t = r["table1"]
+    lines = [
+        "## 2. Table 1 at 10 mm",
+        "",
+        f"One press at the top vertex; recovery error = residual {t['settle_s']:g} s after release, recovery time = until it "
+        "stays under 1% of the depth (0.1 mm). Stomach explicit, liver implicit (its explicit critical step, 0.24 ms, "
+        "is below 1 ms).",
+        "",
+        "| model | integrator | recovery error [mm] | paper | recovery time [s] | paper | peak force [N] | paper |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for row in t["rows"]:
+        p = PAPER["table1"].get(row["paper"]) if row["paper"] else None
+        pe, pt, pf = (fmt(x, 3) for x in p) if p else ("-", "-", "-")
+        rt = row["recovery_time_s"]
+        rt_text = fmt(rt, 3) if math.isfinite(rt) else f"> {t['settle_s']:g} (never)"
+        who = f" ({row['paper']})" if row["paper"] else ""
+        lines.append(
+            f"| {row['label']}{who} | {row['integrator']} | {fmt(row['recovery_error_mm'], 3)} | {pe} | {rt_text} | {pt} | "
+            f"{fmt(row['peak_force_N'], 3)} | {pf} |"
+        )
+    rows = {row["label"]: row for row in t["rows"]}
+    s4, sg = rows["stomach, 4 rings"], rows["stomach, global anchored"]
+    l4 = rows["liver, 4 rings"]
+    lines += [
+        "",
+        f"Forces: the 4-ring models give {s4['peak_force_N']:.2f} N (stomach) and {l4['peak_force_N']:.2f} N (liver), within "
+        f"{100 * abs(s4['peak_force_N'] / 2.402 - 1):.0f}% and {100 * abs(l4['peak_force_N'] / 2.312 - 1):.0f}% of the paper's "
+        "2.402 and 2.312 N (the scenes are calibrated to them at 4 rings, over a median of contact vertices). "
+        f"The anchored global model gives {sg['peak_force_N']:.3f} N on the stomach, the 4-ring local model "
+        f"{s4['peak_force_N']:.3f} N: with anchors the deformation dies out within a few rings. "
+        "Where we fall short of the paper: recovery times. Ours are tens of milliseconds where the paper's are 0.25-1 s, "
+        "because our damping is set for explicit stability at 1 ms, not to match the paper's (unstated) units; the "
+        "paper's global volume model recovers, and we could only match that with anchors (our unanchored liver drifts away). "
+        "The unanchored models' peak force is that of a mesh pushed as a whole, not of tissue (no anchors resist the probe).",
+        "",
+    ]
+    return lines
+
+
+def _fig10(r) -> list[str]:
+    return [
+        "## 3. Force against displacement (paper Fig. 10)",
+        "",
+        f"![force against displacement]({r['figures']['force_displacement']})",
+        "",
+        "On the stomach (a surface) the force stiffens with depth: the anchor springs of eq. (3) carry the reaction at "
+        "first, and the edge springs add theirs as they stretch (second order in the depth, docs/calibration.md); on the "
+        "liver (a volume, springs on tet edges at every angle) it is close to linear. One ring is stiffer than the rest "
+        "(its fixed outer ring is one edge from the probe); from 2 rings on, the curves lie on the global anchored model's. "
+        "The unanchored models carry almost no force: the probe pushes the mesh as a whole. The paper's Fig. 10 curves "
+        "are not given as numbers; its 10 mm forces are marked.",
+        "",
+    ]
+
+
+def _table2(r) -> list[str]:
+    t = r["table2"]
+    strategies = t["strategies"]
+    head = "| model | integrator | region vertices | step [us] | steps/s |"
+    sep = "|---|---|---|---|---|"
+    if strategies:
+        head += "".join(f" frames/s, {s} normals |" for s in strategies)
+        sep += "---|" * len(strategies)
+    head += " paper frames/s (global / local / precomputed normals) |"
+    sep += "---|"
+    lines = ["## 4. Table 2: steps and frames per second", "", head, sep]
+    slowest = min((row for row in t["rows"] if isinstance(row["rings"], int)), key=lambda row: row["steps_per_s"])
+    for row in t["rows"]:
+        p = PAPER["table2_fps"].get(row["paper"])
+        cells = f"| {row['label']} | {row['integrator']} | {row['region_vertices']} | {row['step_us']:.1f} | {row['steps_per_s']:,.0f} |"
+        if strategies:
+            cells += "".join(f" {row['fps'][s]:,.0f} |" for s in strategies)
+        lines.append(cells + f" {' / '.join(p) if p else '-'} |")
+    lines.append("")
+    if not strategies:
+        lines.append(
+            "Normals strategies not available: almsdm_warp.normals (issue 4) is not in this build, so the frames-per-second "
+            "columns with each normals strategy are missing; the hook is `evaluate_paper.find_normals_strategies()`."
+        )
+    lines += [
+        "",
+        "The paper's frame rates include rendering and are capped by the display (~120 Hz); ours are the simulation alone "
+        "(one graph-replayed step and the force read back), so the comparison says only whether the physics is still the "
+        + (
+            "limit: it is not, every local model here runs above the 1 kHz haptic rate on one CPU core "
+            f"(the slowest, {slowest['label']}, at {slowest['steps_per_s']:,.0f} steps/s)."
+            if slowest["steps_per_s"] > 1000
+            else f"limit: {slowest['label']} runs at {slowest['steps_per_s']:,.0f} steps/s, below the 1 kHz haptic rate."
+        ),
+        "",
+    ]
+    return lines
+
+
+def _accuracy(r) -> list[str]:
+    a = r["accuracy"]
+    lines = [
+        "## 5. Speed against accuracy",
+        "",
+        f"Error against the global anchored model (same integrator, same dt) at the end of the hold, median over "
+        f"{a['contacts']} contact vertices spread over the surface (max in brackets); the step timed at the first (the top "
+        "vertex) with the probe held 5 mm in.",
+        "",
+        f"![speed against accuracy]({r['figures']['speed_accuracy']})",
+        "",
+        "| mesh | integrator | rings | region vertices | step [us] | peak-force error [N] | largest displacement error [mm] |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in a["rows"] + a.get("extra", []):
+        dev = "" if row["device"] == "cpu" else f" ({row['device']})"
+        lines.append(
+            f"| {row['scene']}{dev} | {row['integrator']} | {row['rings']} | {row['region_vertices']} | {row['step_us']:.1f} | "
+            f"{fmt(row['force_error_N'], 4)} ({fmt(row['force_error_max_N'], 4)}) | {fmt(row['disp_error_mm'], 3)} ({fmt(row['disp_error_max_mm'], 3)}) |"
+        )
+    if a["not_available"]:
+        lines += ["", "Rings `auto` not available: the adaptive region (issue 7) is not in this build; the hook is `evaluate_accuracy.find_auto_factory()`."]
+    lines.append("")
+    for scene, integrator in sorted({(x["scene"], x["integrator"]) for x in a["rows"]}):
+        rows = [x for x in a["rows"] if x["scene"] == scene and x["integrator"] == integrator]
+        glob = next((x for x in rows if x["rings"] == "global"), None)
+        ok = [x for x in rows if isinstance(x["rings"], int) and x["disp_error_max_mm"] < 0.1]
+        if glob and ok:
+            best = min(ok, key=lambda x: x["rings"])
+            lines.append(
+                f"- {scene}, {integrator}: {best['rings']} rings are within 0.1 mm of the global model everywhere on the mesh "
+                f"({fmt(best['disp_error_max_mm'], 3)} mm, force within {fmt(best['force_error_max_N'], 4)} N) at "
+                f"{best['step_us']:.1f} us a step, {glob['step_us'] / best['step_us']:.0f}x faster than the global model "
+                f"({glob['step_us']:.0f} us)."
+            )
+        elif glob:
+            lines.append(f"- {scene}, {integrator}: no ring count up to {max(x['rings'] for x in rows if isinstance(x['rings'], int))} is within 0.1 mm of the global model.")
+    lines += [
+        "",
+        "The paper has no accuracy measure against a reference; its operating points are drawn as frame times "
+        "(4 rings at >= 120 frames/s, the global surface model at 34.5), which include rendering.",
+        "",
+    ]
+    return lines
+
+
+def _stability(r) -> list[str]:
+    s = r["stability"]
+    lines = [
+        "## 6. Stability map",
+        "",
+        f"A 10 mm press (ramp {s['press']['ramp_s']:g} s, hold {s['press']['hold_s']:g} s, settle {s['press']['settle_s']:g} s) "
+        f"at vertex {s['vertex']} of the stomach, 4 rings; every stiffness (k_ij and k_i) scaled, masses and dampers kept. "
+        "Stable: the contact vertex comes back within 1% of the depth and stays; oscillating: it still swings by more than "
+        "that at the end of the window; not recovered: it settles away from rest; diverged: non-finite or running away.",
+        "",
+        f"![stability map]({r['figures']['stability']})",
+        "",
+        "| stiffness scale | critical dt [ms] | explicit: largest stable dt / smallest diverged dt [ms] | implicit: states over dt |",
+        "|---|---|---|---|",
+    ]
+    bound = explicit_boundary(s)
+    for scale, (stable, diverged) in bound.items():
+        crit = s["critical_dt_ms"][str(scale)]
+        imp = [c for c in s["cells"] if c["scale"] == scale and c["integrator"] == "implicit"]
+        states = sorted({c["state"] for c in imp})
+        lines.append(f"| {scale:g} | {crit:.3g} | {fmt(stable, 3, 'none')} / {fmt(diverged, 3, 'none')} | {', '.join(states)} |")
+    implicit_states = {c["state"] for c in s["cells"] if c["integrator"] == "implicit"}
+    agree = _stability_verdicts(s)[1]
+    osc = [c for c in s["cells"] if c["state"] == OSCILLATING]
+    free = s["global_free_cells"]
+    lines += [
+        "",
+        ("The explicit boundary agrees with the linearized critical step at every stiffness: stable below it, diverged above."
+         if agree else "The explicit boundary does not agree everywhere with the linearized critical step (see the table): "
+         "the estimate is linear, a deep press adds geometric stiffness."),
+        ("The implicit integrator is stable in every cell." if implicit_states == {STABLE}
+         else f"The implicit integrator's states: {', '.join(sorted(implicit_states))}."),
+        (f"{len(osc)} of the 4-ring cells oscillate without settling." if osc else "No 4-ring cell oscillated without settling: "
+         "between stable and diverged there is no band of sustained oscillation at this damping; the explicit scheme goes from "
+         "damped to divergent within one grid step."),
+        f"The paper's global surface model (no anchors, whole-mesh critical step {fmt(s['global_free_critical_dt_ms'], 3)} ms): "
+        + "; ".join(_states_by_dt(free, integrator) for integrator in ("explicit", "implicit"))
+        + ". Where it does not diverge it still never returns to rest: that model, not the integrator, is what fails.",
+        "",
+    ]
+    if s.get("global_critical_dt_ms"):
+        lines += [f"(The anchored global model's whole-mesh critical step: {s['global_critical_dt_ms']:.3g} ms.)", ""]
+    return lines
+
+
+def _states_by_dt(cells, integrator) -> str:
+    """"explicit: stable at 0.1-1 ms, diverged at 2-20 ms" for one integrator's cells."""
+    groups = {}
+    for c in sorted((c for c in cells if c["integrator"] == integrator), key=lambda c: c["dt_ms"]):
+        groups.setdefault(c["state"], []).append(f"{c['dt_ms']:g}")
+    return f"{integrator} " + ", ".join(f"{state} at {'/'.join(dts)} ms" for state, dts in groups.items())
+
+
+def _anatomy(r) -> list[str]:
+    a = r["anatomy"]
+    lines = ["## 7. Real anatomy", ""]
+    if not a["rows"]:
+        return lines + ["The shared meshes (../shared/meshes) were absent: nothing run.", ""]
+    lines += [
+        f"Meshes from `{a['folder']}` (not copied into the repository). Surfaces with the stomach scene's tissue, tet meshes "
+        "with the liver's; implicit, dt 1 ms, the top vertex.",
+        "",
+        "| mesh | vertices | x mm/unit | 4-ring region | peak force 4 rings / global [N] | residual 4 rings, each press [mm] | residual global no anchors [mm] | step 4 rings / global [us] |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for row in a["rows"]:
+        lines.append(
+            f"| {row['file']} | {row['vertices']} | {row['scale_mm']:g} | {row['region_vertices']} | "
+            f"{row['local_peak_force_N']:.3f} / {row['global_peak_force_N']:.3f} | {', '.join(fmt(x, 3) for x in row['local_residual_mm'])} | "
+            f"{fmt(row['free_residual_mm'], 2, 'not run (large)')} | {row['local_step_us']:.1f} / {row['global_step_us']:.1f} |"
+        )
+    mor = sorted((x for x in a["rows"] if x["file"].startswith("mor_")), key=lambda x: x["vertices"])
+    lines += ["", f"![cost against mesh size]({r['figures']['anatomy_cost']})", "", f"![force on real meshes]({r['figures']['anatomy_force']})", ""]
+    if len(mor) >= 2:
+        lo, hi = mor[0], mor[-1]
+        lines.append(
+            f"MOR liver series, {lo['vertices']} to {hi['vertices']} vertices ({hi['vertices'] / lo['vertices']:.0f}x): "
+            f"the 4-ring step goes {lo['local_step_us']:.1f} -> {hi['local_step_us']:.1f} us "
+            f"({hi['local_step_us'] / lo['local_step_us']:.1f}x), the global step {lo['global_step_us']:.0f} -> "
+            f"{hi['global_step_us']:.0f} us ({hi['global_step_us'] / lo['global_step_us']:.0f}x). The local step follows its "
+            f"region, not the mesh: 4 rings hold {', '.join(str(x['region_vertices']) for x in mor)} vertices along the series "
+            "(the smallest meshes are covered almost whole)."
+        )
+    lines.append("")
+    return lines
+
+
+def render_results(r) -> str:
+    lines = _header(r) + _summary(r) + _recovery(r) + _table1(r) + _fig10(r) + _table2(r) + _accuracy(r) + _stability(r) + _anatomy(r)
+    return "\n".join(lines).rstrip() + "\n"
+

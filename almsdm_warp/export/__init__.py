@@ -1,0 +1,1 @@
+"""Export: atomic writes, USD stages, pictures."""

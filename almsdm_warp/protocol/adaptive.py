@@ -1,0 +1,287 @@
+"""The adaptive region: grown ring by ring during a press to a displacement tolerance, retired at rest.
+
+Criterion (docs/adaptive.md). A region of N rings holds ring N at rest; against the global
+anchored model its largest displacement error is then the displacement ring N has in the global
+model (measured: equal to 4 digits on the stomach and the liver). Every few steps one kernel
+(kernels/ring_motion.py) returns the largest displacement of each free ring and a one-step Jacobi
+estimate u_J of the fixed ring's (each fixed vertex freed alone, its neighbours held). For a chain
+with anchors the Jacobi ratio rho = u_J / u_(N-1) is lambda / (1 + lambda^2), lambda the decay per
+ring, and freeing the whole far field multiplies u_J by (1 + lambda^2) / (1 - lambda^2): that is
+the estimate e_N of ring N's displacement (0.77-1.05 of the true value on the scenes and the
+shared meshes). The
+region grows while e_N * MARGIN > tol, or while the probe force error it implies, k_1 e_N^2 / u_1
+(the error ring 1 inherits, times the probe's spring stiffness), is over half the force tolerance.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import warp as wp
+
+from ..kernels.region_state import reset_vertices_left_behind
+from ..kernels.ring_motion import eval_region_motion
+from ..sim.model import PROBE_OFF
+from .palpation import Palpation, _replayer
+
+MARGIN = 1.2
+"""Safety factor on the fixed-ring estimate (it read 0.77-1.05 of the true value: docs/adaptive.md)."""
+FORCE_TOL = 0.01
+"""Relative peak-force error the region is grown to stay under (the estimate is held to half of it)."""
+
+
+def fixed_ring_estimate(jacobi: float, outer_free: float) -> tuple[float, float]:
+    """(e_N, lambda): ring N's displacement had it been free, from the Jacobi estimate at ring N and
+    the largest displacement of ring N - 1 (any unit); lambda = 1 and e_N = inf when they do not decay."""
+    if outer_free <= 0.0:
+        return (0.0, 0.0) if jacobi <= 0.0 else (math.inf, 1.0)
+    rho = jacobi / outer_free
+    if rho >= 0.5:
+        return math.inf, 1.0
+    lam = (1.0 - math.sqrt(1.0 - 4.0 * rho * rho)) / (2.0 * rho) if rho > 0.0 else 0.0
+    return jacobi * (1.0 + lam * lam) / (1.0 - lam * lam), lam
+
+
+class AdaptivePalpation(Palpation):
+    """A Palpation whose region is sized to `tol` [m] as it is pressed (``--rings auto --tol-mm``).
+
+    It starts with `start_rings` rings at touch(); every `check_interval` [s] of simulated time
+    it reads the ring motion and expands while the criterion above asks for it (up to
+    `max_rings`). With the probe off, a region whose every free vertex is back within `tol` of
+    rest is retired (its vertices put at rest, nothing integrated) when `retire` is set; the next
+    press rebuilds it. ``rings_chosen`` and ``auto_reason`` say how large it grew and why.
+    """
+
+    def __init__(self, mesh, tissue=None, *, tol=1e-4, start_rings=1, max_rings=64, check_interval=0.01, retire=True,
+                 force_tol=FORCE_TOL, margin=MARGIN, **kw):
+        if "rings" in kw:
+            raise TypeError("AdaptivePalpation sizes its own region: give tol (and start_rings), not rings")
+        if not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol > 0):
+            raise ValueError(f"tol must be a length > 0 [m], got {tol!r}")
+        if not (isinstance(start_rings, (int, np.integer)) and 1 <= start_rings <= max_rings):
+            raise ValueError(f"start_rings must be an int in 1..max_rings ({max_rings}), got {start_rings!r}")
+        if not (math.isfinite(check_interval) and check_interval > 0):
+            raise ValueError(f"check_interval must be > 0 [s], got {check_interval}")
+        super().__init__(mesh, tissue, rings=int(start_rings), **kw)
+        self.tol = float(tol)
+        self.start_rings = int(start_rings)
+        self.max_rings = int(max_rings)
+        self.force_tol = float(force_tol)
+        self.margin = float(margin)
+        self.retire = bool(retire)
+        self.check_steps = max(int(round(check_interval / self.dt)), 1)
+        self.retired = False
+        self.rings_chosen = 0
+        """The most rings the region had since the last touch()."""
+        self._reason = "not pressed yet"
+        self._within = None
+        self.events = []
+        """dict(step, event ("+k" rings or "retired"), rings, estimate_mm) for each since touch(): the
+        fixed ring's estimated displacement that made it grow, or the region's largest at retirement."""
+        self._countdown = self.check_steps
+        self._steps = 0
+        self._k1 = 0.0
+        self._outer = 0
+        self._motion_graphs = None
+        slots = self.max_rings + 2
+        self._motion = wp.zeros(slots, dtype=wp.float32, device=self.device)
+        if self._cpu:
+            self._motion_host = self._motion.numpy()  # a view: the kernel writes it in place
+        else:
+            self._motion_pinned = wp.zeros(slots, dtype=wp.float32, device="cpu", pinned=True)
+            self._motion_host = self._motion_pinned.numpy()
+        self._zero_force = np.zeros(3, dtype=np.float32)
+        self.press_log = []
+        """Per press(): dict(rings, reason, events): the rings it grew to and why."""
+
+    # -- the region ----------------------------------------------------------------------------
+    def touch(self, vertex: int) -> None:
+        """Put the probe on `vertex` with a fresh region of `start_rings` rings."""
+        self.rings = self.start_rings
+        super().touch(vertex)
+        self.retired = False
+        self._outer = self.region.outer_ring  # Region.outer_ring scans the ring sizes: kept here
+        self.rings_chosen = self._outer
+        self.auto_reason = "not pressed yet"
+        self.events = []
+        self._countdown = self.check_steps
+        self._steps = 0
+        self._motion_graphs = None
+        # the probe's springs: how much an error on ring 1 moves the feedback force, eq. (4)
+        dm = self.model.dmesh
+        off = dm.adj_offsets.numpy()
+        edges = dm.adj_edge.numpy()[off[vertex] : off[vertex + 1]]
+        self._k1 = float(self.model._ke_host[edges].sum())
+
+    def expand(self, rings: int = 1) -> None:
+        super().expand(rings)
+        self._motion_graphs = None
+        self._outer = self.region.outer_ring
+        self.rings_chosen = max(self.rings_chosen, self._outer)
+
+    @property
+    def auto_reason(self) -> str:
+        """Why the region has the size it has: the last check's verdict, in words (mm)."""
+        if self._within is not None:
+            n, est, ferr = self._within
+            return (
+                f"ring {n} (fixed) would move {est * 1e3:.3g} mm if freed (estimated; x{self.margin:g} <= tol "
+                f"{self.tol * 1e3:g} mm) and the force error it implies is {ferr:.2%} (<= {0.5 * self.force_tol:.2%})"
+            )
+        return self._reason
+
+    @auto_reason.setter
+    def auto_reason(self, text: str) -> None:
+        self._reason = text
+        self._within = None
+
+    def rebuild(self, rings: int, *, retire: bool | None = None) -> None:
+        """Touch the same vertex again with a region of `rings` rings (and set `retire`)."""
+        self.touch(self.vertex)
+        if rings > self.region.outer_ring:
+            self.expand(rings - self.region.outer_ring)
+        if retire is not None:
+            self.retire = bool(retire)
+
+    def retire_region(self) -> None:
+        """Put the region's vertices at rest in both states and integrate nothing until the next touch."""
+        region = self.region
+        count = region.vertex_count
+        if count:
+            old = wp.clone(region.region_vertex[:count])
+            region.clear()
+            reset_vertices_left_behind(self.model, old, count, region, self.states)
+        self.solver.set_region(region)
+        self._graphs = None
+        self._motion_graphs = None
+        self.retired = True
+        self._outer = 0
+
+    # -- stepping ------------------------------------------------------------------------------
+    def step(self) -> np.ndarray:
+        """One step of dt (nothing once retired); every `check_steps` steps, the ring check."""
+        if self.retired:
+            return self._zero_force
+        replays = self._graphs
+        if replays is None:
+            force = self._step_setup()
+        else:  # Palpation.step written out: one Python call less per step
+            replay = replays[self._cur]
+            self._cur ^= 1
+            replay()
+            force = self._force_view
+        self._countdown -= 1
+        if self._countdown <= 0:
+            self._countdown = self.check_steps
+            self._steps += self.check_steps
+            self._check()
+        return force
+
+    def ring_motion(self) -> np.ndarray:
+        """[Jacobi estimate at the fixed ring, max displacement of ring 0, ring 1, ...] [m] (host view)."""
+        graphs = self._motion_graphs
+        if graphs is None:
+            graphs = self._capture_motion()
+        graphs[self._cur]()
+        return self._motion_host
+
+    def _launch_motion(self, state):
+        eval_region_motion(self.model, self.region, state, self._motion)
+        if not self._cpu:
+            wp.copy(self._motion_pinned, self._motion)
+
+    def _capture_motion(self):
+        self._launch_motion(self.state)  # loads the module outside any capture
+        if not self.capture:
+            def launcher(state):
+                def launch():
+                    self._launch_motion(state)
+                    if not self._cpu:
+                        wp.synchronize_device(self.device)
+
+                return launch
+
+            self._motion_graphs = [launcher(s) for s in self.states]
+            return self._motion_graphs
+        graphs = []
+        for s in self.states:
+            with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
+                self._launch_motion(s)
+            graphs.append(_replayer(cap.graph, self.device))
+        self._motion_graphs = graphs
+        return graphs
+
+    def estimate(self, motion=None):
+        """(e_N [m], force error estimate (relative), lambda) of the current region and state."""
+        m = self.ring_motion() if motion is None else motion
+        n = self._outer
+        if n == 0:  # the region is its seed alone: nothing fixed
+            return 0.0, 0.0, 0.0
+        est, lam = fixed_ring_estimate(float(m[0]), float(m[n]))
+        fx, fy, fz = (float(c) for c in self._force_view)
+        f = math.sqrt(fx * fx + fy * fy + fz * fz)
+        u1 = est if n == 1 else float(m[2])
+        e1 = est if n == 1 else (est * est / u1 if u1 > 0 else 0.0)
+        ferr = self._k1 * e1 / f if f > 0 else 0.0
+        return est, ferr, lam
+
+    def _check(self) -> None:
+        m = self.ring_motion()
+        region = self.region
+        n = self._outer
+        if self._mode[0] == PROBE_OFF:
+            moved = float(m[1 : n + 1].max(initial=0.0)) if n else float(m[1])
+            if self.retire and moved <= self.tol:
+                self._event("retired", n, moved)
+                self.retire_region()
+            return
+        est, ferr, lam = self.estimate(m)
+        tol, half = self.tol, 0.5 * self.force_tol
+        if est * self.margin <= tol and ferr <= half:
+            self._within = (n, est, ferr)  # formatted only when auto_reason is read
+            return
+        if n >= self.max_rings:
+            self.auto_reason = f"stopped at max_rings {self.max_rings}: ring {n} would move {est * 1e3:.3g} mm"
+            return
+        grow = 1
+        if 0.0 < lam < 1.0 and math.isfinite(est) and est * self.margin > tol:
+            # k more rings put the fixed ring at about e_N lambda^k: enough when that x margin <= tol (the
+            # decay measured so far only slows outward, so this under-grows rather than over-grows)
+            grow = min(max(int(math.ceil(math.log(tol / (self.margin * est)) / math.log(lam))), 1), 3)
+        grow = min(grow, self.max_rings - n)
+        size = region.vertex_count
+        self.expand(grow)
+        self._event(f"+{grow}", self.region.outer_ring, est)
+        if self.region.vertex_count == size:
+            self.auto_reason = f"the region covers the mesh component ({size} vertices)"
+            self.max_rings = self.region.outer_ring  # nothing more to grow into
+        else:
+            self.auto_reason = f"grew to {self.region.outer_ring} rings: ring {n} would have moved {est * 1e3:.3g} mm"
+
+    def _event(self, what, rings, length):
+        estimate = round(length * 1e3, 6) if math.isfinite(length) else None
+        self.events.append({"step": self._steps, "event": what, "rings": int(rings), "estimate_mm": estimate})
+
+    # -- the press protocol --------------------------------------------------------------------
+    def press(self, *args, **kw):
+        """Palpation.press, on a region rebuilt from `start_rings` if the last one was retired."""
+        return self._logged(super().press, args, kw)
+
+    def press_force(self, *args, **kw):
+        """Palpation.press_force, on a region rebuilt from `start_rings` if the last one was retired."""
+        return self._logged(super().press_force, args, kw)
+
+    def _logged(self, press, args, kw):
+        if self.vertex < 0:
+            raise RuntimeError("touch(vertex) first: the probe is on no vertex")
+        if self.retired:
+            self.touch(self.vertex)
+        result = press(*args, **kw)
+        self.press_log.append({"rings": int(self.rings_chosen), "reason": self.auto_reason, "events": list(self.events)})
+        return result
+
+
+def make_auto_palpation(mesh, tissue=None, *, integrator="explicit", dt=1e-3, device=None, tol=1e-4):
+    """An AdaptivePalpation at tolerance `tol` [m]: the "auto" points of `almsdm evaluate`."""
+    return AdaptivePalpation(mesh, tissue, tol=tol, integrator=integrator, dt=dt, device=device)

@@ -1,0 +1,364 @@
+"""Several probes at once, each with its own region; regions that touch merge into one.
+
+The same Model, States and SolverALMSDM as one Palpation: a *patch* is a region with its own
+solver, and every patch's step (plus the drive of its probes' vertices) goes into one captured
+graph. Regions are grown from several seeds (kernels/multi_probe.py), so merging two patches is
+rebuilding one region from both probes' vertices with the larger ring count, which holds both.
+With `tol` and no `rings`, each patch grows as AdaptivePalpation's region does (the criterion in
+almsdm_warp.adaptive) and, once all its probes are off and it is back within `tol` of rest, is
+retired. Probes are displacement-controlled (PROBE_DISPLACEMENT) or off (PROBE_OFF).
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import warp as wp
+
+from .adaptive import FORCE_TOL, MARGIN, fixed_ring_estimate
+from ..mesh.device_mesh import check_vertex
+from ..kernels.multi_probe import drive_probe_vertices, seed_region_rings
+from ..kernels.region_state import reset_vertices_left_behind
+from ..kernels.ring_motion import eval_region_motion
+from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
+from .palpation import PressResult, _replayer
+from ..region.region import Region, check_rings
+from ..solvers.solver import SolverALMSDM
+
+
+class MultiRegion(Region):
+    """A Region grown from one or more seed vertices: ring r holds the vertices r hops from the nearest."""
+
+    def build_seeds(self, seeds, rings: int) -> "MultiRegion":
+        seeds = np.unique(np.asarray([check_vertex(self.dmesh.mesh, int(s)) for s in seeds], dtype=np.int32))
+        if len(seeds) == 0:
+            raise ValueError("a region needs at least one seed vertex")
+        rings = check_rings(rings)
+        self.clear()
+        seed_region_rings(self, wp.array(seeds, dtype=wp.int32, device=self.device))
+        self.region_count.fill_(len(seeds))
+        self.seed = int(seeds[0])
+        self.seeds = seeds
+        self.rings = 0
+        self.ring_offsets = np.array([0, len(seeds)], dtype=np.int64)
+        self._grow(rings)
+        return self
+
+
+class _Probes:
+    """Per-probe vertex, mode, target [m] and reaction [N] on the device, with host views."""
+
+    def __init__(self, vertices, device):
+        n = len(vertices)
+        self.probe_vertex = wp.array(np.asarray(vertices, dtype=np.int32), dtype=wp.int32, device=device)
+        self.probe_mode = wp.zeros(n, dtype=wp.int32, device=device)
+        self.probe_target = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.probe_reaction = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.cpu = wp.get_device(device).is_cpu
+        if self.cpu:
+            self.mode, self.target, self.reaction = (a.numpy() for a in (self.probe_mode, self.probe_target, self.probe_reaction))
+        else:
+            self.pinned = [wp.zeros(n, dtype=t, device="cpu", pinned=True) for t in (wp.int32, wp.vec3, wp.vec3)]
+            self.mode, self.target, self.reaction = (a.numpy() for a in self.pinned)
+
+    def copy_in(self):
+        if not self.cpu:
+            wp.copy(self.probe_mode, self.pinned[0])
+            wp.copy(self.probe_target, self.pinned[1])
+
+    def copy_out(self):
+        if not self.cpu:
+            wp.copy(self.pinned[2], self.probe_reaction)
+
+
+class Patch:
+    """One region, the probes in it, and the solver that steps it."""
+
+    def __init__(self, owner, probes, rings):
+        self.probes = sorted(probes)
+        seeds = owner.vertices[self.probes]
+        self.region = MultiRegion(owner.model.dmesh).build_seeds(seeds, rings)
+        self.solver = SolverALMSDM(owner.model, owner.integrator, **owner.solver_kw)
+        self.patch_probe = wp.array(np.asarray(self.probes, dtype=np.int32), dtype=wp.int32, device=owner.device)
+        self.motion = wp.zeros(owner.max_rings + 2, dtype=wp.float32, device=owner.device)
+        self.rings_chosen = self.region.outer_ring
+        self.reason = "not pressed yet"
+        self.events = []
+
+    def vertices(self) -> np.ndarray:
+        return self.region.vertices()
+
+    def set_driven(self, model, driven_vertices):
+        """Give the solver the region's free vertices but the driven ones (which it then holds)."""
+        region = self.region
+        verts = region.vertices()
+        nfree = region.free_count
+        held = np.isin(verts[:nfree], driven_vertices)
+        free, driven = verts[:nfree][~held], verts[:nfree][held]  # the region's ring order kept
+        order = np.concatenate([free, driven, verts[nfree:]]).astype(np.int32)
+        local = np.full(model.particle_count, -1, dtype=np.int32)
+        local[order] = np.arange(len(order), dtype=np.int32)
+        d = model.device
+        self.view = SimpleNamespace(
+            region_vertex=wp.array(order, dtype=wp.int32, device=d),
+            free_count=len(free),
+            vertex_local=wp.array(local, dtype=wp.int32, device=d),
+        )
+        self.solver.set_region(self.view)
+
+
+class MultiPalpation:
+    """Several probes on one organ: a region per probe, merged where they touch.
+
+    rings: an int (every region that many rings, no growth) or None with `tol` [m] (adaptive).
+    The other parameters are AdaptivePalpation's. Probe i holds ``vertices[i]``.
+    """
+
+    def __init__(self, mesh, tissue=None, *, tol=1e-4, rings=None, integrator="explicit", dt=1e-3, device=None,
+                 start_rings=1, max_rings=64, check_interval=0.01, retire=True, force_tol=FORCE_TOL, margin=MARGIN,
+                 capture=True, **solver_kw):
+        if rings is not None:
+            start_rings = check_rings(rings)
+            if start_rings < 1:
+                raise ValueError(f"rings must be >= 1, got {rings}")
+        if not (math.isfinite(tol) and tol > 0):
+            raise ValueError(f"tol must be a length > 0 [m], got {tol!r}")
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be > 0, got {dt}")
+        self.model = Model(mesh, tissue, device)
+        self.device = self.model.device
+        self.mesh = self.model.mesh
+        self.integrator = integrator
+        SolverALMSDM(self.model, integrator)  # checks the integrator's name now, not at the first touch
+        self.solver_kw = solver_kw
+        self.adaptive = rings is None
+        self.tol, self.dt = float(tol), float(dt)
+        self.start_rings, self.max_rings = int(start_rings), int(max(max_rings, start_rings))
+        self.force_tol, self.margin, self.retire = float(force_tol), float(margin), bool(retire)
+        self.capture = bool(capture)
+        self.check_steps = max(int(round(check_interval / self.dt)), 1)
+        self.states = [self.model.state(), self.model.state()]
+        self._cur = 0
+        self._off = self.model.control()  # every solver's own probe is off: drive_probes holds the probes
+        self.patches = []
+        self.retired = []
+        """dict(probes, rings, events) of each patch retired since touch()."""
+        self.vertices = np.zeros(0, dtype=np.int32)
+        self._graphs = None
+        self._dirty = True
+
+    @property
+    def state(self):
+        return self.states[self._cur]
+
+    # -- probes --------------------------------------------------------------------------------
+    def touch(self, vertices) -> None:
+        """Put probe i on `vertices[i]` (all off), each with a fresh region; touching regions merge."""
+        vertices = np.asarray([check_vertex(self.mesh, int(v), "contact vertex") for v in vertices], dtype=np.int32)
+        if len(vertices) == 0 or len(np.unique(vertices)) != len(vertices):
+            raise ValueError(f"touch() needs one or more distinct contact vertices, got {vertices.tolist()}")
+        for patch in list(self.patches):
+            self._retire(patch)
+        self.vertices = vertices
+        self.probes = _Probes(vertices, self.device)
+        self.reaction = self.probes.reaction  # a view that every step updates
+        off = self.model.dmesh.adj_offsets.numpy()
+        edges = self.model.dmesh.adj_edge.numpy()
+        self._k1 = np.array([self.model._ke_host[edges[off[v] : off[v + 1]]].sum() for v in vertices])
+        self._driven = np.zeros(len(vertices), dtype=bool)
+        self._countdown = self.check_steps
+        self._steps = 0
+        self.retired = []
+        for i in range(len(vertices)):
+            self.patches.append(Patch(self, [i], self.start_rings))
+        self._merge()
+        self._dirty = True
+
+    def set_probes(self, modes, targets=None) -> None:
+        """Every probe's mode (PROBE_OFF / PROBE_DISPLACEMENT; one or one per probe) and target [m]."""
+        mode = self.probes.mode
+        mode[:] = modes
+        if not np.all((mode == PROBE_OFF) | (mode == PROBE_DISPLACEMENT)):
+            bad = mode[(mode != PROBE_OFF) & (mode != PROBE_DISPLACEMENT)]
+            mode[:] = PROBE_OFF
+            raise ValueError(f"probe modes are PROBE_OFF (0) or PROBE_DISPLACEMENT (1) here, got {bad.tolist()}")
+        if targets is not None:
+            self.probes.target[:] = targets
+        driven = self.probes.mode == PROBE_DISPLACEMENT
+        if not np.array_equal(driven, self._driven):
+            self._driven = driven
+            self._dirty = True
+
+    def patch_of(self, probe: int):
+        """The patch holding probe `probe`, or None when its region is retired."""
+        return next((p for p in self.patches if probe in p.probes), None)
+
+    def rest_positions(self) -> np.ndarray:
+        return self.mesh.vertices[self.vertices].astype(np.float32).astype(np.float64)
+
+    def inward_normals(self) -> np.ndarray:
+        return -self.model.vertex_normal_rest[self.vertices]
+
+    def positions(self) -> np.ndarray:
+        return self.state.particle_q.numpy().astype(np.float64)
+
+    # -- patches -------------------------------------------------------------------------------
+    def _retire(self, patch):
+        region = patch.region
+        count = region.vertex_count
+        if count:
+            old = wp.clone(region.region_vertex[:count])
+            region.clear()
+            reset_vertices_left_behind(self.model, old, count, region, self.states)
+        self.patches.remove(patch)
+        self._dirty = True
+
+    def _merge(self):
+        """Rebuild any two patches whose regions share a vertex as one, until none do."""
+        merged = True
+        while merged:
+            merged = False
+            sets = [p.vertices() for p in self.patches]
+            for a in range(len(self.patches)):
+                for b in range(a + 1, len(self.patches)):
+                    if len(np.intersect1d(sets[a], sets[b], assume_unique=True)):
+                        pa, pb = self.patches[a], self.patches[b]
+                        rings = max(pa.region.outer_ring, pb.region.outer_ring)
+                        both = Patch(self, pa.probes + pb.probes, rings)
+                        merge = {"step": self._steps, "event": "merged", "rings": int(rings), "probes": both.probes}
+                        both.events = pa.events + pb.events + [merge]
+                        both.rings_chosen = max(pa.rings_chosen, pb.rings_chosen, rings)
+                        self.patches = [p for p in self.patches if p is not pa and p is not pb] + [both]
+                        merged = True
+                        break
+                if merged:
+                    break
+        self._dirty = True
+
+    def _rebuild(self):
+        # a pressed probe whose region was retired gets a fresh one
+        held = {i for p in self.patches for i in p.probes}
+        for i in np.flatnonzero(self._driven):
+            if int(i) not in held:
+                self.patches.append(Patch(self, [int(i)], self.start_rings))
+        self._merge()
+        driven = self.vertices[self._driven]
+        for p in self.patches:
+            p.set_driven(self.model, driven)
+        self._graphs = None
+        self._dirty = False
+
+    # -- stepping ------------------------------------------------------------------------------
+    def _launch_step(self, a, b):
+        self.probes.copy_in()
+        for p in self.patches:
+            p.solver.step(a, b, self._off, self.dt)
+            drive_probe_vertices(self.model, p.patch_probe, self.probes, self.dt, a, b)
+        self.probes.copy_out()
+
+    def step(self) -> np.ndarray:
+        """One step of dt for every patch; returns the reactions [N], shape [probes, 3] (a view)."""
+        if self._dirty:
+            self._rebuild()
+        if not self.patches:
+            self.probes.reaction[:] = 0.0
+        elif self._graphs is not None:
+            self._graphs[self._cur]()
+            self._cur ^= 1
+        else:
+            self._launch_step(self.states[self._cur], self.states[1 - self._cur])  # loads the modules uncaptured
+            self._cur ^= 1
+            if self.capture:
+                graphs = []
+                for i in (0, 1):
+                    with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
+                        self._launch_step(self.states[i], self.states[1 - i])
+                    graphs.append(_replayer(cap.graph, self.device))
+                self._graphs = graphs
+            if not self.device.is_cpu:
+                wp.synchronize_device(self.device)
+        self._steps += 1
+        self._countdown -= 1
+        if self._countdown <= 0:
+            self._countdown = self.check_steps
+            self._check()
+        return self.probes.reaction
+
+    def _check(self):
+        grew = False
+        for patch in list(self.patches):
+            eval_region_motion(self.model, patch.region, self.state, patch.motion)
+            m = patch.motion.numpy()
+            n = patch.region.outer_ring
+            pressed = [i for i in patch.probes if self._driven[i]]
+            if not pressed:
+                moved = float(m[1 : n + 1].max(initial=0.0)) if n else float(m[1])
+                if self.retire and moved <= self.tol:
+                    patch.events.append(
+                        {"step": self._steps, "event": "retired", "rings": int(n), "estimate_mm": round(moved * 1e3, 6)}
+                    )
+                    self.retired.append({"probes": patch.probes, "rings": int(patch.rings_chosen), "events": patch.events})
+                    self._retire(patch)
+                continue
+            if not self.adaptive or n == 0:
+                continue
+            est, lam = fixed_ring_estimate(float(m[0]), float(m[n]))
+            u1 = est if n == 1 else float(m[2])
+            e1 = est if n == 1 else (est * est / u1 if u1 > 0 else 0.0)
+            forces = np.linalg.norm(self.probes.reaction[pressed], axis=1)
+            ferr = max((k * e1 / f if f > 0 else 0.0) for k, f in zip(self._k1[pressed], forces))
+            if est * self.margin <= self.tol and ferr <= 0.5 * self.force_tol:
+                patch.reason = (f"ring {n} (fixed) would move {est * 1e3:.3g} mm if freed (estimated), force error "
+                                f"{ferr:.2%}: within tol {self.tol * 1e3:g} mm")
+                continue
+            if n >= self.max_rings:
+                patch.reason = f"stopped at max_rings {self.max_rings}"
+                continue
+            grow = 1
+            if 0.0 < lam < 1.0 and math.isfinite(est) and est * self.margin > self.tol:
+                grow = min(max(int(math.ceil(math.log(self.tol / (self.margin * est)) / math.log(lam))), 1), 3)
+            grow = min(grow, self.max_rings - n)
+            size = patch.region.vertex_count
+            patch.region.expand(grow)
+            if patch.region.vertex_count == size:
+                self.max_rings = min(self.max_rings, patch.region.outer_ring)
+            patch.rings_chosen = max(patch.rings_chosen, patch.region.outer_ring)
+            patch.reason = f"grew to {patch.region.outer_ring} rings: ring {n} would have moved {est * 1e3:.3g} mm"
+            patch.events.append({"step": self._steps, "event": f"+{grow}", "rings": int(patch.region.outer_ring),
+                                 "estimate_mm": round(est * 1e3, 6) if math.isfinite(est) else None})
+            grew = True
+        if grew:
+            self._merge()
+
+    # -- the press protocol --------------------------------------------------------------------
+    def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0) -> list:
+        """Every probe pressed at once: driven `depth` [m] along its inward normal over `ramp` [s],
+        held `hold` [s], released for `settle` [s]; one PressResult per probe."""
+        for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"press {name} must be >= 0, got {value}")
+        ramp_n = max(int(round(ramp / self.dt)), 1)
+        hold_n = int(round(hold / self.dt))
+        total = ramp_n + hold_n + max(int(round(settle / self.dt)), 1)
+        rest, normal = self.rest_positions(), self.inward_normals()
+        count = len(self.vertices)
+        force, disp = np.zeros((count, total)), np.zeros((count, total))
+        for s in range(total):
+            if s < ramp_n + hold_n:
+                self.set_probes(PROBE_DISPLACEMENT, rest + normal * depth * min((s + 1) / ramp_n, 1.0))
+            else:
+                self.set_probes(PROBE_OFF)
+            f = self.step()
+            force[:, s] = np.linalg.norm(f, axis=1)
+            q = self.state.particle_q.numpy()
+            disp[:, s] = np.linalg.norm(q[self.vertices] - rest, axis=1)
+        if not np.all(np.isfinite(force)) or not np.all(np.isfinite(disp)):
+            raise FloatingPointError(f"the {self.integrator} integrator diverged: use a smaller dt or the implicit one")
+        return [
+            PressResult(
+                vertex=int(v), depth=float(depth), dt=self.dt, release_step=ramp_n + hold_n, force=force[i], displacement=disp[i]
+            )
+            for i, v in enumerate(self.vertices)
+        ]

@@ -1,0 +1,374 @@
+"""One palpation: a probe pressing an organ, simulated on its local region (or the whole mesh).
+
+The step is captured once in a Warp graph (CPU and CUDA) and replayed; the probe's target goes
+in and the feedback force comes out through host views kept across steps, so the hot loop has
+no allocation and no extra copy on the CPU (on CUDA, pinned buffers copied inside the graph).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from ..kernels.region_state import reset_vertices_left_behind
+from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, Model
+from ..region.region import Region
+from ..solvers.solver import SolverALMSDM
+
+GLOBAL_MODELS = ("global", "global-free")
+
+
+def _replayer(graph, device):
+    """A call that replays `graph` (and, on CUDA, waits for it so the pinned outputs are readable).
+
+    On the CPU it binds Warp's native replay of a live capture directly: `wp.capture_launch` checks
+    the graph's kind in Python first, ~0.3-0.8 us a step at these sizes (docs/performance.md).
+    """
+    if device.is_cpu:
+        try:
+            import warp._src.context as wpc
+
+            native = wpc.runtime.core.wp_apic_cpu_replay_state
+            state = graph.apic_state
+            if graph._native_graph is None and state is not None:
+                replay = functools.partial(native, state)
+                replay.graph = graph  # the graph owns `state`: keep it alive as long as the call
+                return replay
+        except AttributeError:  # another Warp version: the public path
+            pass
+        return functools.partial(wp.capture_launch, graph)
+
+    def replay():
+        wp.capture_launch(graph)
+        wp.synchronize_device(device)
+
+    return replay
+
+
+class SimulationDiverged(RuntimeError):
+    """The explicit integrator blew up: its step exceeds the critical step of the region."""
+
+
+@dataclass
+class PressResult:
+    """One press: ramp to depth along the inward normal, hold, release, settle (SI inside)."""
+
+    vertex: int
+    depth: float
+    dt: float
+    release_step: int
+    force: np.ndarray = field(repr=False)
+    """|feedback force| [N] per step (0 after release), shape [steps]."""
+    displacement: np.ndarray = field(repr=False)
+    """Distance of the contact vertex from its rest position [m] per step, shape [steps]."""
+
+    @property
+    def peak_force_N(self) -> float:
+        return float(self.force.max(initial=0.0))
+
+    @property
+    def recovery_error_mm(self) -> float:
+        """Residual displacement of the contact vertex at the end of the settle window [mm]."""
+        return float(self.displacement[-1] * 1e3)
+
+    @property
+    def recovery_time_s(self) -> float:
+        """Time from release until the displacement stays under 1% of the depth [s]; inf if never."""
+        after = self.displacement[self.release_step :]
+        above = np.flatnonzero(after >= 0.01 * self.depth)
+        if len(above) == 0:
+            return 0.0
+        if above[-1] == len(after) - 1:
+            return math.inf
+        return float((above[-1] + 1) * self.dt)
+
+    def summary(self) -> dict:
+        return {
+            "vertex": self.vertex,
+            "peak_force_N": self.peak_force_N,
+            "recovery_error_mm": self.recovery_error_mm,
+            "recovery_time_s": self.recovery_time_s,
+        }
+
+
+class Palpation:
+    """A probe on an organ: Model, two States, a Control, a solver and the region it steps.
+
+    rings: an int (the local model: the rings around the contact vertex, the outer one fixed),
+    "global" (every vertex free, anchored: the accuracy reference) or "global-free" (every vertex
+    free, no anchors: the paper's global surface model). dt [s]. edge_scale [edge_count] and
+    anchor_scale [vertex_count]: per-spring and per-anchor multipliers of stiffness and damping
+    (a scene's lesion, `Lesion.scales`), fixed for the model's life.
+    """
+
+    def __init__(self, mesh, tissue=None, *, rings=4, integrator="explicit", dt=1e-3, device=None, capture=True,
+                 edge_scale=None, anchor_scale=None, **solver_kw):
+        if not (isinstance(rings, (int, np.integer)) and not isinstance(rings, bool)) and rings not in GLOBAL_MODELS:
+            raise ValueError(f"rings must be an int >= 1 or one of {GLOBAL_MODELS}, got {rings!r}")
+        if isinstance(rings, (int, np.integer)) and rings < 1:
+            raise ValueError(f"rings must be >= 1 (ring 0 is the contact vertex alone), got {rings}")
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be > 0, got {dt}")
+        self.model = Model(mesh, tissue, device, edge_scale=edge_scale, anchor_scale=anchor_scale)
+        self.device = self.model.device
+        self.mesh = self.model.mesh
+        self.rings = rings
+        self.dt = float(dt)
+        self.solver = SolverALMSDM(self.model, integrator, **solver_kw)
+        self.states = [self.model.state(), self.model.state()]
+        self._cur = 0  # states[_cur] is the current state
+        self.control = self.model.control()
+        self.region = Region(self.model.dmesh) if rings not in GLOBAL_MODELS else None
+        self.capture = bool(capture)
+        self.vertex = -1
+        self._graphs = None
+        self._cpu = self.device.is_cpu
+        if self._cpu:
+            self._target = self.control.probe_target.numpy()
+            self._force = self.control.probe_force.numpy()
+            self._mode = self.control.probe_mode.numpy()
+            self._reaction = self.control.probe_reaction.numpy()
+        else:
+            # pinned host buffers, copied inside the captured graph; numpy views of them for Python
+            self._pinned = {
+                name: wp.zeros(1, dtype=dtype, device="cpu", pinned=True)
+                for name, dtype in (("target", wp.vec3), ("force", wp.vec3), ("mode", wp.int32), ("reaction", wp.vec3))
+            }
+            self._target = self._pinned["target"].numpy()
+            self._force = self._pinned["force"].numpy()
+            self._mode = self._pinned["mode"].numpy()
+            self._reaction = self._pinned["reaction"].numpy()
+        self._force_view = self._reaction[0]  # a view of the reaction buffer: no copy per step
+        if self.region is None:
+            self.solver.set_global(anchors=(rings == "global"))
+
+    # -- the region ----------------------------------------------------------------------------
+    @property
+    def state(self):
+        """The current State (the one the last step wrote)."""
+        return self.states[self._cur]
+
+    @property
+    def region_vertices(self) -> int:
+        return self.region.vertex_count if self.region is not None else self.model.particle_count
+
+    @property
+    def region_springs(self) -> int:
+        return self.region.spring_count if self.region is not None else self.model.spring_count
+
+    def touch(self, vertex: int) -> None:
+        """Put the probe on `vertex`; the local model builds its region there (relocating it)."""
+        if self.region is not None:
+            old = self.region
+            old_count = old.vertex_count
+            if old_count:
+                old_vertex = wp.clone(old.region_vertex[:old_count])
+            old.build(vertex, self.rings)
+            if old_count:
+                reset_vertices_left_behind(self.model, old_vertex, old_count, old, self.states)
+            self.solver.set_region(old)
+        else:
+            from ..mesh.device_mesh import check_vertex
+
+            check_vertex(self.mesh, vertex, "contact vertex")
+        self.vertex = int(vertex)
+        self.control.set(vertex=self.vertex, mode=PROBE_OFF)
+        self._mode[0] = PROBE_OFF
+        self._graphs = None
+
+    def expand(self, rings: int = 1) -> None:
+        """Grow the local region by `rings` rings in place (during a press, too)."""
+        if self.region is None:
+            raise RuntimeError("the global models have no region to expand")
+        self.region.expand(rings)
+        self.rings = self.region.rings
+        self.solver.set_region(self.region)
+        self._graphs = None
+
+    # -- stepping ------------------------------------------------------------------------------
+    def _launch_step(self, a, b):
+        if not self._cpu:
+            wp.copy(self.control.probe_target, self._pinned["target"])
+            wp.copy(self.control.probe_force, self._pinned["force"])
+            wp.copy(self.control.probe_mode, self._pinned["mode"])
+        self.solver.step(a, b, self.control, self.dt)
+        if not self._cpu:
+            wp.copy(self._pinned["reaction"], self.control.probe_reaction)
+
+    def _capture(self):
+        # two graphs: states[0] -> states[1] and back; replayed by a bound call each, no checks
+        replays = []
+        for i in (0, 1):
+            with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
+                self._launch_step(self.states[i], self.states[1 - i])
+            replays.append(_replayer(cap.graph, self.device))
+        self._graphs = replays
+
+    def step(self) -> np.ndarray:
+        """One step of dt; returns the feedback force [N]: a view that every step updates in place."""
+        replays = self._graphs
+        if replays is not None:
+            replay = replays[self._cur]
+            self._cur ^= 1
+            replay()
+            return self._force_view
+        return self._step_setup()
+
+    def _step_setup(self) -> np.ndarray:
+        if self.vertex < 0:
+            raise RuntimeError("touch(vertex) first: the probe is on no vertex")
+        # the first step runs uncaptured: it compiles and loads the kernels outside any capture
+        self._launch_step(self.states[self._cur], self.states[1 - self._cur])
+        self._cur ^= 1
+        if self.capture:
+            self._capture()
+        if not self._cpu:
+            wp.synchronize_device(self.device)
+        return self._force_view
+
+    def set_probe(self, mode: int, target=None) -> None:
+        """Probe mode (PROBE_OFF / PROBE_DISPLACEMENT / PROBE_FORCE) and target [m], through host views."""
+        self._mode[0] = mode
+        if target is not None:
+            self._target[0] = target
+
+    def set_probe_force(self, force) -> None:
+        """Force-controlled probe: push the contact vertex with `force` [N] (a 3-vector)."""
+        self._mode[0] = PROBE_FORCE
+        self._force[0] = force
+
+    @property
+    def probe_mode(self) -> int:
+        """PROBE_OFF / PROBE_DISPLACEMENT / PROBE_FORCE, as the next step will see it."""
+        return int(self._mode[0])
+
+    @property
+    def feedback_force(self) -> np.ndarray:
+        """The last step's feedback force [N], a view every step updates (stale while the probe is off)."""
+        return self._force_view
+
+    def rest_position(self, vertex=None) -> np.ndarray:
+        """Rest position [m] as the device holds it (float32), so that full recovery reads 0."""
+        v = self.vertex if vertex is None else vertex
+        return self.mesh.vertices[v].astype(np.float32).astype(np.float64)
+
+    def inward_normal(self, vertex=None) -> np.ndarray:
+        v = self.vertex if vertex is None else vertex
+        return -self.model.vertex_normal_rest[v]
+
+    def positions(self) -> np.ndarray:
+        """Current positions of every vertex [m] (host copy)."""
+        return self.state.particle_q.numpy().astype(np.float64)
+
+    def check_finite(self, step_index: int) -> None:
+        """Raise SimulationDiverged if the region's state is not finite or has run away."""
+        q = self.state.particle_q.numpy()
+        qd = self.state.particle_qd.numpy()
+        size = float(np.ptp(self.mesh.vertices, axis=0).max())
+        ok = np.all(np.isfinite(q)) and np.all(np.isfinite(qd))
+        if ok:
+            ok = float(np.abs(q - self.model.particle_q_rest.numpy()).max()) < 2.0 * size
+        if not ok:
+            free = self.region.vertices()[: self.region.free_count] if self.region is not None else None
+            crit = self.model.critical_dt(free, anchors=self.solver.anchor_scale > 0)
+            if self.solver.integrator == "explicit" and self.dt > crit:
+                raise SimulationDiverged(
+                    f"the {self.solver.integrator} integrator diverged at step {step_index} "
+                    f"(t = {step_index * self.dt:.4g} s): dt = {self.dt * 1e3:.4g} ms exceeds the critical "
+                    f"step of about {crit * 1e3:.4g} ms; use a smaller --dt-ms or --integrator implicit"
+                )
+            raise SimulationDiverged(  # not the step: the press (or the force) is more than the model holds
+                f"the {self.solver.integrator} integrator ran away at step {step_index} "
+                f"(t = {step_index * self.dt:.4g} s): a vertex is not finite or more than twice the mesh's size "
+                f"({size * 1e3:.4g} mm) from rest, with dt = {self.dt * 1e3:.4g} ms under the critical step at rest "
+                f"(about {crit * 1e3:.4g} ms); the press is deeper, or its force larger, than the model holds"
+            )
+
+    # -- the press protocol --------------------------------------------------------------------
+    def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
+        """Displacement-controlled press at the touched vertex: ramp to `depth` [m] along the inward
+        normal over `ramp` [s], hold `hold` [s], release and settle `settle` [s].
+
+        record: called as ``record(k, total)`` after step k (1..total) of the press when k is a
+        multiple of `record_every`, and after the last step; it reads the state itself (a USD
+        recorder, say). None (the default) costs one test per step."""
+        for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"press {name} must be >= 0, got {value}")
+        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
+            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
+        dt = self.dt
+        ramp_n = max(int(round(ramp / dt)), 1)
+        hold_n = int(round(hold / dt))
+        settle_n = max(int(round(settle / dt)), 1)
+        total = ramp_n + hold_n + settle_n
+        rest = self.rest_position()
+        direction = self.inward_normal()
+        v = self.vertex
+        force = np.zeros(total)
+        disp = np.zeros(total)
+        for s in range(total):
+            if s < ramp_n + hold_n:
+                frac = min((s + 1) / ramp_n, 1.0)
+                self.set_probe(PROBE_DISPLACEMENT, rest + direction * depth * frac)
+            else:
+                self.set_probe(PROBE_OFF)
+            f = self.step()
+            if s < ramp_n + hold_n:
+                force[s] = math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2)
+                if not math.isfinite(force[s]):
+                    self.check_finite(s + 1)
+            if s >= ramp_n + hold_n or s % check_every == 0:
+                pos = self.state.particle_q.numpy()[v] if self._cpu else self.state.particle_q[v : v + 1].numpy()[0]
+                disp[s] = float(np.linalg.norm(pos - rest))
+                if not math.isfinite(disp[s]) or (s % check_every == 0 and s):
+                    self.check_finite(s + 1)
+            else:
+                disp[s] = depth * min((s + 1) / ramp_n, 1.0)
+            if record is not None and ((s + 1) % record_every == 0 or s + 1 == total):
+                record(s + 1, total)
+        self.check_finite(total)
+        return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=ramp_n + hold_n, force=force, displacement=disp)
+
+    def press_force(self, force=2.4, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
+        """Force-controlled press: push the touched vertex along the inward normal with a force
+        ramped to `force` [N] over `ramp` [s], held `hold` [s], then released for `settle` [s].
+        The result's `force` is the applied force; its `depth` the deepest displacement reached.
+        record, record_every: as in :meth:`press`."""
+        for name, value in (("force", force), ("ramp", ramp), ("hold", hold), ("settle", settle)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"press {name} must be >= 0, got {value}")
+        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
+            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
+        dt = self.dt
+        ramp_n = max(int(round(ramp / dt)), 1)
+        hold_n = int(round(hold / dt))
+        total = ramp_n + hold_n + max(int(round(settle / dt)), 1)
+        rest = self.rest_position()
+        direction = self.inward_normal()
+        v = self.vertex
+        applied = np.zeros(total)
+        disp = np.zeros(total)
+        q_view = self.state.particle_q
+        for s in range(total):
+            if s < ramp_n + hold_n:
+                applied[s] = force * min((s + 1) / ramp_n, 1.0)
+                self.set_probe_force(direction * applied[s])
+            else:
+                self.set_probe(PROBE_OFF)
+            self.step()
+            q_view = self.state.particle_q
+            pos = q_view.numpy()[v] if self._cpu else q_view[v : v + 1].numpy()[0]
+            disp[s] = float(np.linalg.norm(pos - rest))
+            if not math.isfinite(disp[s]) or (s % check_every == 0 and s):
+                self.check_finite(s + 1)
+            if record is not None and ((s + 1) % record_every == 0 or s + 1 == total):
+                record(s + 1, total)
+        self.check_finite(total)
+        depth = float(disp[: ramp_n + hold_n].max(initial=0.0))
+        return PressResult(vertex=v, depth=depth, dt=dt, release_step=ramp_n + hold_n, force=applied, displacement=disp)
+

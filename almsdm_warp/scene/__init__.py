@@ -1,0 +1,1 @@
+"""Scenes: an organ mesh with its tissue, region and press parameters, from a TOML file."""

@@ -1,0 +1,317 @@
+"""Scenes: an organ mesh with its tissue, region and press parameters, read from a TOML file.
+
+A scene file names every value's unit in its key (``depth_mm``, ``edge_stiffness_N_per_m``);
+:func:`load_scene` checks it strictly (unknown sections and keys are errors, so a typo never
+goes unnoticed) and converts it to SI units: :class:`Scene` holds metres, kilograms, seconds
+and newtons. The project ships two scenes, ``stomach`` (the default) and ``liver``; see
+``scenes/stomach.toml`` for the documented schema. Every problem is an :class:`InputError`
+with one line that starts with the scene file's path.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from ..errors import InputError
+from .schema import _FIELD_RULE, AUTO, SCHEMA, _check_rings, _check_value, _describe
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+if TYPE_CHECKING:
+    from ..tissue.lesion import Lesion
+    from ..mesh.tissue_mesh import TissueMesh
+
+DEFAULT_SCENE = "stomach"
+"""The scene used when none is given."""
+
+
+@dataclass(frozen=True)
+class TissueParams:
+    """Mass, spring and damper parameters of the tissue, in SI units.
+
+    The defaults are the stomach scene's, calibrated so that a 10 mm press with 4 rings gives the
+    paper's feedback force (about 2.4 N, Table 1) and the explicit scheme is stable at dt = 1 ms
+    (docs/calibration.md).
+    """
+
+    density: float = 1000.0
+    """Tissue density [kg/m^3], for the lumped vertex masses."""
+    thickness: float = 25.0e-3
+    """Shell thickness [m] of a surface mesh, for its lumped masses (area x thickness x density);
+    ignored for a tet mesh, whose masses come from the tet volumes."""
+    edge_stiffness: float = 62.0
+    """k_ij [N/m]: stiffness of the spring on each mesh edge, eqs. (4)-(6)."""
+    edge_damping: float = 0.02
+    """d_ij [N s/m]: damping along each mesh edge, eqs. (4)-(6)."""
+    anchor_stiffness: float = 124.0
+    """k_i [N/m]: stiffness of the spring that pulls each vertex back to its rest position, eq. (3)."""
+    anchor_damping: float = 0.1
+    """d_i [N s/m]: damping of each vertex's velocity, eq. (3)."""
+
+    def __post_init__(self):
+        for f in fields(self):
+            _check_value(getattr(self, f.name), float, _FIELD_RULE[("tissue", f.name)], f"TissueParams.{f.name}")
+
+
+@dataclass(frozen=True)
+class PressParams:
+    """The press protocol (DESIGN.md, evaluation protocol), in SI units."""
+
+    depth: float = 10.0e-3
+    """Indentation depth [m]: how far the contact vertex is driven along the inward surface normal."""
+    ramp: float = 0.1
+    """Ramp time [s] from rest to full depth."""
+    hold: float = 0.2
+    """Hold time [s] at full depth."""
+    settle: float = 1.0
+    """Settle window [s] after release; the recovery error is measured at its end."""
+
+    def __post_init__(self):
+        for f in fields(self):
+            _check_value(getattr(self, f.name), float, _FIELD_RULE[("press", f.name)], f"PressParams.{f.name}")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """An organ mesh and the parameters to simulate it with (SI units)."""
+
+    path: Path | None
+    """The scene file, or None for a scene made from a bare mesh file."""
+    mesh_path: Path
+    """The mesh file (absolute)."""
+    scale_mm: float = 1.0
+    """Millimetres per mesh file unit (1.0 for a file in mm, 10.0 for cm, 1000.0 for m)."""
+    tissue: TissueParams = field(default_factory=TissueParams)
+    """Mass, spring and damper parameters."""
+    rings: int | str = 4
+    """Rings grown from the contact vertex along mesh edges (the outermost ring fixed), or "auto":
+    the region sized during each press to `tol` (AdaptivePalpation, ``--rings auto``)."""
+    press: PressParams = field(default_factory=PressParams)
+    """The press protocol."""
+    lesion: "Lesion | None" = None
+    """A sphere of stiffer tissue (the scene's optional [lesion] table), or None."""
+    tol: float | None = None
+    """With rings = "auto": the displacement tolerance [m] the region is sized to (None: the
+    command line's default, cli_palpate.AUTO_TOL_MM); None otherwise."""
+
+    def __post_init__(self):
+        object.__setattr__(self, "mesh_path", Path(self.mesh_path))
+        if self.path is not None:
+            object.__setattr__(self, "path", Path(self.path))
+        object.__setattr__(self, "scale_mm", _check_value(self.scale_mm, float, "> 0", "Scene.scale_mm"))
+        _check_rings(self.rings, "Scene.rings")
+        if self.tol is not None:
+            object.__setattr__(self, "tol", _check_value(self.tol, float, "> 0", "Scene.tol"))
+            if self.rings != AUTO:
+                raise InputError(f"Scene.tol is for rings = {AUTO!r} (the region sized to a tolerance), "
+                                 f"but rings = {self.rings!r}")
+
+    @property
+    def name(self) -> str:
+        """The scene file's stem, or the mesh file's for a bare mesh."""
+        return (self.path or self.mesh_path).stem
+
+    def load_mesh(self) -> TissueMesh:
+        """Read, validate and repair the scene's mesh (metres); raises InputError."""
+        from ..mesh.io import load_mesh
+
+        return load_mesh(self.mesh_path, scale=self.scale_mm)
+
+    def rings_text(self) -> str:
+        """"4 rings", or "auto rings (tol 0.1 mm)" ("tol: the default" when the scene gives none)."""
+        if self.rings != AUTO:
+            return f"{self.rings} rings"
+        return f"auto rings (tol {self.tol * 1e3:g} mm)" if self.tol is not None else "auto rings (tol: the default)"
+
+    def as_dict(self) -> dict:
+        """The scene in interface units, keyed as in a scene file (for JSON records)."""
+        out: dict = {"scene": str(self.path) if self.path else None}
+        for section, keys in SCHEMA.items():
+            out[section] = {}
+            for key, (attr, _kind, factor, _rule) in keys.items():
+                value = _get(self, section, attr)
+                if section == "mesh" and attr == "path":
+                    value = str(self.mesh_path)
+                elif factor != 1.0 and value is not None:
+                    value = value * factor
+                out[section][key] = value
+        if self.lesion is not None:
+            out["lesion"] = self.lesion.as_dict()
+        return out
+
+    def summary(self) -> str:
+        """One line: the scene, its mesh and the parameters people ask about first."""
+        t, p = self.tissue, self.press
+        return (
+            f"scene {self.name}: mesh {self.mesh_path.name} (x{self.scale_mm:g} mm), {self.rings_text()}, "
+            f"k_ij {t.edge_stiffness:g} N/m, k_i {t.anchor_stiffness:g} N/m, press {p.depth * 1e3:g} mm"
+        )
+
+
+def _get(scene: Scene, section: str, attr: str):
+    if section == "tissue":
+        return getattr(scene.tissue, attr)
+    if section == "press":
+        return getattr(scene.press, attr)
+    return getattr(scene, attr)
+
+
+def load_scene(path) -> Scene:
+    """Read and check a scene file (TOML); returns a :class:`Scene` in SI units.
+
+    Keys left out take the defaults (the stomach scene's values), except ``[mesh] path``,
+    which is required and is relative to the scene file. Raises InputError, one line naming
+    the file: no such file, a TOML syntax error (with line and column), an unknown section or
+    key (with the allowed ones), a value of the wrong type, a non-finite or out-of-range value,
+    a missing mesh file.
+    """
+    where = str(path)
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{where}: no such scene file")
+    if p.is_dir():
+        raise InputError(f"{where}: is a directory, not a scene file")
+    try:
+        with open(p, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{where}: TOML syntax error: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{where}: not a UTF-8 text file (TOML), byte {exc.start} is 0x{exc.object[exc.start]:02x}") from exc
+    except PermissionError as exc:
+        raise InputError(f"{where}: permission denied, cannot read the scene file") from exc
+    except OSError as exc:
+        raise InputError(f"{where}: cannot read the scene file: {exc.strerror or exc}") from exc
+
+    allowed_sections = ", ".join(f"[{s}]" for s in SCHEMA)
+    values: dict[str, dict[str, object]] = {section: {} for section in SCHEMA}
+    lesion = None
+    if "lesion" in data:  # an optional table of its own (an array and scalars: almsdm_warp/lesion.py)
+        from ..tissue.lesion import parse_lesion
+
+        lesion = parse_lesion(data.pop("lesion"), where)
+    for section, table in data.items():
+        if section not in SCHEMA:
+            what = "section" if isinstance(table, dict) else "top-level key"
+            raise InputError(
+                f"{where}: unknown {what} {section!r}{_did_you_mean(section, SCHEMA, '[{}]')}; "
+                f"allowed sections: {allowed_sections}"
+            )
+        if not isinstance(table, dict):
+            raise InputError(f"{where}: [{section}] must be a table (a [{section}] section), got {_describe(table)}")
+        keys = SCHEMA[section]
+        for key, value in table.items():
+            if key not in keys:
+                raise InputError(
+                    f"{where}: unknown key {key!r} in [{section}]{_did_you_mean(key, keys, '{}')}; "
+                    f"allowed: {', '.join(keys)}"
+                )
+            attr, kind, factor, rule = keys[key]
+            try:
+                if (section, key) == ("region", "rings"):
+                    value = _check_rings(value, f"[{section}] {key}")
+                else:
+                    value = _check_value(value, kind, rule, f"[{section}] {key}")
+            except InputError as exc:
+                raise InputError(f"{where}: {exc}") from None
+            if kind is float and factor != 1.0:
+                value = value / factor  # mm -> m: divide (correctly rounded: 10 mm is exactly 0.01)
+            values[section][attr] = value
+
+    region = values["region"]
+    if "tol" in region and region.get("rings") != AUTO:
+        rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
+        raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
+    raw_mesh = values["mesh"].get("path")
+    if raw_mesh is None:
+        raise InputError(f"{where}: missing [mesh] path (the mesh file, relative to the scene file)")
+    mesh_path = Path(os.path.abspath(p.parent / Path(str(raw_mesh)).expanduser()))
+    if not mesh_path.exists():
+        raise InputError(f"{where}: mesh file not found: {mesh_path} ([mesh] path = {raw_mesh!r})")
+    if mesh_path.is_dir():
+        raise InputError(f"{where}: [mesh] path = {raw_mesh!r} is a directory, not a mesh file ({mesh_path})")
+
+    try:  # the SI values are checked again: say which file they came from
+        return Scene(
+            path=Path(os.path.abspath(p)),
+            mesh_path=mesh_path,
+            scale_mm=values["mesh"].get("scale_mm", 1.0),
+            tissue=TissueParams(**values["tissue"]),
+            rings=region.get("rings", Scene.rings),
+            tol=region.get("tol"),
+            press=PressParams(**values["press"]),
+            lesion=lesion,
+        )
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+
+
+def _did_you_mean(word: str, choices, fmt: str) -> str:
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f" (did you mean {fmt.format(close[0])}?)" if close else ""
+
+
+# -- the scenes shipped with the package -----------------------------------------------------
+def scenes_dir() -> Path:
+    """The folder of the scenes shipped with the package.
+
+    Installed: ``almsdm_warp/scenes`` inside the package (where pyproject maps ``scenes/``).
+    Source checkout: ``scenes/`` next to the package folder.
+    """
+    here = Path(__file__).resolve().parents[1]  # the package folder
+    candidates = [here / "scenes", here.parent / "scenes"]
+    for folder in candidates:
+        if (folder / f"{DEFAULT_SCENE}.toml").is_file():
+            return folder
+    tried = ", ".join(str(c) for c in candidates)
+    raise InputError(f"the package's scenes are missing (looked in {tried}); reinstall almsdm_warp")
+
+
+def scene_names() -> list[str]:
+    """The names of the scenes shipped with the package (sorted)."""
+    return sorted(p.stem for p in scenes_dir().glob("*.toml"))
+
+
+def default_scene_path(name: str = DEFAULT_SCENE) -> Path:
+    """The path of a scene shipped with the package: ``stomach`` (the default) or ``liver``."""
+    stem = name[:-5] if name.lower().endswith(".toml") else name
+    path = scenes_dir() / f"{stem}.toml"
+    if not path.is_file():
+        raise InputError(f"no scene named {name!r}; the package has: {', '.join(scene_names())}")
+    return path
+
+
+def resolve_scene_or_mesh(arg=None, *, scale_mm: float = 1.0) -> Scene:
+    """A scene from what a user typed.
+
+    None: the default scene (stomach). A path ending in ``.toml``: that scene file. The name
+    of a shipped scene (``liver``) that is not a file here: that scene. Anything else: a mesh
+    file, with the default tissue, region and press parameters, read at `scale_mm`
+    millimetres per file unit.
+    """
+    if arg is None:
+        return load_scene(default_scene_path())
+    p = Path(arg)
+    if p.suffix.lower() == ".toml":
+        return load_scene(p)
+    if not p.exists() and p.suffix == "" and p.name == str(arg):
+        try:
+            scene = default_scene_path(p.name)
+        except InputError:
+            scene = None
+        if scene is not None:
+            return load_scene(scene)
+    if not p.exists():
+        hint = f", or one of the scenes: {', '.join(scene_names())}" if p.suffix == "" else ""
+        raise InputError(f"{arg}: no such file (give a scene .toml or a mesh file{hint})")
+    if p.is_dir():
+        raise InputError(f"{arg}: is a directory, not a scene or mesh file")
+    scale_mm = _check_value(scale_mm, float, "> 0", "scale_mm")
+    return Scene(path=None, mesh_path=Path(os.path.abspath(p)), scale_mm=scale_mm)

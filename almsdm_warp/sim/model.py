@@ -1,0 +1,187 @@
+"""Model (static, on the device), State (what each step changes) and Control (the probe).
+
+As in Newton: a Model is made once from a mesh and tissue parameters; ``model.state()`` gives a
+State at rest; a solver steps ``state_in`` to ``state_out`` under a ``Control``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from ..mesh.device_mesh import as_device_mesh
+from ..scene.loader import TissueParams
+
+PROBE_OFF = 0
+"""The probe does not touch: every free vertex moves under the tissue's forces alone."""
+PROBE_DISPLACEMENT = 1
+"""The probe drives its vertex to `probe_target`; the reaction is the sum of internal forces on it."""
+PROBE_FORCE = 2
+"""The probe pushes its vertex with `probe_force`, which then moves freely."""
+
+
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area-weighted outward vertex normals of a surface (unit length; zero where no face), host."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    face_n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])  # |n| = 2 x area
+    n = np.zeros_like(v)
+    for c in range(3):
+        np.add.at(n, t[:, c], face_n)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+class Model:
+    """The static tissue model on one device: rest shape, topology, masses, springs, anchors."""
+
+    def __init__(self, mesh, tissue=None, device=None, *, edge_scale=None, anchor_scale=None):
+        """mesh: TissueMesh or DeviceMesh. tissue: TissueParams (SI; default: the stomach scene's).
+
+        edge_scale [edge_count] and anchor_scale [vertex_count]: optional multipliers of stiffness
+        and damping per spring and per anchor (a stiffer lesion, say).
+        """
+        self.dmesh = dm = as_device_mesh(mesh, device)
+        self.mesh = dm.mesh
+        self.device = dm.device
+        self.tissue = t = tissue if tissue is not None else TissueParams()
+        if not isinstance(t, TissueParams):
+            raise TypeError(f"tissue must be a TissueParams, got {type(t).__name__}")
+        n, e = dm.vertex_count, dm.edge_count
+        self.particle_count = n
+        self.spring_count = e
+        mass = self.mesh.vertex_masses(t.density, t.thickness)
+        if np.any(mass <= 0):
+            bad = int(np.flatnonzero(mass <= 0)[0])
+            raise ValueError(f"vertex {bad} has mass {mass[bad]:.3g} kg: it belongs to no element with area or volume")
+        es = np.ones(e) if edge_scale is None else np.asarray(edge_scale, dtype=np.float64)
+        an = np.ones(n) if anchor_scale is None else np.asarray(anchor_scale, dtype=np.float64)
+        d = self.device
+        self.particle_mass_host = mass
+        self.particle_mass = wp.array(mass, dtype=wp.float32, device=d)
+        """Lumped vertex mass [kg], shape [particle_count], float32."""
+        self.particle_q_rest = dm.rest_position
+        """Rest positions [m], shape [particle_count], vec3."""
+        self.anchor_ke = wp.array(t.anchor_stiffness * an, dtype=wp.float32, device=d)
+        """Anchor stiffness k_i [N/m], shape [particle_count], float32, eq. (3)."""
+        self.anchor_kd = wp.array(t.anchor_damping * an, dtype=wp.float32, device=d)
+        """Anchor damping d_i [N s/m], shape [particle_count], float32, eq. (3)."""
+        self.spring_ke = wp.array(t.edge_stiffness * es, dtype=wp.float32, device=d)
+        """Spring stiffness k_ij [N/m], shape [spring_count], float32, eqs. (4)-(5)."""
+        self.spring_kd = wp.array(t.edge_damping * es, dtype=wp.float32, device=d)
+        """Spring damping d_ij [N s/m], shape [spring_count], float32, eq. (6)."""
+        self.spring_rest_length = dm.edge_rest_length
+        """Spring rest length [m], shape [spring_count], float32."""
+        _, _, adj_edge = self.mesh.adjacency
+        per_entry = np.stack([t.edge_stiffness * es, t.edge_damping * es, self.mesh.edge_rest_length], axis=1)[adj_edge]
+        self.adj_spring = wp.array(per_entry, dtype=wp.vec3, device=d)
+        """(k_ij [N/m], d_ij [N s/m], rest length [m]) of the spring of each CSR adjacency entry, shape
+        [2 * spring_count], vec3: the step reads one vector per neighbour, not three arrays by edge id."""
+        self.vertex_normal_rest = vertex_normals(self.mesh.vertices, self.mesh.triangles)
+        """Outward unit normal of each surface vertex at rest (host, float64): the press direction."""
+        self._ke_host = t.edge_stiffness * es
+        self._kd_host = t.edge_damping * es
+        self._ka_host = t.anchor_stiffness * an
+        self._da_host = t.anchor_damping * an
+
+    def state(self) -> "State":
+        """A State at rest."""
+        return State(self)
+
+    def control(self) -> "Control":
+        return Control(self.device)
+
+    def critical_dt(self, vertices=None, anchors: bool = True) -> float:
+        """Largest stable step [s] of semi-implicit Euler, for the model linearized at rest.
+
+        The stiffest mode of M^-1/2 K M^-1/2 over the free `vertices` (default: all; the others
+        held fixed) has eigenvalue w^2; with that mode's damping g = v^T M^-1/2 C M^-1/2 v, the
+        scheme is stable while dt <= (-g + sqrt(g^2 + 4 w^2)) / w^2 (for g = 0: 2 / w). An estimate:
+        a deep press adds geometric stiffness to the stretched springs.
+        """
+        import scipy.sparse as sp
+        from scipy.sparse.linalg import eigsh
+
+        n = self.particle_count
+        free = np.arange(n) if vertices is None else np.unique(np.asarray(vertices, dtype=np.int64))
+        if len(free) == 0:
+            return float("inf")
+        e = self.mesh.edges.astype(np.int64)
+        d = self.mesh.vertices[e[:, 1]] - self.mesh.vertices[e[:, 0]]
+        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
+        ddt = d[:, :, None] * d[:, None, :]  # [e, 3, 3]
+        scale = 1.0 if anchors else 0.0
+
+        def assemble(edge_coef, vertex_coef):
+            blocks = edge_coef[:, None, None] * ddt
+            rows, cols, vals = [], [], []
+            for a, b, sign in ((0, 0, 1.0), (1, 1, 1.0), (0, 1, -1.0), (1, 0, -1.0)):
+                for r in range(3):
+                    for c in range(3):
+                        rows.append(3 * e[:, a] + r)
+                        cols.append(3 * e[:, b] + c)
+                        vals.append(sign * blocks[:, r, c])
+            diag = np.repeat(vertex_coef * scale, 3)
+            rows.append(np.arange(3 * n))
+            cols.append(np.arange(3 * n))
+            vals.append(diag)
+            return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
+
+        dof = (3 * free[:, None] + np.arange(3)).ravel()
+        w = np.repeat(1.0 / np.sqrt(self.particle_mass_host), 3)[dof]
+        Winv = sp.diags(w)
+        K = Winv @ assemble(self._ke_host, self._ka_host)[dof][:, dof] @ Winv
+        C = Winv @ assemble(self._kd_host, self._da_host)[dof][:, dof] @ Winv
+        if K.shape[0] <= 60:
+            vals, vecs = np.linalg.eigh(K.toarray())
+            lam, v = vals[-1], vecs[:, -1]
+        else:
+            vals, vecs = eigsh(K, k=1, which="LA", tol=1e-6)
+            lam, v = vals[0], vecs[:, 0]
+        if lam <= 0:
+            return float("inf")
+        g = float(v @ (C @ v))
+        return float((-g + np.sqrt(g * g + 4.0 * lam)) / lam)
+
+
+class State:
+    """Positions and velocities of every mesh vertex; a step writes only the free region vertices."""
+
+    def __init__(self, model: Model):
+        d = model.device
+        self.particle_q = wp.clone(model.particle_q_rest)
+        """Positions [m], shape [particle_count], vec3."""
+        self.particle_qd = wp.zeros(model.particle_count, dtype=wp.vec3, device=d)
+        """Velocities [m/s], shape [particle_count], vec3."""
+
+
+class Control:
+    """The probe: which vertex it holds, how (off / displacement / force), where or how hard.
+
+    The step writes the reaction into `probe_reaction`, so the feedback force can be read each
+    step through a view kept across steps (``control.reaction_view()``), with no copy on the CPU.
+    """
+
+    def __init__(self, device):
+        self.device = device
+        self.probe_vertex = wp.full(1, -1, dtype=wp.int32, device=device)
+        """Mesh id of the vertex the probe holds, shape [1], int32 (-1: none)."""
+        self.probe_mode = wp.zeros(1, dtype=wp.int32, device=device)
+        """PROBE_OFF, PROBE_DISPLACEMENT or PROBE_FORCE, shape [1], int32."""
+        self.probe_target = wp.zeros(1, dtype=wp.vec3, device=device)
+        """Target position of the held vertex [m] (displacement mode), shape [1], vec3."""
+        self.probe_force = wp.zeros(1, dtype=wp.vec3, device=device)
+        """Force the probe applies [N] (force mode), shape [1], vec3."""
+        self.probe_reaction = wp.zeros(1, dtype=wp.vec3, device=device)
+        """Output: sum of the tissue's internal forces on the held vertex [N], shape [1], vec3."""
+
+    def set(self, vertex: int | None = None, mode: int | None = None, target=None, force=None) -> None:
+        """Update the probe from the host (small copies; the hot loop writes views instead)."""
+        if vertex is not None:
+            self.probe_vertex.fill_(int(vertex))
+        if mode is not None:
+            self.probe_mode.fill_(int(mode))
+        if target is not None:
+            self.probe_target.fill_(wp.vec3(*np.asarray(target, dtype=np.float32)))
+        if force is not None:
+            self.probe_force.fill_(wp.vec3(*np.asarray(force, dtype=np.float32)))

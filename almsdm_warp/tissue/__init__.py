@@ -1,0 +1,1 @@
+"""Tissue: the material parameters and lesions (regions of stiffer tissue)."""
