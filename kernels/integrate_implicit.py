@@ -13,20 +13,7 @@ import warp as wp
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
-from .forces import EPS_LENGTH, edge_direction
-
-
-@wp.func
-def spring_block(ke: float, kd: float, L0: float, r: wp.vec3, dt: float):
-    # dt C_e + dt^2 K_e for one spring: K_e = ke (d d^T + max(1 - L0/l, 0) (I - d d^T)), C_e = kd d d^T
-    l = wp.length(r)
-    d = edge_direction(r)
-    ddt = wp.outer(d, d)
-    geo = float(0.0)
-    if l > 1.0e-9:
-        geo = wp.max(1.0 - L0 / l, 0.0)
-    Kb = ke * (ddt + geo * (wp.identity(n=3, dtype=float) - ddt))
-    return dt * kd * ddt + dt * dt * Kb, Kb
+from .forces import anchor_force, spring_block, spring_force
 
 
 @wp.kernel
@@ -79,7 +66,7 @@ def integrate_region_implicit(
         x = q_in[v]
         u = qd_in[v]
         # anchor spring and damper, eq. (3); springs and dampers along the edges below, eqs. (4)-(6)
-        f = -anchor_scale * (anchor_ke[v] * (x - q_rest[v]) + anchor_kd[v] * u)
+        f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
         ka = anchor_scale * anchor_ke[v]
         kda = anchor_scale * anchor_kd[v]
         D = (particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
@@ -88,13 +75,8 @@ def integrate_region_implicit(
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             j = adj_vertex[k]
             spring = adj_spring[k]  # (k_ij, d_ij, rest length)
-            r = q_in[j] - x
-            l = wp.length(r)
-            if l > EPS_LENGTH:
-                inv_l = 1.0 / l
-                s = spring[0] * (l - spring[2]) + spring[1] * wp.dot(qd_in[j] - u, r) * inv_l
-                f += (s * inv_l) * r
-            B, Kb = spring_block(spring[0], spring[1], spring[2], r, dt)
+            f += spring_force(x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
+            B, Kb = spring_block(spring[0], spring[1], spring[2], q_in[j] - x, dt)
             csr_block[k] = B
             # the neighbour's local index where it is an unknown of the solve (free, not driven), else -1
             lj = vertex_local[j]

@@ -1,6 +1,6 @@
 """A batch of presses, implicit (backward) Euler: one thread per palpation, one step per launch.
 
-The one-palpation implicit step (kernels/step_implicit.py) on each palpation's compacted region:
+The one-palpation implicit step (kernels/integrate_implicit.py) on each palpation's compacted region:
 linearized once per step (Baraff & Witkin), (M + dt C + dt^2 K) dv = dt (f0 - dt K v0),
 block-Jacobi preconditioned conjugate gradients warm-started from the palpation's previous dv;
 the driven vertex (local 0 while the probe presses) is a known velocity, the fixed ring has
@@ -11,8 +11,7 @@ vertex's springs in mesh CSR order), so a palpation of the batch gives the same 
 
 import warp as wp
 
-from .forces import EPS_LENGTH
-from .step_implicit import spring_block
+from .forces import anchor_force, spring_block, spring_force
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -75,7 +74,7 @@ def step_batch_implicit(
         x = q_in[b, i]
         u = qd_in[b, i]
         # anchor spring and damper, eq. (3); springs and dampers along the edges below, eqs. (4)-(6)
-        f = -anchor_scale * (anchor_ke[v] * (x - q_rest[v]) + anchor_kd[v] * u)
+        f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
         ka = anchor_scale * anchor_ke[v]
         kda = anchor_scale * anchor_kd[v]
         D = (particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
@@ -84,13 +83,8 @@ def step_batch_implicit(
         for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
             j = local_neighbour[b, k]
             e = local_edge[b, k]
-            r = q_in[b, j] - x
-            l = wp.length(r)
-            if l > EPS_LENGTH:
-                inv_l = 1.0 / l
-                s = spring_ke[e] * (l - spring_rest_length[e]) + spring_kd[e] * wp.dot(qd_in[b, j] - u, r) * inv_l
-                f += (s * inv_l) * r
-            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], r, dt)
+            f += spring_force(x, u, q_in[b, j], qd_in[b, j], spring_ke[e], spring_kd[e], spring_rest_length[e])
+            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], q_in[b, j] - x, dt)
             csr_block[b, k] = B
             D += B
             Kv += Kb * (u - qd_in[b, j])
