@@ -29,16 +29,13 @@ import functools
 
 import warp as wp
 
-from .block_memory import (
-    C_TYPES, SHARED_BYTES_MAX, add_entry16, block_sync, cpu_blocks, load2, load4, load_xyz, rsqrt_approx, shared_array, store_xyz,
-    work_array,
-)
+from .block_memory import add_entry16, block_sync, cpu_blocks, load2, load4, load_xyz, rsqrt_approx, shared_array, store_xyz, work_array
 from .forces import EPS_LENGTH, anchor_force, spring_force_along
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
-__all__ = ["C_TYPES", "SHARED_BYTES_MAX", "MAX_REGISTERS", "press_batch_fast", "press_kernel_fast", "shared_bytes_fast"]
+__all__ = ["MAX_REGISTERS", "press_batch_fast", "press_kernel_fast", "shared_bytes_fast"]
 
 EPS_LENGTH2 = EPS_LENGTH * EPS_LENGTH
 

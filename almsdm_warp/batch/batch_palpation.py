@@ -1,7 +1,7 @@
 """Many palpations at once on one mesh: B contacts, each with its own region, probe and state.
 
 ``BatchPalpation(mesh).touch(vertices)`` builds B ring regions on the device in one launch
-(kernels/batch_region.py); ``press(depth, ramp, hold, settle)`` runs the press protocol of
+(kernels/batch_rings.py); ``press(depth, ramp, hold, settle)`` runs the press protocol of
 ``Palpation.press`` on all of them, many steps per launch, one block per palpation with the
 region on chip on CUDA (kernels/batch_press_fast.py; the exact kernel, kernels/batch_press.py,
 on the CPU). The physics, summation order and integration formula are the one-palpation explicit
