@@ -13,6 +13,7 @@ import warp as wp
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
+from .block_cg import solve_block_cg
 from .forces import anchor_force, spring_block, spring_force
 
 
@@ -99,62 +100,14 @@ def integrate_region_implicit(
         cg_r[i] = b
         b_norm2 += wp.dot(b, b)
 
-    # 2) r = b - A dv (warm start), z = P^-1 r, p = z
-    rz = float(0.0)
-    for i in range(free_count):
-        v = free_vertex[i]
-        if v == driven:
-            dv[i] = wp.vec3(0.0)
-        Ax = block_diag[i] * dv[i]
-        for k in range(adj_offsets[v], adj_offsets[v + 1]):
-            lj = csr_local[k]
-            if lj >= 0:
-                Ax -= csr_block[k] * dv[lj]
-        r = cg_r[i] - Ax
-        if v == driven:
-            r = wp.vec3(0.0)
-        cg_r[i] = r
-        z = block_diag_inv[i] * r
-        cg_p[i] = z
-        rz += wp.dot(r, z)
-
-    # 3) conjugate gradients
-    iterations = int(0)
-    r_norm2 = float(0.0)
-    for i in range(free_count):
-        r_norm2 += wp.dot(cg_r[i], cg_r[i])
-    threshold = tolerance * tolerance * b_norm2
-    while iterations < max_iterations and r_norm2 > threshold:
-        pAp = float(0.0)
-        for i in range(free_count):
-            v = free_vertex[i]
-            Ap = wp.vec3(0.0)
-            if v != driven:
-                Ap = block_diag[i] * cg_p[i]
-                for k in range(adj_offsets[v], adj_offsets[v + 1]):
-                    lj = csr_local[k]  # (a wp.func here would copy the array descriptor per call)
-                    if lj >= 0:
-                        Ap -= csr_block[k] * cg_p[lj]
-            cg_Ap[i] = Ap
-            pAp += wp.dot(cg_p[i], Ap)
-        if pAp <= 0.0:
-            break
-        alpha = rz / pAp
-        r_norm2 = float(0.0)
-        rz_new = float(0.0)
-        for i in range(free_count):
-            dv[i] = dv[i] + alpha * cg_p[i]
-            r = cg_r[i] - alpha * cg_Ap[i]
-            cg_r[i] = r
-            z = block_diag_inv[i] * r
-            cg_Ap[i] = z  # A p is spent: keep the preconditioned residual there
-            r_norm2 += wp.dot(r, r)
-            rz_new += wp.dot(r, z)
-        beta = rz_new / rz
-        rz = rz_new
-        for i in range(free_count):
-            cg_p[i] = cg_Ap[i] + beta * cg_p[i]
-        iterations += 1
+    # 2) and 3): r = b - A dv (warm start), then conjugate gradients (kernels/block_cg.py)
+    driven_local = int(-1)
+    if driven >= 0:
+        driven_local = vertex_local[driven]
+    iterations, r_norm2 = solve_block_cg(
+        free_count, driven_local, adj_offsets, free_vertex, 1, csr_local, csr_block, block_diag, block_diag_inv,
+        b_norm2, max_iterations, tolerance, dv, cg_r, cg_p, cg_Ap,
+    )
 
     # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
     for i in range(free_count):
