@@ -22,7 +22,7 @@ import functools
 import warp as wp
 
 from .block_memory import SHARED_BYTES_MAX, block_sync, work_array
-from .forces import anchor_force, spring_force
+from .forces import add_spring_force, anchor_force
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -62,7 +62,7 @@ def substep_explicit(
         f = anchor_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale)
         for k in range(off[i], off[i + 1]):
             j = nbr[k]
-            f += spring_force(x, u, q_in[j], qd_in[j], spring_ke[k], spring_kd[k], spring_rest_length[k])
+            f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring_ke[k], spring_kd[k], spring_rest_length[k])
         if i == 0 and pressed != 0:
             reaction = f  # the feedback force: the tissue's internal forces on the probe
             # displacement control: the vertex is where the probe puts it

@@ -127,8 +127,9 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
         for i in range(lane, nf, T):
             v = region_vertex[b, i]
             x0 = q_rest[v]
-            rest4[i] = wp.vec4(x0[0], x0[1], x0[2], anchor_scale * anchor_ke[v])
-            kda[i] = anchor_scale * anchor_kd[v]
+            # the anchor constants negated (scale -1 in anchor_force): one multiply-add a step
+            rest4[i] = wp.vec4(x0[0], x0[1], x0[2], -anchor_scale * anchor_ke[v])
+            kda[i] = -anchor_scale * anchor_kd[v]
             dtm[i] = dt / particle_mass[v]
             k0 = local_offsets[b, i]
             for k in range(k0, local_offsets[b, i + 1]):
@@ -145,8 +146,8 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
             deg = local_offsets[b, lane + 1] - local_offsets[b, lane]
         vo = region_vertex[b, ow]
         ro = q_rest[vo]
-        kao = anchor_scale * anchor_ke[vo]
-        kdo = anchor_scale * anchor_kd[vo]
+        kao = -anchor_scale * anchor_ke[vo]
+        kdo = -anchor_scale * anchor_kd[vo]
         dto = dt / particle_mass[vo]
         # this lane's springs (each spring of the region once), in registers for the whole launch
         ends = vec_i(0)
@@ -200,7 +201,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
             # vertex first (registers), then any beyond the block's threads (shared memory)
             if own:
                 i = lane
-                f = anchor_force(xo, uo, ro, kao, kdo, 1.0)
+                f = anchor_force(xo, uo, ro, kao, kdo, -1.0)  # the constants are stored negated
                 for k in range(deg):
                     f = add_entry16(f, fe, code, k * cf + i)
                 if i == 0 and s < press_steps:
@@ -234,7 +235,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                 x = wp.vec3(av[0], av[1], av[2])
                 u = wp.vec3(av[3], bv[0], bv[1])
                 c4 = load4(rest4, i)
-                f = anchor_force(x, u, wp.vec3(c4[0], c4[1], c4[2]), c4[3], kda[i], 1.0)
+                f = anchor_force(x, u, wp.vec3(c4[0], c4[1], c4[2]), c4[3], kda[i], -1.0)
                 for k in range(wp.int32(off[i + 1]) - wp.int32(off[i])):
                     f = add_entry16(f, fe, code, k * cf + i)
                 u1 = u + f * dtm[i]

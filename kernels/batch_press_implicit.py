@@ -12,7 +12,7 @@ vertex's springs in mesh CSR order), so a palpation of the batch gives the same 
 import warp as wp
 
 from .block_cg import solve_block_cg
-from .forces import anchor_force, spring_block, spring_force
+from .forces import add_spring_force, anchor_force, spring_block
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -85,7 +85,7 @@ def step_batch_implicit(
         for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
             j = local_neighbour[b, k]
             e = local_edge[b, k]
-            f += spring_force(x, u, q_in[b, j], qd_in[b, j], spring_ke[e], spring_kd[e], spring_rest_length[e])
+            f = add_spring_force(f, x, u, q_in[b, j], qd_in[b, j], spring_ke[e], spring_kd[e], spring_rest_length[e])
             B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], q_in[b, j] - x, dt)
             csr_block[b, k] = B
             # the neighbour's local index where it is an unknown of the solve (free, not driven), else -1

@@ -9,7 +9,7 @@ its thread writes the reaction, so the feedback force needs no second kernel.
 
 import warp as wp
 
-from .forces import anchor_force, spring_force
+from .forces import add_spring_force, anchor_force
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -50,7 +50,7 @@ def integrate_region_explicit(
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             j = adj_vertex[k]
             spring = adj_spring[k]  # (k_ij, d_ij, rest length)
-            f += spring_force(x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
+            f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
         if v == pv and mode != 0:
             probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
         if v == pv and mode == 1:

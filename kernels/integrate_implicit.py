@@ -14,7 +14,7 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .block_cg import solve_block_cg
-from .forces import anchor_force, spring_block, spring_force
+from .forces import add_spring_force, anchor_force, spring_block
 
 
 @wp.kernel
@@ -76,7 +76,7 @@ def integrate_region_implicit(
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             j = adj_vertex[k]
             spring = adj_spring[k]  # (k_ij, d_ij, rest length)
-            f += spring_force(x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
+            f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
             B, Kb = spring_block(spring[0], spring[1], spring[2], q_in[j] - x, dt)
             csr_block[k] = B
             # the neighbour's local index where it is an unknown of the solve (free, not driven), else -1

@@ -7,7 +7,7 @@ vertices at most between checks), so the maxima need no atomics and the launch n
 
 import warp as wp
 
-from .forces import anchor_force, edge_direction, spring_force
+from .forces import add_spring_force, anchor_force, edge_direction
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -51,7 +51,7 @@ def eval_ring_motion(
             for k in range(adj_offsets[v], adj_offsets[v + 1]):
                 j = adj_vertex[k]
                 e = adj_edge[k]
-                f += spring_force(x, zero, q[j], zero, spring_ke[e], 0.0, spring_rest_length[e])
+                f = add_spring_force(f, x, zero, q[j], zero, spring_ke[e], 0.0, spring_rest_length[e])
                 d = edge_direction(q[j] - x)
                 D += spring_ke[e] * wp.outer(d, d)
             if wp.determinant(D) > 0.0:
