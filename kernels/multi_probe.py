@@ -1,7 +1,7 @@
-"""Several probes at once: regions seeded at several vertices, and the probes' vertices driven.
+"""Several probes at once: the probes' vertices driven.
 
-A region of several probes is one region grown from all their vertices (ring 0 = the seeds), so
-two regions that touch merge by being rebuilt from the union of their seeds. The solver integrates
+A region of several probes is one region grown from all their vertices (ring 0 = the seeds:
+kernels/rings.py), so two regions that touch merge by being rebuilt from the union of their seeds. The solver integrates
 the region's free vertices but the driven ones, which it treats like its fixed ring (known, their
 velocity kept through the step); `drive_probes` then puts each driven vertex where its probe
 holds it and writes the reaction, as the single-probe step does for its one probe.
@@ -16,14 +16,6 @@ wp.set_module_options({"enable_backward": False})
 
 PROBE_OFF = wp.constant(0)
 PROBE_DISPLACEMENT = wp.constant(1)
-
-
-@wp.kernel
-def seed_rings(seeds: wp.array(dtype=wp.int32), vertex_ring: wp.array(dtype=wp.int32), region_vertex: wp.array(dtype=wp.int32)):
-    # ring 0 is every probe's contact vertex (sorted, distinct: the host checks)
-    i = wp.tid()
-    vertex_ring[seeds[i]] = 0
-    region_vertex[i] = seeds[i]
 
 
 @wp.kernel
@@ -64,11 +56,6 @@ def drive_probes(
     target = probe_target[p]
     q_out[v] = target
     qd_out[v] = (target - x) / dt
-
-
-def seed_region_rings(region, seeds):
-    """Put the sorted, distinct `seeds` (device int32) on ring 0 of a cleared region."""
-    wp.launch(seed_rings, dim=seeds.shape[0], inputs=[seeds], outputs=[region.vertex_ring, region.region_vertex], device=region.device)
 
 
 def drive_probe_vertices(model, patch_probe, probes, dt, state_in, state_out):

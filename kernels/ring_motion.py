@@ -7,7 +7,7 @@ vertices at most between checks), so the maxima need no atomics and the launch n
 
 import warp as wp
 
-from .forces import EPS_LENGTH
+from .forces import add_spring_force, anchor_force, edge_direction
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -43,18 +43,17 @@ def eval_ring_motion(
         else:
             # one Jacobi step of the static equilibrium K u = f at v: anchor and springs, eqs. (3)-(5),
             # linearized at the current state, with v's neighbours held where they are
+            # (a static equilibrium: velocities zero, so the dampers add nothing)
             ka = anchor_ke[v]
-            f = -ka * (x - q_rest[v])
+            zero = wp.vec3(0.0)
+            f = anchor_force(x, zero, q_rest[v], ka, 0.0, 1.0)
             D = ka * wp.identity(n=3, dtype=float)
             for k in range(adj_offsets[v], adj_offsets[v + 1]):
                 j = adj_vertex[k]
                 e = adj_edge[k]
-                r = q[j] - x
-                l = wp.length(r)
-                if l > EPS_LENGTH:
-                    d = r / l
-                    f += spring_ke[e] * (l - spring_rest_length[e]) * d
-                    D += spring_ke[e] * wp.outer(d, d)
+                f = add_spring_force(f, x, zero, q[j], zero, spring_ke[e], 0.0, spring_rest_length[e])
+                d = edge_direction(q[j] - x)
+                D += spring_ke[e] * wp.outer(d, d)
             if wp.determinant(D) > 0.0:
                 motion[0] = wp.max(motion[0], wp.length(wp.inverse(D) * f))
 

@@ -26,6 +26,14 @@ def seed_ring(
 
 
 @wp.kernel
+def seed_rings(seeds: wp.array(dtype=wp.int32), vertex_ring: wp.array(dtype=wp.int32), region_vertex: wp.array(dtype=wp.int32)):
+    # ring 0 of a region of several probes: every probe's contact vertex (sorted, distinct: the host checks)
+    i = wp.tid()
+    vertex_ring[seeds[i]] = 0
+    region_vertex[i] = seeds[i]
+
+
+@wp.kernel
 def grow_ring(
     adj_offsets: wp.array(dtype=wp.int32),
     adj_vertex: wp.array(dtype=wp.int32),
@@ -45,16 +53,23 @@ def grow_ring(
                 region_vertex[slot] = u
 
 
+@wp.func
+def sort_ring(region_vertex: wp.array(dtype=wp.int32), begin: int, end: int):
+    # insertion sort of region_vertex[begin:end] by vertex id (the radix sort's order), in one thread:
+    # a ring's order must not depend on which thread claimed which vertex
+    for i in range(begin + 1, end):
+        key = region_vertex[i]
+        j = i - 1
+        while j >= begin and region_vertex[j] > key:
+            region_vertex[j + 1] = region_vertex[j]
+            j -= 1
+        region_vertex[j + 1] = key
+
+
 @wp.kernel
 def sort_ring_small(region_vertex: wp.array(dtype=wp.int32), begin: int, count: int):
-    # one thread: insertion sort of a short ring by vertex id (same order as the radix sort)
-    for i in range(1, count):
-        key = region_vertex[begin + i]
-        j = i - 1
-        while j >= 0 and region_vertex[begin + j] > key:
-            region_vertex[begin + j + 1] = region_vertex[begin + j]
-            j -= 1
-        region_vertex[begin + j + 1] = key
+    # one thread sorts a short ring
+    sort_ring(region_vertex, begin, begin + count)
 
 
 @wp.kernel
@@ -128,6 +143,11 @@ def write_region_edges(
             region_edge[slot] = adj_edge[k]
             region_edge_local[slot] = wp.vec2i(i, vertex_local[u])
             slot += 1
+
+
+def seed_region_rings(region, seeds):
+    """Put the sorted, distinct `seeds` (device int32) on ring 0 of a cleared region."""
+    wp.launch(seed_rings, dim=seeds.shape[0], inputs=[seeds], outputs=[region.vertex_ring, region.region_vertex], device=region.device)
 
 
 def grow_region_ring(adjacency, region, frontier_begin, frontier_end, ring):

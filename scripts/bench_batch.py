@@ -83,15 +83,12 @@ def main(argv=None):
     ap.add_argument("--rings", type=int, default=4)
     ap.add_argument("--batch", type=int, nargs="*", default=[1000, 10000, 100000])
     ap.add_argument("--threads", type=int, nargs="*", default=[None])
-    ap.add_argument("--max-registers", type=int, nargs="*", default=[None], help="register caps per thread to try (0: none; default 64; the fast kernel's lean 4-5: 80)")
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--sweep-points", type=int, default=10000)
     ap.add_argument("--spheres", type=int, nargs="*", default=[])
     ap.add_argument("--sphere-batch", type=int, default=10000)
     ap.add_argument("--dt-ms", type=float, default=None, help="default: 1 ms, or less where the mesh's critical step asks")
-    ap.add_argument("--wide", type=int, nargs="*", default=[1], help="entries kernel: 1 vec4 shared state, 0 vec3")
-    ap.add_argument("--lean", type=int, nargs="*", default=[5], help="fast kernel: 2 probe state in shared memory, int16 codes and packed positions and velocities, 4 as 2 with owned vertices in registers and transposed codes, 5 also their constants, 6 also slots by level, 7 as 5 with codes in pairs, 8 as 5 with spring ends not hoisted, 9 as 5 with the last spring slot in shared memory, 10 all spring constants there, 11 force slots spread over the banks")
-    ap.add_argument("--kernels", nargs="*", default=[None], help="entries, vertices (default: the device's default)")
+    ap.add_argument("--kernels", nargs="*", default=[None], help="fast, exact (default: the device's default)")
     ap.add_argument("--implicit-batch", type=int, nargs="*", default=[], help="batch sizes for the implicit integrator")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
@@ -108,25 +105,22 @@ def main(argv=None):
     dt = args.dt_ms * 1e-3 if args.dt_ms else auto_dt(Model(mesh, None, "cpu"))
     print(f"{mesh.summary()}; device {args.device}; {args.rings} rings; dt {dt * 1e3:g} ms")
     out = {"device": args.device, "mesh": str(mesh.path), "dt": dt, "batch": [], "sweep": None, "spheres": []}
-    print("| B | kernel | threads | register cap | region vertices max | build ms | step us | region-steps/s | finite |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| B | kernel | threads | region vertices max | build ms | step us | region-steps/s | finite |")
+    print("|---|---|---|---|---|---|---|---|")
     for b in args.batch:
         for kernel in args.kernels:
             for threads in args.threads:
-                for regs, wide, lean in [(r, w, e) for r in args.max_registers for w in args.wide for e in (args.lean if kernel == "fast" else [1])] if kernel != "vertices" else [(0, 1, 1)]:
-                    try:
-                        row = measure_batch(
-                            mesh, args.rings, b, args.device, steps=args.steps, threads=threads, dt=dt, kernel=kernel, max_registers=regs, wide=bool(wide), lean=int(lean)
-                        )
-                    except ValueError as exc:  # a thread count too small for the regions
-                        print(f"| {b} | {kernel} | {threads} | {regs} | skipped: {exc} |")
-                        continue
-                    out["batch"].append(row)
-                    print(
-                        f"| {b} | {row['kernel']}{' vec4' * wide if kernel not in ('vertices', 'fast') else ''}{(' lean' + ' packed' * (lean >= 2) + ' owned' * (lean >= 4) + ' regs' * (lean >= 5) + ' levels' * (lean == 6) + ' pairs' * (lean == 7) + ' late' * (lean == 8) + ' tail' * (lean == 9) + ' kshared' * (lean == 10) + ' banks' * (lean == 11)) * bool(lean) if kernel == 'fast' else ''} | {row['threads']} | {regs if regs is not None else 'default'} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
-                        f"{row['step_us_median']:.2f} | {row['region_steps_per_s']:.3e} | {row['finite']} |",
-                        flush=True,
-                    )
+                try:
+                    row = measure_batch(mesh, args.rings, b, args.device, steps=args.steps, threads=threads, dt=dt, kernel=kernel)
+                except ValueError as exc:  # a thread count too small for the regions
+                    print(f"| {b} | {kernel} | {threads} | skipped: {exc} |")
+                    continue
+                out["batch"].append(row)
+                print(
+                    f"| {b} | {row['kernel']} | {row['threads']} | {row['region_vertices_max']} | {row['build_ms']:.1f} | "
+                    f"{row['step_us_median']:.2f} | {row['region_steps_per_s']:.3e} | {row['finite']} |",
+                    flush=True,
+                )
     for b in args.implicit_batch:
         from almsdm_warp.batch.batch_palpation import BatchPalpation
         from almsdm_warp.evaluation.bench import spread_vertices

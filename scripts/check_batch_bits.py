@@ -2,8 +2,8 @@
 
     python scripts/check_batch_bits.py [MESH] --device cuda:0 --points 32
 
-On the CPU every point agrees (tests/test_batch.py asserts it); on CUDA this reports how far
-NVRTC's fused multiply-adds take the two kernels apart.
+With the exact kernel every point agrees (tests/test_batch.py asserts it); the fast kernel (CUDA's
+default) reports how far its approximate reciprocal square root takes it from the exact step.
 """
 
 import argparse
@@ -18,7 +18,7 @@ def main(argv=None):
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--points", type=int, default=32)
     ap.add_argument("--rings", type=int, default=4)
-    ap.add_argument("--kernel", default=None, help="entries or vertices (default: the device's)")
+    ap.add_argument("--kernel", default=None, help="fast or exact (default: the device's)")
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
     from almsdm_warp.batch.batch_palpation import BatchPalpation

@@ -1,6 +1,6 @@
 """A sweep's results on CUDA against the CPU's, per kernel, and run to run on CUDA.
 
-    python scripts/check_fast_sweep.py MESH --points 10000 --kernels fast entries
+    python scripts/check_fast_sweep.py MESH --points 10000 --kernels fast exact
 
 The sweep's press (10 mm, ramp 0.1 s, hold 0.2 s, settle 1 s, dt from the mesh's critical step)
 at `points` farthest-point samples snapped to vertices; the CPU reference is the default CPU
@@ -22,8 +22,7 @@ def main(argv=None):
     ap.add_argument("--device", default="cuda:0")
     ap.add_argument("--points", type=int, default=10000)
     ap.add_argument("--rings", type=int, default=4)
-    ap.add_argument("--kernels", nargs="*", default=["fast", "entries"])
-    ap.add_argument("--lean", type=int, nargs="*", default=[5], help="the fast kernel's variants (BatchPalpation lean), each checked")
+    ap.add_argument("--kernels", nargs="*", default=["fast", "exact"])
     args = ap.parse_args(argv)
     import warp as wp
 
@@ -43,10 +42,10 @@ def main(argv=None):
     cpu = BatchPalpation(mesh, rings=args.rings, dt=dt, device="cpu").touch(uniq).press(*press)
     print(f"CPU reference (default CPU kernel): {len(uniq)} distinct vertices of {len(vertices)} points, {time.perf_counter() - t0:.1f} s")
     ref_peak, ref_hold, ref_rec = cpu.peak_force[inverse], cpu.hold_force[inverse], cpu.recovery_error[inverse]
-    for kernel, lean in [(k, e) for k in args.kernels for e in (args.lean if k == "fast" else [2])]:
+    for kernel in args.kernels:
         runs = []
         for _ in range(2):
-            bp = BatchPalpation(mesh, rings=args.rings, dt=dt, device=args.device, kernel=kernel, lean=lean).touch(vertices)
+            bp = BatchPalpation(mesh, rings=args.rings, dt=dt, device=args.device, kernel=kernel).touch(vertices)
             runs.append(bp.press(*press))
             wp.synchronize_device(bp.device)
         a, b = runs
@@ -54,7 +53,7 @@ def main(argv=None):
         rel = lambda x, y: float(np.max(np.abs(x - y) / np.abs(y)))
         big = ref_rec > 1e-7  # recovery errors above 0.1 um: relative differences mean something there
         print(
-            f"{kernel}{f' lean {lean}' * (kernel == 'fast')}: peak force max rel diff {rel(a.peak_force, ref_peak):.3g}, hold force {rel(a.hold_force, ref_hold):.3g}; "
+            f"{kernel}: peak force max rel diff {rel(a.peak_force, ref_peak):.3g}, hold force {rel(a.hold_force, ref_hold):.3g}; "
             f"recovery error max abs diff {np.max(np.abs(a.recovery_error - ref_rec)) * 1e3:.3g} mm (max {ref_rec.max() * 1e3:.3g} mm), "
             f"max rel diff where > 0.1 um {rel(a.recovery_error[big], ref_rec[big]) if big.any() else float('nan'):.3g} ({int(big.sum())} points); "
             f"two CUDA runs same bits: {same}",

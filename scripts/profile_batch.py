@@ -17,9 +17,7 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, default=10000)
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--rings", type=int, default=4)
-    ap.add_argument("--kernel", default=None)
-    ap.add_argument("--max-registers", type=int, default=None)
-    ap.add_argument("--lean", type=int, default=5)
+    ap.add_argument("--kernel", default=None, help="fast or exact (default: the device's)")
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
     from almsdm_warp.batch.batch_palpation import BatchPalpation
@@ -28,11 +26,11 @@ def main(argv=None):
 
     init_warp()
     mesh = load_mesh(args.mesh)
-    bp = BatchPalpation(mesh, rings=args.rings, dt=6.5e-4, device=args.device, kernel=args.kernel, max_registers=args.max_registers, lean=args.lean).touch(spread_vertices(mesh, args.batch))
+    bp = BatchPalpation(mesh, rings=args.rings, dt=6.5e-4, device=args.device, kernel=args.kernel).touch(spread_vertices(mesh, args.batch))
     bp.depth, bp.ramp_steps, bp.press_steps = 0.01, 100, args.steps
     bp.launch_steps(0, args.steps)
     wp.synchronize_device(bp.device)
-    print(f"kernel {bp.kernel}, plan {bp.cuda_plan}, {args.batch} palpations x {args.steps} steps")
+    print(f"kernel {bp.kernel}, plan {bp.fast_plan if bp.kernel == 'fast' else bp.threads}, {args.batch} palpations x {args.steps} steps")
 
 
 if __name__ == "__main__":

@@ -1,11 +1,11 @@
 """Many palpations at once on one mesh: B contacts, each with its own region, probe and state.
 
 ``BatchPalpation(mesh).touch(vertices)`` builds B ring regions on the device in one launch
-(kernels/batch_region.py); ``press(depth, ramp, hold, settle)`` runs the press protocol of
+(kernels/batch_rings.py); ``press(depth, ramp, hold, settle)`` runs the press protocol of
 ``Palpation.press`` on all of them, many steps per launch, one block per palpation with the
-region on chip on CUDA (kernels/batch_explicit.py). The physics, summation order and
-integration formula are the one-palpation explicit step's, so a palpation of the batch gives the
-same bits as ``Palpation`` on the same device.
+region on chip on CUDA (kernels/batch_press_fast.py; the exact kernel, kernels/batch_press.py,
+on the CPU). The physics, summation order and integration formula are the one-palpation explicit
+step's, so a palpation of the exact kernel gives the same bits as ``Palpation`` on the same device.
 """
 
 from __future__ import annotations
@@ -17,16 +17,15 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import check_vertex
-from ..kernels import batch_explicit as bk
-from ..kernels import batch_explicit_cuda as bkc
-from ..kernels.batch_fast_common import shared_bytes_fast
-from ..kernels import batch_implicit as bki
-from ..kernels import batch_region as br
+from ..kernels import batch_press as bk
+from ..kernels import batch_press_fast as bkf
+from ..kernels import batch_press_implicit as bki
+from ..kernels import batch_rings as br
 from ..sim.model import Model
 from ..region.region import check_rings
 
 
-KERNELS = ("fast", "entries", "vertices")
+KERNELS = ("fast", "exact")
 INTEGRATORS = ("explicit", "implicit")
 
 
@@ -58,7 +57,7 @@ class BatchResult:
 
 
 class BatchRegions:
-    """Compacted per-palpation regions of fixed capacity, on the device (see kernels/batch_region.py)."""
+    """Compacted per-palpation regions of fixed capacity, on the device (see kernels/batch_rings.py)."""
 
     def __init__(self, batch_size: int, vertex_capacity: int, entry_capacity: int, rings: int, device):
         B, cv, ce, d = batch_size, vertex_capacity, entry_capacity, device
@@ -97,21 +96,13 @@ class BatchPalpation:
     step; cg_max_iterations and cg_tolerance as the solver's).
 
     rings: the local model's rings (the outermost fixed). dt [s].
-    kernel (explicit): "fast" (the CUDA default where the regions fit: as "entries", with an
-    approximate reciprocal square root and no division in the step, forces within 5e-6 relative of the CPU's
-    bits; on the CPU it runs the "entries" kernel), "entries" (a block per palpation, its threads
-    sharing the springs, each computed once) or "vertices" (a block's threads share
-    the free vertices; a block is one thread on the CPU: the CPU default). Both give the same
-    bits on the CPU. threads: threads per block on CUDA (default 64 for "entries"; for
-    "vertices" enough for the largest region's free vertices, 32..256). max_registers: the
-    "entries" kernel's registers per thread (default 64, and for the "fast" kernel 80 for lean 4-5, 9, 11 and 72 for 10; 0: no cap). wide: its state as vec4.
-    lean ("fast" kernel): 2 the probe's state in shared memory, int16 CSR codes and each vertex's
-    position and velocity packed in 24 bytes of shared memory; 4 as 2, each thread owning a free vertex (its state and degree in
-    registers across steps) and the CSR codes transposed; 5 as 4 with the owned vertex's constants
-    in registers too (the default); 6 as 5 with force slots numbered by CSR level; 7 as 5 with
-    the codes in pairs; 8 as 5 with the spring ends not hoisted out of the step loop; 9 / 10 as 5
-    with the last / all spring slots' constants in shared memory; 11 as 5 with the force slots
-    spread over the shared-memory banks. All give the same bits on the CPU.
+    kernel (explicit): "fast" (CUDA's default where the regions fit: one block per palpation, its
+    threads sharing the springs, each computed once, with an approximate reciprocal square root
+    and no division in the step: forces within 5e-6 relative of the exact kernel's) or "exact" (a
+    block's threads share the free vertices, the same bits as Palpation on the same device; the
+    CPU's default, and CUDA's where the fast kernel cannot hold the regions). threads: threads
+    per block on CUDA (default 64 for "fast"; for "exact" enough for the largest region's free
+    vertices, 32..256).
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
     Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
@@ -119,7 +110,7 @@ class BatchPalpation:
 
     def __init__(
         self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
-        kernel=None, threads=None, max_registers=None, wide=True, lean=5, capacity=None,
+        kernel=None, threads=None, capacity=None,
         cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
     ):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
@@ -136,16 +127,9 @@ class BatchPalpation:
         self.integrator = integrator
         self.cg_max_iterations = int(cg_max_iterations)
         self.cg_tolerance = float(cg_tolerance)
+        if kernel is not None and kernel not in KERNELS:
+            raise ValueError(f"unknown kernel {kernel!r} (known: {', '.join(KERNELS)})")
         self._kernel = kernel
-        # 64 registers a thread: 16 blocks of 64 threads per SM, the best of 0/40/64 caps measured on an H200
-        self._max_registers = 64 if max_registers is None else int(max_registers)
-        # the "fast" kernel's lean 4-5 run best at 80 registers (12 blocks of 64 threads an SM): 9.55e8 against 9.23e8 at 64 on an H200
-        # (lean 9 also 80, 9.55e8; lean 10 best at 72, 9.35e8; lean 11 derived from 5: 80, not measured)
-        self._fast_max_registers = {4: 80, 5: 80, 9: 80, 10: 72, 11: 80}.get(int(lean), 64) if max_registers is None else int(max_registers)
-        self._wide = bool(wide)
-        if int(lean) not in (2, *range(4, 12)):
-            raise ValueError(f"lean must be 2 or 4..11, got {lean}")
-        self._lean = int(lean)
         self._threads = threads
         self._capacity = capacity
         self.batch_size = 0
@@ -157,114 +141,106 @@ class BatchPalpation:
     # -- regions -------------------------------------------------------------------------------
     def touch(self, vertices) -> "BatchPalpation":
         """Put a probe on each of `vertices` and build their regions (one launch, on the device)."""
+        self.vertices = self._checked_vertices(vertices)
+        self.batch_size = len(self.vertices)
+        self.regions = self._build_regions(self.vertices)
+        self._choose_kernel()
+        self._allocate_states()
+        br.rest_states(self)
+        return self
+
+    def _checked_vertices(self, vertices) -> np.ndarray:
         verts = np.asarray(vertices)
         if verts.ndim != 1 or len(verts) == 0:
             raise ValueError(f"vertices must be a non-empty 1-D list of vertex ids, got shape {verts.shape}")
         if not np.issubdtype(verts.dtype, np.integer):
             raise TypeError(f"vertices must be integers, got {verts.dtype}")
-        n = self.mesh.vertex_count
-        bad = np.flatnonzero((verts < 0) | (verts >= n))
+        bad = np.flatnonzero((verts < 0) | (verts >= self.mesh.vertex_count))
         if len(bad):
             check_vertex(self.mesh, int(verts[bad[0]]), f"contact vertex (palpation {bad[0]})")
-        self.vertices = verts.astype(np.int64)
-        B = self.batch_size = len(verts)
+        return verts.astype(np.int64)
+
+    def _build_regions(self, verts) -> BatchRegions:
+        # build at a guessed capacity; a build that overflows it is redone with twice the capacity
+        n, k = self.mesh.vertex_count, self.rings
         seeds = wp.array(verts.astype(np.int32), dtype=wp.int32, device=self.device)
-        k = self.rings
         cv = _pow2(2 * (3 * k * (k + 1) + 1), 32) if self._capacity is None else int(self._capacity)
         # CSR entries of the free vertices: ~3.6 per region vertex on a surface (60% free, degree 6)
         ce = _pow2(cv * min(self._max_degree, 4), 8)
         while True:
-            regions = BatchRegions(B, cv, ce, k, self.device)
+            regions = BatchRegions(len(verts), cv, ce, k, self.device)
             br.build_regions(self.model.dmesh, seeds, k, regions)
             status = regions.status.numpy()
             if not np.any(status):
-                break
+                return regions
             if np.any(status & br.BUILD_OVERFLOW):
                 cv *= 2
             ce = ce * 2 if np.any(status & br.BUILD_CSR_OVERFLOW) else max(ce, _pow2(cv * min(self._max_degree, 4)))
             if cv > max(4 * n, 64):  # cannot happen for a valid mesh: a region never exceeds it
                 raise RuntimeError("batch region build did not converge")
-        self.regions = regions
-        counts = regions.region_count.numpy()
-        free = regions.free_count.numpy()
-        entries = regions.entry_count.numpy()
-        self.region_vertex_counts = counts
-        self.free_vertex_counts = free
-        # the kernel's capacities: the largest region of this batch, not the build's guess
+
+    def _choose_kernel(self) -> None:
+        # the kernels' capacities: the largest region of this batch, not the build's guess
+        regions = self.regions
+        counts = self.region_vertex_counts = regions.region_count.numpy()
+        free = self.free_vertex_counts = regions.free_count.numpy()
+        entries = int(regions.entry_count.numpy().max(initial=1))
+        springs = int(regions.spring_count.numpy().max(initial=1))
         self.vertex_capacity = _pow2(int(counts.max()), 16)
-        self.entry_capacity = _pow2(int(entries.max(initial=1)), 16)
-        springs = regions.spring_count.numpy()
-        self.cuda_plan = self._entries_plan(int(counts.max()), int(entries.max(initial=1)), int(springs.max(initial=1)))
-        self.fast_plan = self._fast_plan(int(counts.max()), int(free.max()), int(entries.max(initial=1)), int(springs.max(initial=1)))
+        self.entry_capacity = _pow2(entries, 16)
+        self.fast_plan = self._fast_plan(int(counts.max()), int(free.max()), entries, springs)
         cuda = self.device.is_cuda
-        kernel = self._kernel or ("fast" if cuda and self.fast_plan is not None else "vertices")
-        if kernel not in KERNELS:
-            raise ValueError(f"unknown kernel {kernel!r} (known: {', '.join(KERNELS)})")
-        if kernel in ("entries", "fast") and self.cuda_plan is None:
+        kernel = self._kernel or ("fast" if cuda and self.fast_plan is not None else "exact")
+        if kernel == "fast" and self.fast_plan is None:
             raise ValueError(
-                f"the 'entries' kernel cannot hold these regions ({int(counts.max())} vertices, {int(springs.max())} springs: "
-                f"at most 16 springs a thread of 1024, and 40 KiB of shared memory)"
+                f"the 'fast' kernel cannot hold these regions ({int(counts.max())} vertices, {springs} springs: "
+                f"at most 16 springs a thread of 1024, and {bk.SHARED_BYTES_MAX // 1024} KiB of shared memory); use kernel='exact'"
             )
         self.kernel = kernel
         self.shared = bool(cuda and bk.shared_bytes(self.vertex_capacity, self.entry_capacity) <= bk.SHARED_BYTES_MAX)
-        if kernel == "fast" and cuda:
+        if kernel == "fast":
             self.threads = self.fast_plan[0]
-        elif kernel in ("entries", "fast"):
-            self.threads = self.cuda_plan[0]
         elif not cuda:
             self.threads = 1
         elif self._threads is not None:
             self.threads = int(self._threads)
         else:
             self.threads = min(max(_pow2(int(free.max()), 32), 32), 256)
-        # global working arrays of the "vertices" kernel where its regions do not fit in shared memory
-        nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared or kernel != "vertices")
-        d = self.device
+
+    def _allocate_states(self) -> None:
+        B, d = self.batch_size, self.device
+        # global working arrays of the exact kernel where its regions do not fit in shared memory
+        nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared or self.kernel != "exact")
         self.scratch_vec3 = wp.zeros(nv, dtype=wp.vec3, device=d)
         self.scratch_float = wp.zeros(nf, dtype=wp.float32, device=d)
         self.scratch_int = wp.zeros(ni, dtype=wp.int32, device=d)
         self.scratch_wide = wp.zeros(1, dtype=wp.vec4, device=d)  # a typed placeholder (shared memory is used)
-        self.q_state = wp.zeros((B, regions.vertex_capacity), dtype=wp.vec3, device=d)
+        self.q_state = wp.zeros((B, self.regions.vertex_capacity), dtype=wp.vec3, device=d)
         """Positions of each palpation's region vertices [m], local order, shape [B, capacity]."""
-        self.qd_state = wp.zeros((B, regions.vertex_capacity), dtype=wp.vec3, device=d)
+        self.qd_state = wp.zeros((B, self.regions.vertex_capacity), dtype=wp.vec3, device=d)
         """Velocities [m/s], same layout."""
         self.peak_force = wp.zeros(B, dtype=wp.float64, device=d)
-        """Running largest |feedback force| [N] (its square with the "fast" kernel on CUDA), [B]."""
+        """Running largest |feedback force| [N] (its square with the "fast" kernel), [B]."""
         self.peak_reaction = wp.zeros(B, dtype=wp.vec3, device=d)
         self.hold_reaction = wp.zeros(B, dtype=wp.vec3, device=d)
         normals = -self.model.vertex_normal_rest[self.vertices]
         self.press_direction = wp.array(normals, dtype=wp.vec3d, device=d)
         """Inward unit normal at each contact vertex (float64, as the host computes the target)."""
-        br.rest_states(self)
-        return self
 
-    def _entries_plan(self, max_vertices, max_entries, max_springs):
-        """(threads, springs per thread, vertex capacity, entry capacity, register cap) of the
-        "entries" kernel, or None where it cannot hold these regions."""
+    def _fast_plan(self, max_vertices, max_free, max_entries, max_springs):
+        """(threads, springs per thread, vertex, free-vertex and spring capacities, largest degree)
+        of the "fast" kernel, or None where it cannot hold these regions."""
         threads = 64 if self._threads is None else int(self._threads)
         per_thread = -(-max_springs // threads)
         while per_thread > 16 and threads < 1024:  # registers are unrolled up to 16 springs a thread
             threads *= 2
             per_thread = -(-max_springs // threads)
-        cv = -(-max_vertices // 16) * 16
-        ce = -(-max_entries // 16) * 16
-        if per_thread > 16 or bkc.shared_bytes(cv, ce, threads * per_thread) > bk.SHARED_BYTES_MAX:
-            return None
-        return threads, max(per_thread, 1), cv, ce, self._max_registers, self._wide
-
-    def _fast_plan(self, max_vertices, max_free, max_entries, max_springs):
-        """(threads, springs per thread, vertex, free-vertex, entry and spring capacities, register
-        cap) of the "fast" kernel, or None where it cannot hold these regions."""
-        threads = 64 if self._threads is None else int(self._threads)
-        per_thread = -(-max_springs // threads)
-        while per_thread > 16 and threads < 1024:
-            threads *= 2
-            per_thread = -(-max_springs // threads)
         r16 = lambda x: -(-max(int(x), 1) // 16) * 16
         cv, cf, ce, cs = r16(max_vertices), r16(max_free), r16(max_entries), r16(max_springs)
-        if per_thread > 16 or max(cv, ce) > 32767 or shared_bytes_fast(cv, cf, ce, cs, self._lean, self._max_degree) > bk.SHARED_BYTES_MAX:
+        # CSR offsets and codes are int16 in shared memory
+        if per_thread > 16 or max(cv, ce) > 32767 or bkf.shared_bytes_fast(cv, cf, cs, self._max_degree) > bk.SHARED_BYTES_MAX:
             return None
-        return threads, max(per_thread, 1), cv, cf, ce, cs, self._fast_max_registers, self._lean, self._max_degree
+        return threads, max(per_thread, 1), cv, cf, cs, self._max_degree
 
     def region(self, b: int) -> np.ndarray:
         """Mesh ids of palpation b's region vertices in local order (host copy)."""
@@ -318,8 +294,8 @@ class BatchPalpation:
 
     def launch_steps(self, begin: int, count: int) -> None:
         """Launch steps begin..begin+count of the press scheduled by start_press (no wait)."""
-        if self.kernel in ("entries", "fast"):
-            bkc.press_batch_cuda(self, begin, count)
+        if self.kernel == "fast":
+            bkf.press_batch_fast(self, begin, count)
         else:
             bk.press_batch(self, begin, count)
 

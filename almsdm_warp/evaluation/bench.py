@@ -56,12 +56,12 @@ def spread_vertices(mesh, count: int) -> np.ndarray:
     return np.resize(surface, count).astype(np.int64)
 
 
-def measure_batch(mesh, rings, batch, device, *, steps=1000, repeats=5, threads=None, model=None, dt=1e-3, kernel=None, max_registers=None, wide=True, lean=5):
+def measure_batch(mesh, rings, batch, device, *, steps=1000, repeats=5, threads=None, model=None, dt=1e-3, kernel=None):
     """Region-steps per second of BatchPalpation: `batch` presses of `steps` steps of `dt` (10 mm
     ramp over the first 100 steps, then held), timed between device synchronizations; the median
     of `repeats`."""
     from ..batch.batch_palpation import BatchPalpation
-    bp = BatchPalpation(mesh, rings=rings, dt=dt, device=device, threads=threads, model=model, kernel=kernel, max_registers=max_registers, wide=wide, lean=lean)
+    bp = BatchPalpation(mesh, rings=rings, dt=dt, device=device, threads=threads, model=model, kernel=kernel)
     t0 = time.perf_counter()
     bp.touch(spread_vertices(mesh, batch))
     wp.synchronize_device(bp.device)
@@ -84,9 +84,6 @@ def measure_batch(mesh, rings, batch, device, *, steps=1000, repeats=5, threads=
         "step_us_median": t / steps * 1e6,
         "threads": bp.threads,
         "kernel": bp.kernel,
-        "max_registers": max_registers,
-        "wide": wide,
-        "lean": lean,
         "shared": bp.shared,
         "build_ms": build_s * 1e3,
         "region_vertices_max": int(bp.region_vertex_counts.max()),

@@ -2,7 +2,7 @@
 
 The same Model, States and SolverALMSDM as one Palpation: a *patch* is a region with its own
 solver, and every patch's step (plus the drive of its probes' vertices) goes into one captured
-graph. Regions are grown from several seeds (kernels/multi_probe.py), so merging two patches is
+graph. Regions are grown from several seeds (kernels/rings.py), so merging two patches is
 rebuilding one region from both probes' vertices with the larger ring count, which holds both.
 With `tol` and no `rings`, each patch grows as AdaptivePalpation's region does (the criterion in
 almsdm_warp.adaptive) and, once all its probes are off and it is back within `tol` of rest, is
@@ -19,7 +19,8 @@ import warp as wp
 
 from .adaptive import FORCE_TOL, MARGIN, fixed_ring_estimate
 from ..mesh.device_mesh import check_vertex
-from ..kernels.multi_probe import drive_probe_vertices, seed_region_rings
+from ..kernels.multi_probe import drive_probe_vertices
+from ..kernels.rings import seed_region_rings
 from ..kernels.region_state import reset_vertices_left_behind
 from ..kernels.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ..kernels.step_explicit import integrate_explicit
-from ..kernels.step_implicit import integrate_implicit
+from ..kernels.integrate_explicit import integrate_explicit
+from ..kernels.integrate_implicit import integrate_implicit
 
 INTEGRATORS = ("explicit", "implicit")
 

@@ -9,7 +9,7 @@ its thread writes the reaction, so the feedback force needs no second kernel.
 
 import warp as wp
 
-from .forces import EPS_LENGTH
+from .forces import add_spring_force, anchor_force
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -39,25 +39,18 @@ def integrate_region_explicit(
     qd_out: wp.array(dtype=wp.vec3),
     probe_reaction: wp.array(dtype=wp.vec3),
 ):
-    # written out in the kernel, not in a wp.func: a call would copy every array descriptor
+    # the gather written out in the kernel (a wp.func taking the arrays would copy every descriptor a call)
     pv = probe_vertex[0]
     mode = probe_mode[0]
     for i in range(wp.tid(), free_count, stride):
         v = free_vertex[i]
         x = q_in[v]
         u = qd_in[v]
-        # anchor spring and damper to the rest position, eq. (3)
-        f = -anchor_scale * (anchor_ke[v] * (x - q_rest[v]) + anchor_kd[v] * u)
+        f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             j = adj_vertex[k]
             spring = adj_spring[k]  # (k_ij, d_ij, rest length)
-            r = q_in[j] - x
-            l = wp.length(r)
-            if l > EPS_LENGTH:
-                # elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
-                inv_l = 1.0 / l
-                s = spring[0] * (l - spring[2]) + spring[1] * wp.dot(qd_in[j] - u, r) * inv_l
-                f += (s * inv_l) * r
+            f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
         if v == pv and mode != 0:
             probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
         if v == pv and mode == 1:

@@ -13,20 +13,8 @@ import warp as wp
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
-from .forces import EPS_LENGTH, edge_direction
-
-
-@wp.func
-def spring_block(ke: float, kd: float, L0: float, r: wp.vec3, dt: float):
-    # dt C_e + dt^2 K_e for one spring: K_e = ke (d d^T + max(1 - L0/l, 0) (I - d d^T)), C_e = kd d d^T
-    l = wp.length(r)
-    d = edge_direction(r)
-    ddt = wp.outer(d, d)
-    geo = float(0.0)
-    if l > 1.0e-9:
-        geo = wp.max(1.0 - L0 / l, 0.0)
-    Kb = ke * (ddt + geo * (wp.identity(n=3, dtype=float) - ddt))
-    return dt * kd * ddt + dt * dt * Kb, Kb
+from .block_cg import solve_block_cg
+from .forces import add_spring_force, anchor_force, spring_block
 
 
 @wp.kernel
@@ -79,7 +67,7 @@ def integrate_region_implicit(
         x = q_in[v]
         u = qd_in[v]
         # anchor spring and damper, eq. (3); springs and dampers along the edges below, eqs. (4)-(6)
-        f = -anchor_scale * (anchor_ke[v] * (x - q_rest[v]) + anchor_kd[v] * u)
+        f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
         ka = anchor_scale * anchor_ke[v]
         kda = anchor_scale * anchor_kd[v]
         D = (particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
@@ -88,13 +76,8 @@ def integrate_region_implicit(
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             j = adj_vertex[k]
             spring = adj_spring[k]  # (k_ij, d_ij, rest length)
-            r = q_in[j] - x
-            l = wp.length(r)
-            if l > EPS_LENGTH:
-                inv_l = 1.0 / l
-                s = spring[0] * (l - spring[2]) + spring[1] * wp.dot(qd_in[j] - u, r) * inv_l
-                f += (s * inv_l) * r
-            B, Kb = spring_block(spring[0], spring[1], spring[2], r, dt)
+            f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
+            B, Kb = spring_block(spring[0], spring[1], spring[2], q_in[j] - x, dt)
             csr_block[k] = B
             # the neighbour's local index where it is an unknown of the solve (free, not driven), else -1
             lj = vertex_local[j]
@@ -117,62 +100,14 @@ def integrate_region_implicit(
         cg_r[i] = b
         b_norm2 += wp.dot(b, b)
 
-    # 2) r = b - A dv (warm start), z = P^-1 r, p = z
-    rz = float(0.0)
-    for i in range(free_count):
-        v = free_vertex[i]
-        if v == driven:
-            dv[i] = wp.vec3(0.0)
-        Ax = block_diag[i] * dv[i]
-        for k in range(adj_offsets[v], adj_offsets[v + 1]):
-            lj = csr_local[k]
-            if lj >= 0:
-                Ax -= csr_block[k] * dv[lj]
-        r = cg_r[i] - Ax
-        if v == driven:
-            r = wp.vec3(0.0)
-        cg_r[i] = r
-        z = block_diag_inv[i] * r
-        cg_p[i] = z
-        rz += wp.dot(r, z)
-
-    # 3) conjugate gradients
-    iterations = int(0)
-    r_norm2 = float(0.0)
-    for i in range(free_count):
-        r_norm2 += wp.dot(cg_r[i], cg_r[i])
-    threshold = tolerance * tolerance * b_norm2
-    while iterations < max_iterations and r_norm2 > threshold:
-        pAp = float(0.0)
-        for i in range(free_count):
-            v = free_vertex[i]
-            Ap = wp.vec3(0.0)
-            if v != driven:
-                Ap = block_diag[i] * cg_p[i]
-                for k in range(adj_offsets[v], adj_offsets[v + 1]):
-                    lj = csr_local[k]  # (a wp.func here would copy the array descriptor per call)
-                    if lj >= 0:
-                        Ap -= csr_block[k] * cg_p[lj]
-            cg_Ap[i] = Ap
-            pAp += wp.dot(cg_p[i], Ap)
-        if pAp <= 0.0:
-            break
-        alpha = rz / pAp
-        r_norm2 = float(0.0)
-        rz_new = float(0.0)
-        for i in range(free_count):
-            dv[i] = dv[i] + alpha * cg_p[i]
-            r = cg_r[i] - alpha * cg_Ap[i]
-            cg_r[i] = r
-            z = block_diag_inv[i] * r
-            cg_Ap[i] = z  # A p is spent: keep the preconditioned residual there
-            r_norm2 += wp.dot(r, r)
-            rz_new += wp.dot(r, z)
-        beta = rz_new / rz
-        rz = rz_new
-        for i in range(free_count):
-            cg_p[i] = cg_Ap[i] + beta * cg_p[i]
-        iterations += 1
+    # 2) and 3): r = b - A dv (warm start), then conjugate gradients (kernels/block_cg.py)
+    driven_local = int(-1)
+    if driven >= 0:
+        driven_local = vertex_local[driven]
+    iterations, r_norm2 = solve_block_cg(
+        free_count, driven_local, adj_offsets, free_vertex, 1, csr_local, csr_block, block_diag, block_diag_inv,
+        b_norm2, max_iterations, tolerance, dv, cg_r, cg_p, cg_Ap,
+    )
 
     # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
     for i in range(free_count):

@@ -1,14 +1,17 @@
-"""A batch of presses, semi-implicit Euler: one block per palpation, many steps in one launch.
+"""A batch of presses, semi-implicit Euler, exact: one block per palpation, many steps in one launch.
+
+The reference batch kernel: the CPU's, and CUDA's where a batch's regions do not fit the fast
+kernel (kernels/batch_press_fast.py).
 
 Each palpation's region (its state, rest positions, masses, anchors and the local topology of
 its free vertices: neighbour local index and spring parameters per CSR entry) is loaded once
 into working arrays, stepped `step_count` times with a block barrier between steps, and written
-back. On CUDA the working arrays are in shared memory (native snippets below declare them and
-give Warp an array view of them) and a block's threads share the free vertices; elsewhere
+back. On CUDA the working arrays are in shared memory (native snippets declare them and
+give Warp an array view of them: kernels/block_memory.py) and a block's threads share the free vertices; elsewhere
 (the CPU, or regions too large for shared memory) they are per-palpation slices of global
 scratch arrays and a block is one thread.
 
-The arithmetic is the one-palpation step's (kernels/step_explicit.py), in the same order: the
+The arithmetic is the one-palpation step's (kernels/integrate_explicit.py), in the same order: the
 anchor term first, then the vertex's neighbours in mesh CSR order; velocity, then position; the
 probe's target computed in float64 as the host computes it, then rounded to float32. So a batch
 gives the same bits as ``Palpation.press`` on the same device (tests/test_batch.py).
@@ -18,70 +21,13 @@ import functools
 
 import warp as wp
 
-from .forces import EPS_LENGTH
+from .block_memory import SHARED_BYTES_MAX, block_sync, work_array
+from .forces import add_spring_force, anchor_force
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
-SHARED_BYTES_MAX = 40 * 1024
-"""Working arrays larger than this per block stay in global memory (static shared memory is 48 KiB)."""
-
-_C_TYPES = {wp.vec3: "wp::vec_t<3, wp::float32>", wp.vec4: "wp::vec_t<4, wp::float32>", wp.float32: "wp::float32", wp.int32: "wp::int32",
-            wp.int16: "wp::int16", wp.float64: "wp::float64", wp.vec2: "wp::vec_t<2, wp::float32>"}
-
-
-class _Native:
-    """``@_native.func_native(snippet, name)``: wp.func_native under a name of our choosing.
-
-    Warp keys a function by its qualified name and recognizes a native stub by a decorator
-    spelled ``*.func_native(...)``; the working arrays differ per capacity, so each needs its
-    own name (and its own __shared__ buffer).
-    """
-
-    @staticmethod
-    def func_native(snippet, name):
-        def decorate(f):
-            f.__name__ = f.__qualname__ = name
-            return wp.func_native(snippet)(f)
-
-        return decorate
-
-
-_native = _Native()
-
-
-def _work_array(name, dtype, capacity, shared):
-    # an array view of a block's working storage: __shared__ on CUDA, else a global slice
-    ctype = _C_TYPES[dtype]
-    snippet = f"""
-#if defined(__CUDA_ARCH__) && {int(bool(shared))}
-    __shared__ __align__(16) {ctype} buf[{capacity}];
-    return wp::array_t<{ctype}>(buf, {capacity});
-#elif {int(bool(shared))}
-    // CPU: blocks run one after another and a block's fibers share this (plain bytes: no static-init guard)
-    alignas(16) static unsigned char raw[sizeof({ctype}) * {capacity}];
-    return wp::array_t<{ctype}>(reinterpret_cast<{ctype}*>(raw), {capacity});
-#else
-    return wp::array_t<{ctype}>(fallback.data + offset, {capacity});
-#endif
-"""
-
-    @_native.func_native(snippet, f"work_{name}_{capacity}_{int(bool(shared))}")
-    def stub(fallback: wp.array(dtype=dtype), offset: int) -> wp.array(dtype=dtype): ...
-
-    return stub
-
-
-@wp.func_native(
-    """
-#if defined(__CUDA_ARCH__)
-    __syncthreads();
-#else
-    ::wp::tile_sync<WP_TILE_BLOCK_DIM>();  // a barrier of the block's fibers (none when a block is one thread)
-#endif
-"""
-)
-def block_sync(): ...
+__all__ = ["SHARED_BYTES_MAX", "press_batch", "press_kernel", "scratch_sizes", "shared_bytes"]
 
 
 @wp.func
@@ -113,17 +59,10 @@ def substep_explicit(
     for i in range(lane, nf, threads):
         x = q_in[i]
         u = qd_in[i]
-        # anchor spring and damper to the rest position, eq. (3)
-        f = -anchor_scale * (anchor_ke[i] * (x - q_rest[i]) + anchor_kd[i] * u)
+        f = anchor_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale)
         for k in range(off[i], off[i + 1]):
             j = nbr[k]
-            r = q_in[j] - x
-            l = wp.length(r)
-            if l > EPS_LENGTH:
-                # elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
-                inv_l = 1.0 / l
-                s = spring_ke[k] * (l - spring_rest_length[k]) + spring_kd[k] * wp.dot(qd_in[j] - u, r) * inv_l
-                f += (s * inv_l) * r
+            f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring_ke[k], spring_kd[k], spring_rest_length[k])
         if i == 0 and pressed != 0:
             reaction = f  # the feedback force: the tissue's internal forces on the probe
             # displacement control: the vertex is where the probe puts it
@@ -142,19 +81,19 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
     """The batch press kernel for regions of up to `vertex_capacity` vertices and `entry_capacity`
     CSR entries of free vertices; working arrays in shared memory on CUDA when `shared`."""
     cv, ce = int(vertex_capacity), int(entry_capacity)
-    w_q_a = _work_array("q_a", wp.vec3, cv, shared)
-    w_qd_a = _work_array("qd_a", wp.vec3, cv, shared)
-    w_q_b = _work_array("q_b", wp.vec3, cv, shared)
-    w_qd_b = _work_array("qd_b", wp.vec3, cv, shared)
-    w_rest = _work_array("rest", wp.vec3, cv, shared)
-    w_mass = _work_array("mass", wp.float32, cv, shared)
-    w_ka = _work_array("ka", wp.float32, cv, shared)
-    w_kda = _work_array("kda", wp.float32, cv, shared)
-    w_ke = _work_array("ke", wp.float32, ce, shared)
-    w_kd = _work_array("kd", wp.float32, ce, shared)
-    w_l0 = _work_array("l0", wp.float32, ce, shared)
-    w_off = _work_array("off", wp.int32, cv + 1, shared)
-    w_nbr = _work_array("nbr", wp.int32, ce, shared)
+    w_q_a = work_array("q_a", wp.vec3, cv, shared)
+    w_qd_a = work_array("qd_a", wp.vec3, cv, shared)
+    w_q_b = work_array("q_b", wp.vec3, cv, shared)
+    w_qd_b = work_array("qd_b", wp.vec3, cv, shared)
+    w_rest = work_array("rest", wp.vec3, cv, shared)
+    w_mass = work_array("mass", wp.float32, cv, shared)
+    w_ka = work_array("ka", wp.float32, cv, shared)
+    w_kda = work_array("kda", wp.float32, cv, shared)
+    w_ke = work_array("ke", wp.float32, ce, shared)
+    w_kd = work_array("kd", wp.float32, ce, shared)
+    w_l0 = work_array("l0", wp.float32, ce, shared)
+    w_off = work_array("off", wp.int32, cv + 1, shared)
+    w_nbr = work_array("nbr", wp.int32, ce, shared)
 
     @wp.kernel(module="unique", enable_backward=False)
     def press_batch_explicit(

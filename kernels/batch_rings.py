@@ -11,6 +11,8 @@ needed per palpation (memory stays proportional to B x region, not B x mesh).
 
 import warp as wp
 
+from .rings import sort_ring
+
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
@@ -75,14 +77,8 @@ def build_batch_regions(
                         count += 1
                     else:
                         flags = flags | 1
-        # sort the new ring by vertex id (insertion sort), as Region does
-        for i in range(end + 1, count):
-            key = region_vertex[b, i]
-            j = i - 1
-            while j >= end and region_vertex[b, j] > key:
-                region_vertex[b, j + 1] = region_vertex[b, j]
-                j -= 1
-            region_vertex[b, j + 1] = key
+        # sort the new ring by vertex id, as Region does
+        sort_ring(region_vertex[b], end, count)
         ring_offsets[b, r + 1] = count
         if count > end:
             outer = r

@@ -1,6 +1,6 @@
 """A batch of presses, implicit (backward) Euler: one thread per palpation, one step per launch.
 
-The one-palpation implicit step (kernels/step_implicit.py) on each palpation's compacted region:
+The one-palpation implicit step (kernels/integrate_implicit.py) on each palpation's compacted region:
 linearized once per step (Baraff & Witkin), (M + dt C + dt^2 K) dv = dt (f0 - dt K v0),
 block-Jacobi preconditioned conjugate gradients warm-started from the palpation's previous dv;
 the driven vertex (local 0 while the probe presses) is a known velocity, the fixed ring has
@@ -11,8 +11,8 @@ vertex's springs in mesh CSR order), so a palpation of the batch gives the same 
 
 import warp as wp
 
-from .forces import EPS_LENGTH
-from .step_implicit import spring_block
+from .block_cg import solve_block_cg
+from .forces import add_spring_force, anchor_force, spring_block
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -50,6 +50,7 @@ def step_batch_implicit(
     block_diag: wp.array2d(dtype=wp.mat33),
     block_diag_inv: wp.array2d(dtype=wp.mat33),
     csr_block: wp.array2d(dtype=wp.mat33),
+    csr_local: wp.array2d(dtype=wp.int32),
     q_out: wp.array2d(dtype=wp.vec3),
     qd_out: wp.array2d(dtype=wp.vec3),
     peak_force: wp.array(dtype=wp.float64),
@@ -75,7 +76,7 @@ def step_batch_implicit(
         x = q_in[b, i]
         u = qd_in[b, i]
         # anchor spring and damper, eq. (3); springs and dampers along the edges below, eqs. (4)-(6)
-        f = -anchor_scale * (anchor_ke[v] * (x - q_rest[v]) + anchor_kd[v] * u)
+        f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
         ka = anchor_scale * anchor_ke[v]
         kda = anchor_scale * anchor_kd[v]
         D = (particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
@@ -84,14 +85,14 @@ def step_batch_implicit(
         for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
             j = local_neighbour[b, k]
             e = local_edge[b, k]
-            r = q_in[b, j] - x
-            l = wp.length(r)
-            if l > EPS_LENGTH:
-                inv_l = 1.0 / l
-                s = spring_ke[e] * (l - spring_rest_length[e]) + spring_kd[e] * wp.dot(qd_in[b, j] - u, r) * inv_l
-                f += (s * inv_l) * r
-            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], r, dt)
+            f = add_spring_force(f, x, u, q_in[b, j], qd_in[b, j], spring_ke[e], spring_kd[e], spring_rest_length[e])
+            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], q_in[b, j] - x, dt)
             csr_block[b, k] = B
+            # the neighbour's local index where it is an unknown of the solve (free, not driven), else -1
+            lj = j
+            if lj >= free_n or j == driven or i == driven:
+                lj = -1
+            csr_local[b, k] = lj
             D += B
             Kv += Kb * (u - qd_in[b, j])
             if j == driven:
@@ -115,60 +116,11 @@ def step_batch_implicit(
         cg_r[b, i] = rhs
         b_norm2 += wp.dot(rhs, rhs)
 
-    # 2) r = b - A dv (warm start), z = P^-1 r, p = z
-    rz = float(0.0)
-    for i in range(free_n):
-        if i == driven:
-            dv[b, i] = wp.vec3(0.0)
-        Ax = block_diag[b, i] * dv[b, i]
-        for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
-            lj = local_neighbour[b, k]  # an unknown of the solve: free, not the driven vertex
-            if lj >= 0 and lj < free_n and lj != driven and i != driven:
-                Ax -= csr_block[b, k] * dv[b, lj]
-        r = cg_r[b, i] - Ax
-        if i == driven:
-            r = wp.vec3(0.0)
-        cg_r[b, i] = r
-        z = block_diag_inv[b, i] * r
-        cg_p[b, i] = z
-        rz += wp.dot(r, z)
-
-    # 3) conjugate gradients
-    iterations = int(0)
-    r_norm2 = float(0.0)
-    for i in range(free_n):
-        r_norm2 += wp.dot(cg_r[b, i], cg_r[b, i])
-    threshold = tolerance * tolerance * b_norm2
-    while iterations < max_iterations and r_norm2 > threshold:
-        pAp = float(0.0)
-        for i in range(free_n):
-            Ap = wp.vec3(0.0)
-            if i != driven:
-                Ap = block_diag[b, i] * cg_p[b, i]
-                for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
-                    lj = local_neighbour[b, k]
-                    if lj >= 0 and lj < free_n and lj != driven:
-                        Ap -= csr_block[b, k] * cg_p[b, lj]
-            cg_Ap[b, i] = Ap
-            pAp += wp.dot(cg_p[b, i], Ap)
-        if pAp <= 0.0:
-            break
-        alpha = rz / pAp
-        r_norm2 = float(0.0)
-        rz_new = float(0.0)
-        for i in range(free_n):
-            dv[b, i] = dv[b, i] + alpha * cg_p[b, i]
-            r = cg_r[b, i] - alpha * cg_Ap[b, i]
-            cg_r[b, i] = r
-            z = block_diag_inv[b, i] * r
-            cg_Ap[b, i] = z  # A p is spent: keep the preconditioned residual there
-            r_norm2 += wp.dot(r, r)
-            rz_new += wp.dot(r, z)
-        beta = rz_new / rz
-        rz = rz_new
-        for i in range(free_n):
-            cg_p[b, i] = cg_Ap[b, i] + beta * cg_p[b, i]
-        iterations += 1
+    # 2) and 3): r = b - A dv (warm start), then conjugate gradients (kernels/block_cg.py), on this palpation's rows
+    solve_block_cg(
+        free_n, driven, local_offsets[b], local_offsets[b], 0, csr_local[b], csr_block[b], block_diag[b], block_diag_inv[b],
+        b_norm2, max_iterations, tolerance, dv[b], cg_r[b], cg_p[b], cg_Ap[b],
+    )
 
     # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
     for i in range(free_n):
@@ -194,6 +146,7 @@ class BatchCGScratch:
         self.diag = wp.zeros(shape_v, dtype=wp.mat33, device=device)
         self.diag_inv = wp.zeros(shape_v, dtype=wp.mat33, device=device)
         self.csr_block = wp.zeros(shape_e, dtype=wp.mat33, device=device)
+        self.csr_local = wp.zeros(shape_e, dtype=wp.int32, device=device)
 
 
 def step_batch(batch, step, state_in, state_out, scratch, max_iterations, tolerance):
@@ -206,7 +159,7 @@ def step_batch(batch, step, state_in, state_out, scratch, max_iterations, tolera
             r.region_vertex, r.free_count, r.local_offsets, r.local_neighbour, r.local_edge,
             m.particle_q_rest, m.particle_mass, m.anchor_ke, m.anchor_kd, 1.0, m.spring_ke, m.spring_kd, m.spring_rest_length,
             p.press_direction, p.depth, p.ramp_steps, p.press_steps, int(step), p.dt, int(max_iterations), float(tolerance),
-            state_in[0], state_in[1], scratch.dv, scratch.r, scratch.p, scratch.Ap, scratch.diag, scratch.diag_inv, scratch.csr_block,
+            state_in[0], state_in[1], scratch.dv, scratch.r, scratch.p, scratch.Ap, scratch.diag, scratch.diag_inv, scratch.csr_block, scratch.csr_local,
         ],
         outputs=[state_out[0], state_out[1], p.peak_force, p.peak_reaction, p.hold_reaction],
         device=m.device,

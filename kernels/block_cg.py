@@ -1,0 +1,101 @@
+"""Block-Jacobi preconditioned conjugate gradients on a region's 3x3 blocks: the implicit steps' solve.
+
+One function for the one-palpation step (kernels/integrate_implicit.py) and the batch
+(kernels/batch_press_implicit.py, on each palpation's row views). It runs in the calling thread,
+its sums in a fixed order, so a rerun gives the same bits on any device. Called once per step:
+its array arguments are copied once, not per vertex.
+
+The system is A dv = b over the `free_count` unknowns in local order, with A's row i the diagonal
+block `block_diag[i]` and, for each CSR entry k of the row, -`csr_block[k]` at column
+`csr_local[k]` (-1: a known, not an unknown: the fixed ring or the driven vertex). Row i's
+entries are offsets[row]..offsets[row + 1] with row = rows[i] when `by_row`, else i. The driven
+vertex (local index `driven`, -1 for none) has dv = 0.
+"""
+
+import warp as wp
+
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def solve_block_cg(
+    free_count: int,
+    driven: int,
+    offsets: wp.array(dtype=wp.int32),
+    rows: wp.array(dtype=wp.int32),
+    by_row: int,
+    csr_local: wp.array(dtype=wp.int32),
+    csr_block: wp.array(dtype=wp.mat33),
+    block_diag: wp.array(dtype=wp.mat33),
+    block_diag_inv: wp.array(dtype=wp.mat33),
+    b_norm2: float,
+    max_iterations: int,
+    tolerance: float,
+    dv: wp.array(dtype=wp.vec3),
+    cg_r: wp.array(dtype=wp.vec3),
+    cg_p: wp.array(dtype=wp.vec3),
+    cg_Ap: wp.array(dtype=wp.vec3),
+):
+    # cg_r holds b on entry and the residual on return; dv the warm start, then the solution.
+    # Returns (iterations, |r|^2).
+    # r = b - A dv (warm start), z = P^-1 r, p = z
+    rz = float(0.0)
+    for i in range(free_count):
+        row = i
+        if by_row != 0:
+            row = rows[i]
+        if i == driven:
+            dv[i] = wp.vec3(0.0)
+        Ax = block_diag[i] * dv[i]
+        for k in range(offsets[row], offsets[row + 1]):
+            lj = csr_local[k]
+            if lj >= 0:
+                Ax -= csr_block[k] * dv[lj]
+        r = cg_r[i] - Ax
+        if i == driven:
+            r = wp.vec3(0.0)
+        cg_r[i] = r
+        z = block_diag_inv[i] * r
+        cg_p[i] = z
+        rz += wp.dot(r, z)
+
+    iterations = int(0)
+    r_norm2 = float(0.0)
+    for i in range(free_count):
+        r_norm2 += wp.dot(cg_r[i], cg_r[i])
+    threshold = tolerance * tolerance * b_norm2
+    while iterations < max_iterations and r_norm2 > threshold:
+        pAp = float(0.0)
+        for i in range(free_count):
+            Ap = wp.vec3(0.0)
+            if i != driven:
+                row = i
+                if by_row != 0:
+                    row = rows[i]
+                Ap = block_diag[i] * cg_p[i]
+                for k in range(offsets[row], offsets[row + 1]):
+                    lj = csr_local[k]
+                    if lj >= 0:
+                        Ap -= csr_block[k] * cg_p[lj]
+            cg_Ap[i] = Ap
+            pAp += wp.dot(cg_p[i], Ap)
+        if pAp <= 0.0:
+            break
+        alpha = rz / pAp
+        r_norm2 = float(0.0)
+        rz_new = float(0.0)
+        for i in range(free_count):
+            dv[i] = dv[i] + alpha * cg_p[i]
+            r = cg_r[i] - alpha * cg_Ap[i]
+            cg_r[i] = r
+            z = block_diag_inv[i] * r
+            cg_Ap[i] = z  # A p is spent: keep the preconditioned residual there
+            r_norm2 += wp.dot(r, r)
+            rz_new += wp.dot(r, z)
+        beta = rz_new / rz
+        rz = rz_new
+        for i in range(free_count):
+            cg_p[i] = cg_Ap[i] + beta * cg_p[i]
+        iterations += 1
+    return iterations, r_norm2
