@@ -273,13 +273,11 @@ class BatchPalpation:
     # -- the press -----------------------------------------------------------------------------
     def schedule(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0):
         """Steps of the press protocol: (ramp, pressed = ramp + hold, total), as Palpation.press counts."""
-        for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"press {name} must be >= 0, got {value}")
-        ramp_n = max(int(round(ramp / self.dt)), 1)
-        hold_n = int(round(hold / self.dt))
-        settle_n = max(int(round(settle / self.dt)), 1)
-        return ramp_n, ramp_n + hold_n, ramp_n + hold_n + settle_n
+        from ..protocol.schedule import PressSchedule, check_press
+
+        check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
+        schedule = PressSchedule.from_times(self.dt, ramp, hold, settle)
+        return schedule.ramp_n, schedule.release_step, schedule.total
 
     def start_press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, steps_per_launch=None, on_launch=None):
         """Launch the whole press (asynchronous on CUDA); `finish_press()` reads the results.

@@ -62,7 +62,9 @@ def sample_points(mesh, n: int, seed: int = 0):
     surface = mesh.surface_vertices
     v = mesh.vertices
     if n <= len(surface):
-        start = int(np.argmax(v[surface, 2]))
+        from ..region.contact import top_vertex
+
+        start = int(np.flatnonzero(surface == top_vertex(mesh))[0])  # its index among the surface vertices
         idx = surface[farthest_points(v[surface], n, start)]
         return v[idx].copy(), idx.astype(np.int64)
     import trimesh
@@ -349,12 +351,14 @@ def run_ray(plan: SweepPlan, parts: Parts, todo: list[int], gpu: bool, address=N
         parts.write(i, ray.get(done[0]))
         if progress is not None:
             b, e = plan.chunks[i]
-            progress.advance((e - b) * _steps(plan))
+            progress.advance((e - b) * press_steps(plan))
 
 
-def _steps(plan: SweepPlan) -> int:
-    ramp_n = max(int(round(plan.ramp / plan.dt)), 1)
-    return ramp_n + int(round(plan.hold / plan.dt)) + max(int(round(plan.settle / plan.dt)), 1)
+def press_steps(plan: SweepPlan) -> int:
+    """Steps of one press of the plan (ramp, hold and settle), as BatchPalpation counts them."""
+    from ..protocol.schedule import PressSchedule
+
+    return PressSchedule.from_times(plan.dt, plan.ramp, plan.hold, plan.settle).total
 
 
 def auto_dt(model, limit: float = 1e-3, safety: float = 0.9) -> float:

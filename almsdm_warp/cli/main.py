@@ -50,7 +50,7 @@ def _quiet_warp():
 
 def cmd_touch(args) -> int:
     """Load a scene or mesh, touch it with the probe, build the ring region and print it."""
-    from ..region.contact import find_contacts
+    from ..region.contact import find_contacts, top_vertex
     from ..export.output import check_writable, write_json
     from ..region.region import Region
     from ..scene.loader import resolve_scene_or_mesh
@@ -77,7 +77,7 @@ def cmd_touch(args) -> int:
         probe = probe_position(args.probe_mm)
     else:
         # above the highest surface vertex: a press from the top
-        top = mesh.surface_vertices[np.argmax(mesh.vertices[mesh.surface_vertices, 2])]
+        top = top_vertex(mesh)
         probe = mesh.vertices[top] + np.array([0.0, 0.0, 5e-3])
     contact = find_contacts(mesh, probe, device=device)
     check_contact(contact, probe, mesh)

@@ -137,7 +137,9 @@ def _contact(args, mesh, device):
         extra = {"probe_mm": (probe * 1e3).tolist(), "face": int(c.face), "distance_mm": float(c.distance * 1e3)}
         return int(c.vertex), np.asarray(c.point, dtype=np.float64), extra
     # the highest surface vertex: a press from the top
-    v = int(mesh.surface_vertices[np.argmax(mesh.vertices[mesh.surface_vertices, 2])])
+    from ..region.contact import top_vertex
+
+    v = top_vertex(mesh)
     return v, mesh.vertices[v], {}
 
 

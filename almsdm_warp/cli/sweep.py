@@ -169,6 +169,6 @@ def _size(plan, scene, scales, tol, progress):
 
 
 def _total_steps(plan) -> int:
-    from ..batch.sweep import _steps
+    from ..batch.sweep import press_steps
 
-    return _steps(plan)
+    return press_steps(plan)

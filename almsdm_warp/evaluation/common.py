@@ -15,6 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..protocol.schedule import PressSchedule
+from ..region.contact import top_vertex
+
 DT = 1e-3
 """The haptic step [s] of every experiment but the stability map."""
 DEPTH = 10e-3
@@ -131,12 +134,6 @@ SETTINGS = {
 }
 
 
-def top_vertex(mesh) -> int:
-    """The highest surface vertex: a press from above (the command line's default contact)."""
-    sv = mesh.surface_vertices
-    return int(sv[np.argmax(mesh.vertices[sv, 2])])
-
-
 def spread_vertices(mesh, count: int) -> list[int]:
     """`count` contact vertices: the top one first, then surface vertices spread by id."""
     sv = mesh.surface_vertices
@@ -176,12 +173,12 @@ def hold_press(pal, depth=DEPTH, ramp=RAMP, hold=HOLD):
     from ..sim.model import PROBE_DISPLACEMENT
 
     rest, direction = pal.rest_position(), pal.inward_normal()
-    ramp_n = max(int(round(ramp / pal.dt)), 1)
-    total = ramp_n + int(round(hold / pal.dt))
+    schedule = PressSchedule.from_times(pal.dt, ramp, hold)
+    total = schedule.release_step
     force = np.zeros(total)
     target = np.zeros(total)
     for s in range(total):
-        target[s] = depth * min((s + 1) / ramp_n, 1.0)
+        target[s] = depth * schedule.fraction(s)
         pal.set_probe(PROBE_DISPLACEMENT, rest + direction * target[s])
         f = pal.step()
         force[s] = math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2)

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from ..protocol.schedule import PressSchedule
 from .common import DEPTH, DT, HOLD, RAMP, time_per_step, top_vertex
 
 RECOVERY_RINGS = (1, 2, 3, 4, "global-free")
@@ -48,7 +49,7 @@ def _scene(name):
 def _curve(result):
     """(displacement [mm], force [N]) over the ramp and hold of a PressResult, every 5th step."""
     n = result.release_step
-    ramp_n = max(int(round(RAMP / result.dt)), 1)
+    ramp_n = PressSchedule.from_times(result.dt, RAMP, 0.0).ramp_n
     depth = result.depth * np.minimum(np.arange(1, n + 1) / ramp_n, 1.0)
     return (depth[::5] * 1e3).round(4).tolist(), result.force[:n:5].round(5).tolist()
 

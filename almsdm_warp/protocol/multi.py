@@ -23,9 +23,10 @@ from ..kernels.multi_probe import drive_probe_vertices, seed_region_rings
 from ..kernels.region_state import reset_vertices_left_behind
 from ..kernels.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from .palpation import PressResult, _replayer
+from .palpation import PressResult, replayer
 from ..region.region import Region, check_rings
 from ..solvers.solver import SolverALMSDM
+from .schedule import PressSchedule, check_press
 
 
 class MultiRegion(Region):
@@ -275,7 +276,7 @@ class MultiPalpation:
                 for i in (0, 1):
                     with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
                         self._launch_step(self.states[i], self.states[1 - i])
-                    graphs.append(_replayer(cap.graph, self.device))
+                    graphs.append(replayer(cap.graph, self.device))
                 self._graphs = graphs
             if not self.device.is_cpu:
                 wp.synchronize_device(self.device)
@@ -336,18 +337,15 @@ class MultiPalpation:
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0) -> list:
         """Every probe pressed at once: driven `depth` [m] along its inward normal over `ramp` [s],
         held `hold` [s], released for `settle` [s]; one PressResult per probe."""
-        for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"press {name} must be >= 0, got {value}")
-        ramp_n = max(int(round(ramp / self.dt)), 1)
-        hold_n = int(round(hold / self.dt))
-        total = ramp_n + hold_n + max(int(round(settle / self.dt)), 1)
+        check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
+        schedule = PressSchedule.from_times(self.dt, ramp, hold, settle)
+        total, release = schedule.total, schedule.release_step
         rest, normal = self.rest_positions(), self.inward_normals()
         count = len(self.vertices)
         force, disp = np.zeros((count, total)), np.zeros((count, total))
         for s in range(total):
-            if s < ramp_n + hold_n:
-                self.set_probes(PROBE_DISPLACEMENT, rest + normal * depth * min((s + 1) / ramp_n, 1.0))
+            if s < release:
+                self.set_probes(PROBE_DISPLACEMENT, rest + normal * depth * schedule.fraction(s))
             else:
                 self.set_probes(PROBE_OFF)
             f = self.step()
@@ -358,7 +356,7 @@ class MultiPalpation:
             raise FloatingPointError(f"the {self.integrator} integrator diverged: use a smaller dt or the implicit one")
         return [
             PressResult(
-                vertex=int(v), depth=float(depth), dt=self.dt, release_step=ramp_n + hold_n, force=force[i], displacement=disp[i]
+                vertex=int(v), depth=float(depth), dt=self.dt, release_step=release, force=force[i], displacement=disp[i]
             )
             for i, v in enumerate(self.vertices)
         ]

@@ -18,11 +18,12 @@ from ..kernels.region_state import reset_vertices_left_behind
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, Model
 from ..region.region import Region
 from ..solvers.solver import SolverALMSDM
+from .schedule import PressSchedule, check_press
 
 GLOBAL_MODELS = ("global", "global-free")
 
 
-def _replayer(graph, device):
+def replayer(graph, device):
     """A call that replays `graph` (and, on CUDA, waits for it so the pinned outputs are readable).
 
     On the CPU it binds Warp's native replay of a live capture directly: `wp.capture_launch` checks
@@ -205,7 +206,7 @@ class Palpation:
         for i in (0, 1):
             with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
                 self._launch_step(self.states[i], self.states[1 - i])
-            replays.append(_replayer(cap.graph, self.device))
+            replays.append(replayer(cap.graph, self.device))
         self._graphs = replays
 
     def step(self) -> np.ndarray:
@@ -296,58 +297,48 @@ class Palpation:
         record: called as ``record(k, total)`` after step k (1..total) of the press when k is a
         multiple of `record_every`, and after the last step; it reads the state itself (a USD
         recorder, say). None (the default) costs one test per step."""
-        for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"press {name} must be >= 0, got {value}")
-        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
-            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
+        check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
+        _check_record_every(record, record_every)
         dt = self.dt
-        ramp_n = max(int(round(ramp / dt)), 1)
-        hold_n = int(round(hold / dt))
-        settle_n = max(int(round(settle / dt)), 1)
-        total = ramp_n + hold_n + settle_n
+        schedule = PressSchedule.from_times(dt, ramp, hold, settle)
+        total, release = schedule.total, schedule.release_step
         rest = self.rest_position()
         direction = self.inward_normal()
         v = self.vertex
         force = np.zeros(total)
         disp = np.zeros(total)
         for s in range(total):
-            if s < ramp_n + hold_n:
-                frac = min((s + 1) / ramp_n, 1.0)
-                self.set_probe(PROBE_DISPLACEMENT, rest + direction * depth * frac)
+            if s < release:
+                self.set_probe(PROBE_DISPLACEMENT, rest + direction * depth * schedule.fraction(s))
             else:
                 self.set_probe(PROBE_OFF)
             f = self.step()
-            if s < ramp_n + hold_n:
+            if s < release:
                 force[s] = math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2)
                 if not math.isfinite(force[s]):
                     self.check_finite(s + 1)
-            if s >= ramp_n + hold_n or s % check_every == 0:
+            if s >= release or s % check_every == 0:
                 pos = self.state.particle_q.numpy()[v] if self._cpu else self.state.particle_q[v : v + 1].numpy()[0]
                 disp[s] = float(np.linalg.norm(pos - rest))
                 if not math.isfinite(disp[s]) or (s % check_every == 0 and s):
                     self.check_finite(s + 1)
             else:
-                disp[s] = depth * min((s + 1) / ramp_n, 1.0)
+                disp[s] = depth * schedule.fraction(s)
             if record is not None and ((s + 1) % record_every == 0 or s + 1 == total):
                 record(s + 1, total)
         self.check_finite(total)
-        return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=ramp_n + hold_n, force=force, displacement=disp)
+        return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=release, force=force, displacement=disp)
 
     def press_force(self, force=2.4, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Force-controlled press: push the touched vertex along the inward normal with a force
         ramped to `force` [N] over `ramp` [s], held `hold` [s], then released for `settle` [s].
         The result's `force` is the applied force; its `depth` the deepest displacement reached.
         record, record_every: as in :meth:`press`."""
-        for name, value in (("force", force), ("ramp", ramp), ("hold", hold), ("settle", settle)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"press {name} must be >= 0, got {value}")
-        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
-            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
+        check_press(force=force, ramp=ramp, hold=hold, settle=settle)
+        _check_record_every(record, record_every)
         dt = self.dt
-        ramp_n = max(int(round(ramp / dt)), 1)
-        hold_n = int(round(hold / dt))
-        total = ramp_n + hold_n + max(int(round(settle / dt)), 1)
+        schedule = PressSchedule.from_times(dt, ramp, hold, settle)
+        total, release = schedule.total, schedule.release_step
         rest = self.rest_position()
         direction = self.inward_normal()
         v = self.vertex
@@ -355,8 +346,8 @@ class Palpation:
         disp = np.zeros(total)
         q_view = self.state.particle_q
         for s in range(total):
-            if s < ramp_n + hold_n:
-                applied[s] = force * min((s + 1) / ramp_n, 1.0)
+            if s < release:
+                applied[s] = force * schedule.fraction(s)
                 self.set_probe_force(direction * applied[s])
             else:
                 self.set_probe(PROBE_OFF)
@@ -369,6 +360,11 @@ class Palpation:
             if record is not None and ((s + 1) % record_every == 0 or s + 1 == total):
                 record(s + 1, total)
         self.check_finite(total)
-        depth = float(disp[: ramp_n + hold_n].max(initial=0.0))
-        return PressResult(vertex=v, depth=depth, dt=dt, release_step=ramp_n + hold_n, force=applied, displacement=disp)
+        depth = float(disp[:release].max(initial=0.0))
+        return PressResult(vertex=v, depth=depth, dt=dt, release_step=release, force=applied, displacement=disp)
+
+
+def _check_record_every(record, record_every) -> None:
+    if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
+        raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
 
