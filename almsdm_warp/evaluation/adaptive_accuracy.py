@@ -9,14 +9,13 @@ speed-accuracy chart (issue 5) for the adaptive region at one tolerance.
 
 from __future__ import annotations
 
-import statistics
-import time
 
 import numpy as np
 import warp as wp
 
 from ..protocol.adaptive import hold_press
 from ..protocol.palpation import Palpation
+from ..protocol.timing import time_steps
 from ..region.contact import top_vertex
 
 PROTOCOL = {"depth": 0.01, "ramp": 0.1, "hold": 0.2}
@@ -25,17 +24,8 @@ PROTOCOL = {"depth": 0.01, "ramp": 0.1, "hold": 0.2}
 
 def _median_step_us(pal, batches=10, batch=20):
     """Median wall time of a step [us] with the probe held where it is (the region as grown)."""
-    for _ in range(5):
-        pal.step()
-    times = []
-    for _ in range(batches):
-        wp.synchronize_device(pal.device)
-        t0 = time.perf_counter()
-        for _ in range(batch):
-            pal.step()
-        wp.synchronize_device(pal.device)
-        times.append((time.perf_counter() - t0) / batch * 1e6)
-    return statistics.median(times)
+    times = time_steps(pal.step, batches, batch, warmup=5, sync=lambda: wp.synchronize_device(pal.device))
+    return times.median * 1e6
 
 
 def _point(pal, reference, protocol, time_steps):

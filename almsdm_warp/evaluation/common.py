@@ -9,8 +9,6 @@ into docs/results.md, evaluate_plots into PNG figures.
 from __future__ import annotations
 
 import math
-import statistics
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -190,25 +188,13 @@ def hold_press(pal, depth=DEPTH, ramp=RAMP, hold=HOLD):
 
 def time_per_step(pal, budget_s: float, blocks: int = 9, depth=0.5 * DEPTH) -> float:
     """Median wall time of one `Palpation.step()` [s], the probe held `depth` in (the force read
-    every step, as a haptic loop does), over `blocks` blocks that together take about `budget_s`.
-    The pattern of scripts/bench_palpation.py's measure(), sized by a time budget."""
+    every step, as a haptic loop does), over `blocks` blocks that together take about `budget_s`
+    (the warm-up, 10 steps, sizes them)."""
+    from ..protocol.timing import time_palpation
     from ..sim.model import PROBE_DISPLACEMENT
 
     pal.set_probe(PROBE_DISPLACEMENT, pal.rest_position() + pal.inward_normal() * depth)
-    t0 = time.perf_counter()
-    for _ in range(10):  # warm-up (captures the graph), also sizes the blocks
-        pal.step()
-    first = (time.perf_counter() - t0) / 10
-    steps = int(min(max(budget_s / blocks / max(first, 1e-9), 1), 5000))
-    per_step = []
-    for _ in range(blocks):
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            f = pal.step()
-            _ = f[2]
-        per_step.append((time.perf_counter() - t0) / steps)
-    pal.check_finite(blocks * steps)
-    return statistics.median(per_step)
+    return time_palpation(pal, blocks, read_force=True, warmup=10, budget_s=budget_s, max_steps=5000).median
 
 
 def finite_or_none(x):
