@@ -14,15 +14,14 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from ..export.output import atomic_write
 
 FPS_MAX = 20000
 """Beyond this many points (and the mesh's vertices), points are area-uniform random, not farthest-point."""
@@ -182,17 +181,6 @@ def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_
 
 
 # -- files -------------------------------------------------------------------------------------
-def _atomic(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_table(path, columns: dict) -> Path:
     """Write the sweep's columns to `path` (.csv with a header, or .npz), atomically."""
     path = Path(path)
@@ -212,7 +200,7 @@ def write_table(path, columns: dict) -> Path:
                     # repr: the shortest text that reads back to the same float
                     f.write(",".join(str(int(x)) if c in _INT_COLUMNS else repr(float(x)) for c, x in zip(COLUMNS, row)) + "\n")
 
-    _atomic(path, write)
+    atomic_write(path, write)
     return path
 
 
@@ -258,7 +246,7 @@ class Parts:
                 )
         else:
             self.dir.mkdir()
-            _atomic(manifest, lambda tmp: Path(tmp).write_text(json.dumps({"key": self.key, "points": len(self.plan.vertices)})))
+            atomic_write(manifest, lambda tmp: Path(tmp).write_text(json.dumps({"key": self.key, "points": len(self.plan.vertices)})))
         return [i for i in range(len(self.plan.chunks)) if (self.dir / f"chunk_{i:06d}.npz").exists()]
 
     def write(self, i: int, columns: dict) -> None:
@@ -266,7 +254,7 @@ class Parts:
             with open(tmp, "wb") as f:
                 np.savez(f, **columns)
 
-        _atomic(self.dir / f"chunk_{i:06d}.npz", write)
+        atomic_write(self.dir / f"chunk_{i:06d}.npz", write)
 
     def gather(self) -> dict:
         parts = []
