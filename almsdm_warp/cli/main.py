@@ -138,6 +138,7 @@ def _mesh_json(mesh):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from ..solvers import INTEGRATORS
     from .palpate import _count_arg, _number_arg, _rings_arg, cmd_palpate
     from .record import add_record_args
     parser = _Parser(prog="almsdm", description=__doc__.splitlines()[0])
@@ -159,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     palpate.add_argument("scene", nargs="?", default=None, type=_path_arg, metavar="MESH_OR_SCENE", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     palpate.add_argument("--rings", type=_rings_arg, default=None, metavar="{N,auto,global,global-free}", help="rings of the local region (outermost fixed), auto (sized to --tol-mm), or a global model (default: the scene's)")
     palpate.add_argument("--tol-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="--rings auto: grow the region until its fixed ring would move less than this [mm] (default 0.1)")
-    palpate.add_argument("--integrator", choices=("explicit", "implicit"), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
+    palpate.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
     palpate.add_argument("--dt-ms", type=_number_arg("> 0"), default=1.0, metavar="MS", help="time step [ms] (default 1)")
     palpate.add_argument("--depth-mm", "--depth", dest="depth_mm", type=_number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
     palpate.add_argument("--ramp-s", type=_number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")

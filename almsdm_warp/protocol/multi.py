@@ -1,6 +1,6 @@
 """Several probes at once, each with its own region; regions that touch merge into one.
 
-The same Model, States and SolverALMSDM as one Palpation: a *patch* is a region with its own
+The same Model, States and solver as one Palpation: a *patch* is a region with its own
 solver, and every patch's step (plus the drive of its probes' vertices) goes into one captured
 graph. Regions are grown from several seeds (kernels/multi_probe.py), so merging two patches is
 rebuilding one region from both probes' vertices with the larger ring count, which holds both.
@@ -25,7 +25,7 @@ from ..kernels.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
 from .palpation import PressResult, replayer
 from ..region.region import Region, check_rings
-from ..solvers.solver import SolverALMSDM
+from ..solvers import make_solver, solver_class
 from .schedule import PressSchedule, check_press
 
 
@@ -81,7 +81,7 @@ class Patch:
         self.probes = sorted(probes)
         seeds = owner.vertices[self.probes]
         self.region = MultiRegion(owner.model.dmesh).build_seeds(seeds, rings)
-        self.solver = SolverALMSDM(owner.model, owner.integrator, **owner.solver_kw)
+        self.solver = make_solver(owner.model, owner.integrator, **owner.solver_kw)
         self.patch_probe = wp.array(np.asarray(self.probes, dtype=np.int32), dtype=wp.int32, device=owner.device)
         self.motion = wp.zeros(owner.max_rings + 2, dtype=wp.float32, device=owner.device)
         self.rings_chosen = self.region.outer_ring
@@ -132,7 +132,7 @@ class MultiPalpation:
         self.device = self.model.device
         self.mesh = self.model.mesh
         self.integrator = integrator
-        SolverALMSDM(self.model, integrator)  # checks the integrator's name now, not at the first touch
+        solver_class(integrator)  # checks the integrator's name now, not at the first touch
         self.solver_kw = solver_kw
         self.adaptive = rings is None
         self.tol, self.dt = float(tol), float(dt)

@@ -17,7 +17,7 @@ import warp as wp
 from ..kernels.region_state import reset_vertices_left_behind
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, Model
 from ..region.region import Region
-from ..solvers.solver import SolverALMSDM
+from ..solvers import make_solver
 from .schedule import PressSchedule, check_press
 
 GLOBAL_MODELS = ("global", "global-free")
@@ -119,7 +119,7 @@ class Palpation:
         self.mesh = self.model.mesh
         self.rings = rings
         self.dt = float(dt)
-        self.solver = SolverALMSDM(self.model, integrator, **solver_kw)
+        self.solver = make_solver(self.model, integrator, **solver_kw)
         self.states = [self.model.state(), self.model.state()]
         self._cur = 0  # states[_cur] is the current state
         self.control = self.model.control()
@@ -276,7 +276,7 @@ class Palpation:
         if not ok:
             free = self.region.vertices()[: self.region.free_count] if self.region is not None else None
             crit = self.model.critical_dt(free, anchors=self.solver.anchor_scale > 0)
-            if self.solver.integrator == "explicit" and self.dt > crit:
+            if self.solver.conditionally_stable and self.dt > crit:
                 raise SimulationDiverged(
                     f"the {self.solver.integrator} integrator diverged at step {step_index} "
                     f"(t = {step_index * self.dt:.4g} s): dt = {self.dt * 1e3:.4g} ms exceeds the critical "
