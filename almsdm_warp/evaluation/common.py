@@ -8,6 +8,7 @@ into docs/results.md, evaluate_plots into PNG figures.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -130,6 +131,23 @@ SETTINGS = {
         anatomy_free_max_vertices=100,
     ),
 }
+
+
+@functools.lru_cache(maxsize=None)
+def shipped_scene(name):
+    """(Scene, its mesh) of a shipped scene, loaded once per process (nothing changes a mesh)."""
+    from ..scene.loader import resolve_scene_or_mesh
+
+    scene = resolve_scene_or_mesh(name)
+    return scene, scene.load_mesh()
+
+
+def press_curve(result):
+    """(displacement [mm], force [N]) over the ramp and hold of a PressResult, every 5th step."""
+    n = result.release_step
+    ramp_n = PressSchedule.from_times(result.dt, RAMP, 0.0).ramp_n
+    depth = result.depth * np.minimum(np.arange(1, n + 1) / ramp_n, 1.0)
+    return (depth[::5] * 1e3).round(4).tolist(), result.force[:n:5].round(5).tolist()
 
 
 def spread_vertices(mesh, count: int) -> list[int]:
