@@ -290,6 +290,13 @@ class Palpation:
             )
 
     # -- the press protocol --------------------------------------------------------------------
+    def _begin_press(self, ramp, hold, settle, record, record_every, **amplitude):
+        """The checked press's schedule, the contact's rest position [m] and inward normal."""
+        check_press(**amplitude, ramp=ramp, hold=hold, settle=settle)
+        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
+            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
+        return PressSchedule.from_times(self.dt, ramp, hold, settle), self.rest_position(), self.inward_normal()
+
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Displacement-controlled press at the touched vertex: ramp to `depth` [m] along the inward
         normal over `ramp` [s], hold `hold` [s], release and settle `settle` [s].
@@ -297,14 +304,9 @@ class Palpation:
         record: called as ``record(k, total)`` after step k (1..total) of the press when k is a
         multiple of `record_every`, and after the last step; it reads the state itself (a USD
         recorder, say). None (the default) costs one test per step."""
-        check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
-        _check_record_every(record, record_every)
-        dt = self.dt
-        schedule = PressSchedule.from_times(dt, ramp, hold, settle)
+        schedule, rest, direction = self._begin_press(ramp, hold, settle, record, record_every, depth=depth)
+        dt, v = self.dt, self.vertex
         total, release = schedule.total, schedule.release_step
-        rest = self.rest_position()
-        direction = self.inward_normal()
-        v = self.vertex
         force = np.zeros(total)
         disp = np.zeros(total)
         for s in range(total):
@@ -334,14 +336,9 @@ class Palpation:
         ramped to `force` [N] over `ramp` [s], held `hold` [s], then released for `settle` [s].
         The result's `force` is the applied force; its `depth` the deepest displacement reached.
         record, record_every: as in :meth:`press`."""
-        check_press(force=force, ramp=ramp, hold=hold, settle=settle)
-        _check_record_every(record, record_every)
-        dt = self.dt
-        schedule = PressSchedule.from_times(dt, ramp, hold, settle)
+        schedule, rest, direction = self._begin_press(ramp, hold, settle, record, record_every, force=force)
+        dt, v = self.dt, self.vertex
         total, release = schedule.total, schedule.release_step
-        rest = self.rest_position()
-        direction = self.inward_normal()
-        v = self.vertex
         applied = np.zeros(total)
         disp = np.zeros(total)
         q_view = self.state.particle_q
@@ -362,9 +359,4 @@ class Palpation:
         self.check_finite(total)
         depth = float(disp[:release].max(initial=0.0))
         return PressResult(vertex=v, depth=depth, dt=dt, release_step=release, force=applied, displacement=disp)
-
-
-def _check_record_every(record, record_every) -> None:
-    if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
-        raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
 
