@@ -246,10 +246,10 @@ def test_hold_press_errors_against_the_global_reference(device):
     and stays inside its region's reach: outside the region nothing moves, so the largest
     displacement error is at most the global model's largest displacement outside the region."""
     from almsdm_warp.evaluation.common import hold_press, top_vertex
-    from almsdm_warp.evaluation.paper import _scene
+    from almsdm_warp.evaluation.common import shipped_scene
     from almsdm_warp.protocol.palpation import Palpation
 
-    scene, mesh = _scene("stomach")
+    scene, mesh = shipped_scene("stomach")
     v = top_vertex(mesh)
     glob = Palpation(mesh, scene.tissue, rings="global", integrator="explicit", device=device)
     glob.touch(v)

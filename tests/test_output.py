@@ -38,3 +38,50 @@ def test_write_failure_after_the_run_is_one_line(tmp_path, monkeypatch):
     check_outcome(code, stdout, err, out, tmp_path)
     assert code == 2 and "No space left on device" in err
     assert list(tmp_path.iterdir()) == []
+
+
+def _new_file_mode():
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o077, 0o002])
+def test_atomic_write_gives_a_new_files_mode(tmp_path, umask):
+    """mkstemp makes the temporary file owner-only; the published file has 0o666 less the umask."""
+    from almsdm_warp.export.output import atomic_write
+
+    old = os.umask(umask)
+    try:
+        out = atomic_write(tmp_path / "t.csv", lambda tmp: Path(tmp).write_text("a\n"))
+        assert (out.stat().st_mode & 0o777) == _new_file_mode() == 0o666 & ~umask
+    finally:
+        os.umask(old)
+    assert out.read_text() == "a\n" and sorted(p.name for p in tmp_path.iterdir()) == ["t.csv"]
+
+
+def test_atomic_write_that_fails_leaves_nothing(tmp_path):
+    """An exception in the middle of the write: neither the target nor the temporary file remains."""
+    from almsdm_warp.export.output import atomic_write
+
+    def half(tmp):
+        Path(tmp).write_text("half a ")
+        raise RuntimeError("interrupted")
+
+    with pytest.raises(RuntimeError, match="interrupted"):
+        atomic_write(tmp_path / "t.csv", half)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_sweep_table_goes_through_the_one_writer(tmp_path, monkeypatch):
+    """The sweep's table is published by export.output.publish, with a new file's mode."""
+    import almsdm_warp.export.output as output
+    from almsdm_warp.batch.sweep import COLUMNS, read_table, write_table
+
+    published = []
+    real = output.publish
+    monkeypatch.setattr(output, "publish", lambda tmp, path: published.append(Path(path).name) or real(tmp, path))
+    columns = {c: [1.0, 2.0] for c in COLUMNS}
+    out = write_table(tmp_path / "s.csv", columns)
+    assert published == ["s.csv"] and (out.stat().st_mode & 0o777) == _new_file_mode()
+    assert read_table(out)["peak_force_N"].tolist() == [1.0, 2.0]

@@ -14,7 +14,7 @@ import pytest
 from almsdm_warp import Region, TissueMesh
 from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
 from almsdm_warp.scene.loader import TissueParams
-from almsdm_warp.solvers.solver import SolverALMSDM
+from almsdm_warp.solvers import INTEGRATORS as REGISTERED, make_solver
 
 LEG = 10.0e-3  # [m]
 EPS32 = float(np.finfo(np.float32).eps)
@@ -35,7 +35,7 @@ class Triangle:
         self.model = Model(self.mesh, tissue, device)
         self.region = Region(self.model.dmesh).build(0, 1)
         assert self.region.free_count == 1 and sorted(self.region.boundary().tolist()) == [1, 2]
-        self.solver = SolverALMSDM(self.model, integrator)
+        self.solver = make_solver(self.model, integrator)
         self.solver.set_region(self.region)
         self.state_in = self.model.state()
         self.state_out = self.model.state()
@@ -361,3 +361,16 @@ def test_critical_dt_separates_growth_from_decay(device, integrator):
             assert amplitude > 1e3 * A, (factor, amplitude)
         else:
             assert amplitude < 1e-3 * A, (factor, amplitude)
+
+
+def test_integrators_by_registration(device):
+    """Every registered integrator makes a solver that names itself; another name is a ValueError
+    that lists the known ones."""
+    assert tuple(REGISTERED) == INTEGRATORS
+    model = Model(triangle_mesh(), TissueParams(), device)
+    for name in REGISTERED:
+        solver = make_solver(model, name)
+        assert solver.integrator == name and isinstance(solver, REGISTERED[name])
+    assert make_solver(model, "implicit", cg_max_iterations=7).cg_max_iterations == 7
+    with pytest.raises(ValueError, match=r"unknown integrator 'rk4' \(known: explicit, implicit\)"):
+        make_solver(model, "rk4")

@@ -26,7 +26,8 @@ from ..region.region import check_rings
 
 
 KERNELS = ("fast", "exact")
-INTEGRATORS = ("explicit", "implicit")
+BATCH_INTEGRATORS = ("explicit", "implicit")
+"""The integrators a batch has kernels for (kernels/batch_press*.py), a subset of solvers.INTEGRATORS."""
 
 
 def _pow2(n: int, minimum: int = 1) -> int:
@@ -92,7 +93,7 @@ class BatchPalpation:
     """B palpations of one mesh, built and stepped together.
 
     integrator: "explicit" (semi-implicit Euler, many steps per launch, a block per palpation) or
-    "implicit" (backward Euler with CG, as SolverALMSDM's: one thread per palpation, one launch a
+    "implicit" (backward Euler with CG, as SolverImplicit's: one thread per palpation, one launch a
     step; cg_max_iterations and cg_tolerance as the solver's).
 
     rings: the local model's rings (the outermost fixed). dt [s].
@@ -122,8 +123,8 @@ class BatchPalpation:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
         self.dt = float(dt)
-        if integrator not in INTEGRATORS:
-            raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(INTEGRATORS)})")
+        if integrator not in BATCH_INTEGRATORS:
+            raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(BATCH_INTEGRATORS)})")
         self.integrator = integrator
         self.cg_max_iterations = int(cg_max_iterations)
         self.cg_tolerance = float(cg_tolerance)
@@ -249,13 +250,11 @@ class BatchPalpation:
     # -- the press -----------------------------------------------------------------------------
     def schedule(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0):
         """Steps of the press protocol: (ramp, pressed = ramp + hold, total), as Palpation.press counts."""
-        for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"press {name} must be >= 0, got {value}")
-        ramp_n = max(int(round(ramp / self.dt)), 1)
-        hold_n = int(round(hold / self.dt))
-        settle_n = max(int(round(settle / self.dt)), 1)
-        return ramp_n, ramp_n + hold_n, ramp_n + hold_n + settle_n
+        from ..protocol.schedule import PressSchedule, check_press
+
+        check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
+        schedule = PressSchedule.from_times(self.dt, ramp, hold, settle)
+        return schedule.ramp_n, schedule.release_step, schedule.total
 
     def start_press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, steps_per_launch=None, on_launch=None):
         """Launch the whole press (asynchronous on CUDA); `finish_press()` reads the results.

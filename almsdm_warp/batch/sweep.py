@@ -14,15 +14,14 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from ..export.output import atomic_write
 
 FPS_MAX = 20000
 """Beyond this many points (and the mesh's vertices), points are area-uniform random, not farthest-point."""
@@ -62,7 +61,9 @@ def sample_points(mesh, n: int, seed: int = 0):
     surface = mesh.surface_vertices
     v = mesh.vertices
     if n <= len(surface):
-        start = int(np.argmax(v[surface, 2]))
+        from ..region.contact import top_vertex
+
+        start = int(np.flatnonzero(surface == top_vertex(mesh))[0])  # its index among the surface vertices
         idx = surface[farthest_points(v[surface], n, start)]
         return v[idx].copy(), idx.astype(np.int64)
     import trimesh
@@ -180,17 +181,6 @@ def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_
 
 
 # -- files -------------------------------------------------------------------------------------
-def _atomic(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_table(path, columns: dict) -> Path:
     """Write the sweep's columns to `path` (.csv with a header, or .npz), atomically."""
     path = Path(path)
@@ -210,7 +200,7 @@ def write_table(path, columns: dict) -> Path:
                     # repr: the shortest text that reads back to the same float
                     f.write(",".join(str(int(x)) if c in _INT_COLUMNS else repr(float(x)) for c, x in zip(COLUMNS, row)) + "\n")
 
-    _atomic(path, write)
+    atomic_write(path, write)
     return path
 
 
@@ -256,7 +246,7 @@ class Parts:
                 )
         else:
             self.dir.mkdir()
-            _atomic(manifest, lambda tmp: Path(tmp).write_text(json.dumps({"key": self.key, "points": len(self.plan.vertices)})))
+            atomic_write(manifest, lambda tmp: Path(tmp).write_text(json.dumps({"key": self.key, "points": len(self.plan.vertices)})))
         return [i for i in range(len(self.plan.chunks)) if (self.dir / f"chunk_{i:06d}.npz").exists()]
 
     def write(self, i: int, columns: dict) -> None:
@@ -264,7 +254,7 @@ class Parts:
             with open(tmp, "wb") as f:
                 np.savez(f, **columns)
 
-        _atomic(self.dir / f"chunk_{i:06d}.npz", write)
+        atomic_write(self.dir / f"chunk_{i:06d}.npz", write)
 
     def gather(self) -> dict:
         parts = []
@@ -349,12 +339,14 @@ def run_ray(plan: SweepPlan, parts: Parts, todo: list[int], gpu: bool, address=N
         parts.write(i, ray.get(done[0]))
         if progress is not None:
             b, e = plan.chunks[i]
-            progress.advance((e - b) * _steps(plan))
+            progress.advance((e - b) * press_steps(plan))
 
 
-def _steps(plan: SweepPlan) -> int:
-    ramp_n = max(int(round(plan.ramp / plan.dt)), 1)
-    return ramp_n + int(round(plan.hold / plan.dt)) + max(int(round(plan.settle / plan.dt)), 1)
+def press_steps(plan: SweepPlan) -> int:
+    """Steps of one press of the plan (ramp, hold and settle), as BatchPalpation counts them."""
+    from ..protocol.schedule import PressSchedule
+
+    return PressSchedule.from_times(plan.dt, plan.ramp, plan.hold, plan.settle).total
 
 
 def auto_dt(model, limit: float = 1e-3, safety: float = 0.9) -> float:

@@ -25,8 +25,7 @@ def size_regions(mesh, tissue, vertices, tol, *, depth, ramp, hold, integrator="
     hold [s]) at tolerance `tol` [m]: int64, one per vertex (each distinct vertex sized once).
 
     on_point(): called after each distinct vertex (a progress bar)."""
-    from ..protocol.adaptive import AdaptivePalpation
-    from ..evaluation.adaptive_accuracy import hold_press
+    from ..protocol.adaptive import AdaptivePalpation, hold_press
 
     verts = np.asarray(vertices, dtype=np.int64)
     distinct, inverse = np.unique(verts, return_inverse=True)

@@ -50,7 +50,7 @@ def _quiet_warp():
 
 def cmd_touch(args) -> int:
     """Load a scene or mesh, touch it with the probe, build the ring region and print it."""
-    from ..region.contact import find_contacts
+    from ..region.contact import find_contacts, top_vertex
     from ..export.output import check_writable, write_json
     from ..region.region import Region
     from ..scene.loader import resolve_scene_or_mesh
@@ -77,7 +77,7 @@ def cmd_touch(args) -> int:
         probe = probe_position(args.probe_mm)
     else:
         # above the highest surface vertex: a press from the top
-        top = mesh.surface_vertices[np.argmax(mesh.vertices[mesh.surface_vertices, 2])]
+        top = top_vertex(mesh)
         probe = mesh.vertices[top] + np.array([0.0, 0.0, 5e-3])
     contact = find_contacts(mesh, probe, device=device)
     check_contact(contact, probe, mesh)
@@ -138,6 +138,7 @@ def _mesh_json(mesh):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from ..solvers import INTEGRATORS
     from .palpate import _count_arg, _number_arg, _rings_arg, cmd_palpate
     from .record import add_record_args
     parser = _Parser(prog="almsdm", description=__doc__.splitlines()[0])
@@ -159,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     palpate.add_argument("scene", nargs="?", default=None, type=_path_arg, metavar="MESH_OR_SCENE", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     palpate.add_argument("--rings", type=_rings_arg, default=None, metavar="{N,auto,global,global-free}", help="rings of the local region (outermost fixed), auto (sized to --tol-mm), or a global model (default: the scene's)")
     palpate.add_argument("--tol-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="--rings auto: grow the region until its fixed ring would move less than this [mm] (default 0.1)")
-    palpate.add_argument("--integrator", choices=("explicit", "implicit"), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
+    palpate.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
     palpate.add_argument("--dt-ms", type=_number_arg("> 0"), default=1.0, metavar="MS", help="time step [ms] (default 1)")
     palpate.add_argument("--depth-mm", "--depth", dest="depth_mm", type=_number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
     palpate.add_argument("--ramp-s", type=_number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")

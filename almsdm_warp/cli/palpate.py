@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
-import statistics
 import sys
-import time
 
 import numpy as np
 
@@ -137,7 +135,9 @@ def _contact(args, mesh, device):
         extra = {"probe_mm": (probe * 1e3).tolist(), "face": int(c.face), "distance_mm": float(c.distance * 1e3)}
         return int(c.vertex), np.asarray(c.point, dtype=np.float64), extra
     # the highest surface vertex: a press from the top
-    v = int(mesh.surface_vertices[np.argmax(mesh.vertices[mesh.surface_vertices, 2])])
+    from ..region.contact import top_vertex
+
+    v = top_vertex(mesh)
     return v, mesh.vertices[v], {}
 
 
@@ -146,32 +146,13 @@ def _press_steps(dt, ramp, hold, settle):
     return max(int(round(ramp / dt)), 1) + int(round(hold / dt)) + max(int(round(settle / dt)), 1)
 
 
-def _time_steps(pal, steps=TIMING_STEPS, budget_s=1.0):
-    """Median wall time per step [s] with the probe off, over batches; and the steps timed."""
-    from ..sim.model import PROBE_OFF
-
-    pal.set_probe(PROBE_OFF)
-    t0 = time.perf_counter()
-    for _ in range(5):  # warm-up; also sizes the batches
-        pal.step()
-    first = (time.perf_counter() - t0) / 5
-    batches = 20
-    batch = int(min(max(budget_s / batches / max(first, 1e-9), 1), steps // batches))
-    per_step = []
-    for _ in range(batches):
-        t0 = time.perf_counter()
-        for _ in range(batch):
-            pal.step()
-        per_step.append((time.perf_counter() - t0) / batch)
-    pal.check_finite(batches * batch)
-    return statistics.median(per_step), batches * batch
-
-
 def cmd_palpate(args) -> int:
     """Press the probe into a scene or mesh, report force, recovery and speed."""
     from ..export.output import check_writable, write_json
     from ..progress import Progress
+    from ..protocol.timing import time_palpation
     from ..scene.loader import resolve_scene_or_mesh
+    from ..sim.model import PROBE_OFF
 
     from .record import Recording, check_record_args
 
@@ -287,7 +268,9 @@ def cmd_palpate(args) -> int:
         critical = pal.model.critical_dt(pal.region.vertices()[: pal.region.free_count])
         free_count = pal.region.free_count
     try:
-        step_s, timed = _time_steps(pal)  # about 1 s at most: no bar
+        pal.set_probe(PROBE_OFF)
+        times = time_palpation(pal, 20, warmup=5, budget_s=1.0, max_steps=TIMING_STEPS // 20)  # about 1 s at most: no bar
+        step_s, timed = times.median, times.steps
     except SimulationDiverged as exc:
         raise InputError(str(exc)) from exc
     step_us = step_s * 1e6

@@ -13,6 +13,7 @@ from ..errors import InputError
 
 
 def add_parser(sub) -> None:
+    from ..solvers import INTEGRATORS
     from .palpate import _count_arg, _number_arg, rings_arg
 
     p = sub.add_parser(
@@ -32,7 +33,7 @@ def add_parser(sub) -> None:
     p.add_argument("--ramp-s", type=_number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
     p.add_argument("--hold-s", type=_number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
     p.add_argument("--settle-s", type=_number_arg(">= 0"), default=None, metavar="S", help="settle window [s] (default: the scene's)")
-    p.add_argument("--integrator", choices=("explicit", "implicit"), default="explicit", help="explicit (semi-implicit Euler, the paper's; default) or implicit (backward Euler, CG: one thread a palpation)")
+    p.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's; default) or implicit (backward Euler, CG: one thread a palpation)")
     p.add_argument("--dt-ms", type=_number_arg("> 0"), default=None, metavar="MS", help="time step [ms] (default 1, less where the model's critical step asks)")
     p.add_argument("--scale-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
@@ -169,6 +170,6 @@ def _size(plan, scene, scales, tol, progress):
 
 
 def _total_steps(plan) -> int:
-    from ..batch.sweep import _steps
+    from ..batch.sweep import press_steps
 
-    return _steps(plan)
+    return press_steps(plan)

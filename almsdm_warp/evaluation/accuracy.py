@@ -57,12 +57,12 @@ def _make(mesh, tissue, rings, integrator, device, auto_factory):
 def run_accuracy(settings, device, tasks, auto_factory=None) -> dict:
     """Rows per (scene, integrator, rings): median and largest errors over the contact vertices,
     the region's size and the median time of a step (timed at the first contact)."""
-    from .paper import _scene
+    from .common import shipped_scene
 
     rings_list = [r for r in settings.accuracy_rings if not is_auto(r) or auto_factory is not None]
     rows = []
     for name, integrator in SERIES:
-        scene, mesh = _scene(name)
+        scene, mesh = shipped_scene(name)
         contacts = spread_vertices(mesh, settings.accuracy_contacts)
         reference = {}
         for rings in ["global"] + [r for r in rings_list if r != "global"]:

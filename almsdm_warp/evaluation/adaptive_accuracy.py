@@ -9,53 +9,23 @@ speed-accuracy chart (issue 5) for the adaptive region at one tolerance.
 
 from __future__ import annotations
 
-import statistics
-import time
 
 import numpy as np
 import warp as wp
 
-from ..sim.model import PROBE_DISPLACEMENT
+from ..protocol.adaptive import hold_press
 from ..protocol.palpation import Palpation
+from ..protocol.timing import time_steps
+from ..region.contact import top_vertex
 
 PROTOCOL = {"depth": 0.01, "ramp": 0.1, "hold": 0.2}
 """The default press [m, s, s]: the scenes' depth, ramp and hold (no settle: accuracy is at the hold)."""
 
 
-def top_vertex(mesh) -> int:
-    """The highest surface vertex: the command line's default press from above."""
-    sv = mesh.surface_vertices
-    return int(sv[np.argmax(mesh.vertices[sv, 2])])
-
-
-def hold_press(pal, depth, ramp, hold):
-    """Drive the touched vertex to `depth` [m] over `ramp` [s], hold `hold` [s]: (peak |force| [N],
-    positions at the end of the hold [m], float64 [vertex_count, 3])."""
-    ramp_n = max(int(round(ramp / pal.dt)), 1)
-    total = ramp_n + int(round(hold / pal.dt))
-    rest, n = pal.rest_position(), pal.inward_normal()
-    peak = 0.0
-    for s in range(total):
-        pal.set_probe(PROBE_DISPLACEMENT, rest + n * depth * min((s + 1) / ramp_n, 1.0))
-        f = pal.step()
-        peak = max(peak, float(np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])))
-    pal.check_finite(total)
-    return peak, pal.positions()
-
-
 def _median_step_us(pal, batches=10, batch=20):
     """Median wall time of a step [us] with the probe held where it is (the region as grown)."""
-    for _ in range(5):
-        pal.step()
-    times = []
-    for _ in range(batches):
-        wp.synchronize_device(pal.device)
-        t0 = time.perf_counter()
-        for _ in range(batch):
-            pal.step()
-        wp.synchronize_device(pal.device)
-        times.append((time.perf_counter() - t0) / batch * 1e6)
-    return statistics.median(times)
+    times = time_steps(pal.step, batches, batch, warmup=5, sync=lambda: wp.synchronize_device(pal.device))
+    return times.median * 1e6
 
 
 def _point(pal, reference, protocol, time_steps):

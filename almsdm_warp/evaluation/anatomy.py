@@ -27,7 +27,7 @@ def run_anatomy(settings, device, tasks, folder=None) -> dict:
     """Per mesh: 4-ring presses (peak force, residual after each), the unanchored global model's
     residual (up to `settings.anatomy_free_max_vertices`), the anchored global force, and the time
     of a step of the 4-ring and the global model."""
-    from .paper import _curve, _scene
+    from .common import press_curve, shipped_scene
     from ..mesh.io import load_mesh
     from ..protocol.palpation import Palpation, SimulationDiverged
 
@@ -41,7 +41,7 @@ def run_anatomy(settings, device, tasks, folder=None) -> dict:
             tasks.step(f"anatomy: {file} (absent)", _weight(file))
             continue
         mesh = load_mesh(path, scale=scale_mm)
-        tissue = _scene("liver" if mesh.is_volume else "stomach")[0].tissue
+        tissue = shipped_scene("liver" if mesh.is_volume else "stomach")[0].tissue
         vertex = top_vertex(mesh)
         row = {"file": file, "scale_mm": scale_mm, "vertices": mesh.vertex_count, "volume": mesh.is_volume, "edges": mesh.edge_count}
         local = Palpation(mesh, tissue, rings=4, integrator="implicit", dt=DT, device=device)
@@ -58,7 +58,7 @@ def run_anatomy(settings, device, tasks, folder=None) -> dict:
         row["global_peak_force_N"] = peak
         row["global_curve"] = ((target[::5] * 1e3).round(4).tolist(), force[::5].round(5).tolist())
         row["global_step_us"] = time_per_step(glob, settings.timing_budget_s) * 1e6
-        row["local_curve"] = _curve(presses[0])
+        row["local_curve"] = press_curve(presses[0])
         row["free_residual_mm"] = None
         if mesh.vertex_count <= settings.anatomy_free_max_vertices:
             free = Palpation(mesh, tissue, rings="global-free", integrator="implicit", dt=DT, device=device)

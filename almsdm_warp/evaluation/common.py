@@ -8,12 +8,14 @@ into docs/results.md, evaluate_plots into PNG figures.
 
 from __future__ import annotations
 
+import functools
 import math
-import statistics
-import time
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..protocol.schedule import PressSchedule
+from ..region.contact import top_vertex
 
 DT = 1e-3
 """The haptic step [s] of every experiment but the stability map."""
@@ -131,10 +133,21 @@ SETTINGS = {
 }
 
 
-def top_vertex(mesh) -> int:
-    """The highest surface vertex: a press from above (the command line's default contact)."""
-    sv = mesh.surface_vertices
-    return int(sv[np.argmax(mesh.vertices[sv, 2])])
+@functools.lru_cache(maxsize=None)
+def shipped_scene(name):
+    """(Scene, its mesh) of a shipped scene, loaded once per process (nothing changes a mesh)."""
+    from ..scene.loader import resolve_scene_or_mesh
+
+    scene = resolve_scene_or_mesh(name)
+    return scene, scene.load_mesh()
+
+
+def press_curve(result):
+    """(displacement [mm], force [N]) over the ramp and hold of a PressResult, every 5th step."""
+    n = result.release_step
+    ramp_n = PressSchedule.from_times(result.dt, RAMP, 0.0).ramp_n
+    depth = result.depth * np.minimum(np.arange(1, n + 1) / ramp_n, 1.0)
+    return (depth[::5] * 1e3).round(4).tolist(), result.force[:n:5].round(5).tolist()
 
 
 def spread_vertices(mesh, count: int) -> list[int]:
@@ -176,12 +189,12 @@ def hold_press(pal, depth=DEPTH, ramp=RAMP, hold=HOLD):
     from ..sim.model import PROBE_DISPLACEMENT
 
     rest, direction = pal.rest_position(), pal.inward_normal()
-    ramp_n = max(int(round(ramp / pal.dt)), 1)
-    total = ramp_n + int(round(hold / pal.dt))
+    schedule = PressSchedule.from_times(pal.dt, ramp, hold)
+    total = schedule.release_step
     force = np.zeros(total)
     target = np.zeros(total)
     for s in range(total):
-        target[s] = depth * min((s + 1) / ramp_n, 1.0)
+        target[s] = depth * schedule.fraction(s)
         pal.set_probe(PROBE_DISPLACEMENT, rest + direction * target[s])
         f = pal.step()
         force[s] = math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2)
@@ -193,25 +206,13 @@ def hold_press(pal, depth=DEPTH, ramp=RAMP, hold=HOLD):
 
 def time_per_step(pal, budget_s: float, blocks: int = 9, depth=0.5 * DEPTH) -> float:
     """Median wall time of one `Palpation.step()` [s], the probe held `depth` in (the force read
-    every step, as a haptic loop does), over `blocks` blocks that together take about `budget_s`.
-    The pattern of scripts/bench_palpation.py's measure(), sized by a time budget."""
+    every step, as a haptic loop does), over `blocks` blocks that together take about `budget_s`
+    (the warm-up, 10 steps, sizes them)."""
+    from ..protocol.timing import time_palpation
     from ..sim.model import PROBE_DISPLACEMENT
 
     pal.set_probe(PROBE_DISPLACEMENT, pal.rest_position() + pal.inward_normal() * depth)
-    t0 = time.perf_counter()
-    for _ in range(10):  # warm-up (captures the graph), also sizes the blocks
-        pal.step()
-    first = (time.perf_counter() - t0) / 10
-    steps = int(min(max(budget_s / blocks / max(first, 1e-9), 1), 5000))
-    per_step = []
-    for _ in range(blocks):
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            f = pal.step()
-            _ = f[2]
-        per_step.append((time.perf_counter() - t0) / steps)
-    pal.check_finite(blocks * steps)
-    return statistics.median(per_step)
+    return time_palpation(pal, blocks, read_force=True, warmup=10, budget_s=budget_s, max_steps=5000).median
 
 
 def finite_or_none(x):

@@ -5,12 +5,9 @@ strategies of almsdm_warp.normals).
 
 from __future__ import annotations
 
-import functools
 import math
 
-import numpy as np
-
-from .common import DEPTH, DT, HOLD, RAMP, time_per_step, top_vertex
+from .common import DEPTH, DT, HOLD, RAMP, press_curve, shipped_scene, time_per_step, top_vertex
 
 RECOVERY_RINGS = (1, 2, 3, 4, "global-free")
 
@@ -36,29 +33,12 @@ TABLE2_ROWS = (
 )
 
 
-@functools.lru_cache(maxsize=None)
-def _scene(name):
-    """(Scene, its mesh) of a shipped scene, loaded once per process (nothing changes a mesh)."""
-    from ..scene.loader import resolve_scene_or_mesh
-
-    scene = resolve_scene_or_mesh(name)
-    return scene, scene.load_mesh()
-
-
-def _curve(result):
-    """(displacement [mm], force [N]) over the ramp and hold of a PressResult, every 5th step."""
-    n = result.release_step
-    ramp_n = max(int(round(RAMP / result.dt)), 1)
-    depth = result.depth * np.minimum(np.arange(1, n + 1) / ramp_n, 1.0)
-    return (depth[::5] * 1e3).round(4).tolist(), result.force[:n:5].round(5).tolist()
-
-
 def run_recovery(settings, device, tasks) -> dict:
     """Fig. 9: `settings.presses` presses at the top of the stomach, 10 mm, explicit, dt 1 ms;
     the contact vertex's residual after each, for rings 1..4 and the unanchored global model."""
     from ..protocol.palpation import Palpation, SimulationDiverged
 
-    scene, mesh = _scene("stomach")
+    scene, mesh = shipped_scene("stomach")
     vertex = top_vertex(mesh)
     rows, curves = [], {}
     for rings in RECOVERY_RINGS:
@@ -84,7 +64,7 @@ def run_recovery(settings, device, tasks) -> dict:
                 "ran_away_at_press": ran_away,
             }
         )
-        curves[str(rings)] = _curve(presses[0])
+        curves[str(rings)] = press_curve(presses[0])
         tasks.step(f"recovery: {rings}")
     return {"scene": "stomach", "vertex": vertex, "settle_s": settings.settle_s, "rows": rows, "curves": curves}
 
@@ -95,7 +75,7 @@ def run_table1(settings, device, tasks) -> dict:
 
     rows = []
     for label, name, rings, integrator, paper in TABLE1_ROWS:
-        scene, mesh = _scene(name)
+        scene, mesh = shipped_scene(name)
         pal = Palpation(mesh, scene.tissue, rings=rings, integrator=integrator, dt=DT, device=device)
         pal.touch(top_vertex(mesh))
         r = pal.press(DEPTH, RAMP, HOLD, settings.settle_s)
@@ -110,7 +90,7 @@ def run_table1(settings, device, tasks) -> dict:
                 "recovery_time_s": r.recovery_time_s,
                 "peak_force_N": r.peak_force_N,
                 "hold_end_force_N": float(r.force[r.release_step - 1]),
-                "curve": _curve(r),
+                "curve": press_curve(r),
             }
         )
         tasks.step(f"table 1: {label}")
@@ -142,7 +122,7 @@ def run_table2(settings, device, tasks, normals=None) -> dict:
 
     rows = []
     for label, name, rings, integrator, paper in TABLE2_ROWS:
-        scene, mesh = _scene(name)
+        scene, mesh = shipped_scene(name)
         pal = Palpation(mesh, scene.tissue, rings=rings, integrator=integrator, dt=DT, device=device)
         pal.touch(top_vertex(mesh))
         step_s = time_per_step(pal, settings.timing_budget_s)

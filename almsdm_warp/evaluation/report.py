@@ -8,7 +8,7 @@ import math
 
 from .common import PAPER, fmt
 from .stability import OSCILLATING, STABLE, explicit_boundary
-from .summary import _header, _stability_verdicts, _summary
+from .summary import header_lines, stability_verdicts, summary_lines
 
 
 def _rings_label(rings) -> str:
@@ -237,7 +237,7 @@ def _stability(r) -> list[str]:
         states = sorted({c["state"] for c in imp})
         lines.append(f"| {scale:g} | {crit:.3g} | {fmt(stable, 3, 'none')} / {fmt(diverged, 3, 'none')} | {', '.join(states)} |")
     implicit_states = {c["state"] for c in s["cells"] if c["integrator"] == "implicit"}
-    agree = _stability_verdicts(s)[1]
+    agree = stability_verdicts(s)[1]
     osc = [c for c in s["cells"] if c["state"] == OSCILLATING]
     free = s["global_free_cells"]
     lines += [
@@ -303,6 +303,6 @@ def _anatomy(r) -> list[str]:
 
 
 def render_results(r) -> str:
-    lines = _header(r) + _summary(r) + _recovery(r) + _table1(r) + _fig10(r) + _table2(r) + _accuracy(r) + _stability(r) + _anatomy(r)
+    lines = header_lines(r) + summary_lines(r) + _recovery(r) + _table1(r) + _fig10(r) + _table2(r) + _accuracy(r) + _stability(r) + _anatomy(r)
     return "\n".join(lines).rstrip() + "\n"
 

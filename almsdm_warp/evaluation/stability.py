@@ -47,10 +47,10 @@ def _cell(pal, check_every) -> str:
 def run_stability(settings, device, tasks) -> dict:
     """The stomach scene at its top vertex, 4 rings: every (integrator, dt, stiffness scale) cell;
     then the unanchored global model at stiffness 1 over `settings.stability_free_dt_ms`."""
-    from .paper import _scene
+    from .common import shipped_scene
     from ..protocol.palpation import Palpation
 
-    scene, mesh = _scene("stomach")
+    scene, mesh = shipped_scene("stomach")
     vertex = top_vertex(mesh)
     cells, critical = [], {}
     for scale in settings.stability_scales:

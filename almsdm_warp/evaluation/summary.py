@@ -27,7 +27,7 @@ def _more_differences(r, missing) -> list[str]:
     return out
 
 
-def _header(r) -> list[str]:
+def header_lines(r) -> list[str]:
     m = r["machine"]
     load = m.get("load_average_1_5_15")
     return [
@@ -50,7 +50,7 @@ def _header(r) -> list[str]:
     ]
 
 
-def _summary(r) -> list[str]:
+def summary_lines(r) -> list[str]:
     rec = {row["rings"]: row for row in r["recovery"]["rows"]}
     t1 = {row["label"]: row for row in r["table1"]["rows"]}
     sizes = ", ".join(f"{k}: {rec[k]['region_vertices']}/{rec[k]['region_springs']}" for k in (1, 2, 3, 4) if k in rec)
@@ -59,7 +59,7 @@ def _summary(r) -> list[str]:
     free = rec["global-free"]["residual_mm"][0]
     liver_free = t1["liver, global free (no anchors)"]["recovery_error_mm"]
     local_res = max(x for k, row in rec.items() if k != "global-free" for x in row["residual_mm"])
-    implicit_ok, agree = _stability_verdicts(r["stability"])
+    implicit_ok, agree = stability_verdicts(r["stability"])
     missing = []
     if not r["table2"]["strategies"]:
         missing.append("Table 2 lacks the normals strategies (issue 4)")
@@ -98,7 +98,7 @@ def _summary(r) -> list[str]:
     return lines + [""]
 
 
-def _stability_verdicts(s):
+def stability_verdicts(s):
     """(the implicit integrator stable in every cell, the explicit boundary on the critical step)."""
     implicit_ok = all(c["state"] == STABLE for c in s["cells"] if c["integrator"] == "implicit")
     agree = all(

@@ -23,33 +23,62 @@ def check_writable(path) -> Path:
         raise InputError(f"{p}: folder {parent} is not writable")
     # os.access can say yes where creating a file fails (/proc, a read-only mount, a full disk,
     # another user's sticky folder): try it, and leave nothing behind
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=parent)
-    except OSError as exc:
-        raise InputError(f"{p}: cannot write in folder {parent}: {exc.strerror or exc}") from exc
-    os.close(fd)
-    os.unlink(tmp)
+    discard(temp_path(p))
     return p
+
+
+def temp_path(path, suffix: str = ".tmp") -> Path:
+    """A new empty temporary file beside `path` (same folder, so the rename is atomic), for a
+    writer that publishes it when complete (:func:`publish`) or removes it (:func:`discard`)."""
+    p = Path(path)
+    folder = p.parent if str(p.parent) else Path(".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=suffix, dir=folder)
+    except OSError as exc:
+        raise InputError(f"{p}: cannot write in folder {folder}: {exc.strerror or exc}") from exc
+    os.close(fd)
+    return Path(tmp)
+
+
+def publish(tmp, path) -> Path:
+    """Rename the finished temporary file `tmp` to `path`, its data on disk first (fsync) and with
+    the mode a new file gets (0o666 less the umask; mkstemp makes it owner-only)."""
+    with open(tmp, "rb+") as f:
+        os.fsync(f.fileno())
+    mask = os.umask(0)
+    os.umask(mask)
+    os.chmod(tmp, 0o666 & ~mask)
+    os.replace(tmp, path)
+    return Path(path)
+
+
+def discard(tmp) -> None:
+    """Remove an unfinished temporary file (nothing if it is gone already)."""
+    Path(tmp).unlink(missing_ok=True)
 
 
 @contextlib.contextmanager
 def atomic_path(path, suffix: str = ".tmp"):
     """Yield a temporary file's path beside `path`; when the block ends without an error it is
-    renamed to `path` (with a new file's mode), otherwise removed: nothing is half-written."""
+    published to `path` (:func:`publish`), otherwise removed: nothing is half-written. An OSError
+    becomes an InputError that names `path`."""
     p = Path(path)
+    tmp = temp_path(p, suffix)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=suffix, dir=p.parent if str(p.parent) else ".")
-    except OSError as exc:
-        raise InputError(f"{p}: cannot write in folder {p.parent}: {exc.strerror or exc}") from exc
-    os.close(fd)
-    try:
-        yield tmp
+        yield str(tmp)
         publish(tmp, p)
     except BaseException as exc:
-        Path(tmp).unlink(missing_ok=True)
+        discard(tmp)
         if isinstance(exc, OSError):
             raise InputError(f"{p}: cannot write: {exc.strerror or exc}") from exc
         raise
+
+
+def atomic_write(path, write) -> Path:
+    """Call ``write(tmp)`` to write a temporary file beside `path`, then publish it as `path`."""
+    with atomic_path(path) as tmp:
+        write(tmp)
+    return Path(path)
 
 
 def atomic_write_text(path, text: str) -> Path:
@@ -63,13 +92,3 @@ def atomic_write_text(path, text: str) -> Path:
 def write_json(path, data) -> Path:
     """Write `data` as indented JSON, atomically."""
     return atomic_write_text(path, json.dumps(data, indent=2) + "\n")
-
-
-def publish(tmp, path) -> Path:
-    """Rename the finished temporary file `tmp` to `path`, with the mode a new file gets (umask
-    applied; mkstemp makes it owner-only)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(tmp, 0o666 & ~mask)
-    os.replace(tmp, path)
-    return Path(path)

@@ -21,7 +21,7 @@ def plot_sweep(mesh, columns: dict, path, title: str = "") -> Path:
         raise InputError("--png needs matplotlib: pip install matplotlib") from exc
     from scipy.spatial import cKDTree
 
-    from ..batch.sweep import _atomic
+    from .output import atomic_write
 
     v = mesh.vertices * 1e3
     tri = mesh.triangles
@@ -52,7 +52,7 @@ def plot_sweep(mesh, columns: dict, path, title: str = "") -> Path:
         fig.savefig(tmp, format="png")
 
     try:
-        _atomic(path, write)
+        atomic_write(path, write)
     finally:
         plt.close(fig)
     return path

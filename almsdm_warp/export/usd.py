@@ -22,15 +22,13 @@ end. All of it is written under a temporary name beside the target and renamed w
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
 from ..sim.model import PROBE_OFF
-from .output import atomic_path, publish
+from .output import atomic_path, discard, publish, temp_path
 
 USD_SUFFIXES = (".usda", ".usdc", ".usd")
 
@@ -110,10 +108,7 @@ class UsdRecorder:
         self._colors = None
         self._region_key = None
         self._spring_ends = None
-        parent = self.path.parent if str(self.path.parent) else Path(".")
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp.usdc", dir=parent)
-        os.close(fd)
-        self._tmp = Path(tmp)
+        self._tmp = temp_path(self.path, ".tmp.usdc")
         try:
             self._layer = Sdf.Layer.CreateNew(str(self._tmp))
             if self._layer is None:
@@ -306,7 +301,7 @@ class UsdRecorder:
     def _discard(self):
         self._release()
         if self._tmp is not None:
-            _unlink(self._tmp)
+            discard(self._tmp)
             self._tmp = None
 
     def __enter__(self):
@@ -318,10 +313,3 @@ class UsdRecorder:
         else:
             self._discard()
         return False
-
-
-def _unlink(path):
-    try:
-        os.unlink(path)
-    except FileNotFoundError:
-        pass

@@ -22,8 +22,9 @@ import warp as wp
 
 from ..kernels.region_state import reset_vertices_left_behind
 from ..kernels.ring_motion import eval_region_motion
-from ..sim.model import PROBE_OFF
-from .palpation import Palpation, _replayer
+from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF
+from .palpation import Palpation, replayer
+from .schedule import PressSchedule
 
 MARGIN = 1.2
 """Safety factor on the fixed-ring estimate (it read 0.77-1.05 of the true value: docs/adaptive.md)."""
@@ -208,7 +209,7 @@ class AdaptivePalpation(Palpation):
         for s in self.states:
             with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
                 self._launch_motion(s)
-            graphs.append(_replayer(cap.graph, self.device))
+            graphs.append(replayer(cap.graph, self.device))
         self._motion_graphs = graphs
         return graphs
 
@@ -285,3 +286,21 @@ class AdaptivePalpation(Palpation):
 def make_auto_palpation(mesh, tissue=None, *, integrator="explicit", dt=1e-3, device=None, tol=1e-4):
     """An AdaptivePalpation at tolerance `tol` [m]: the "auto" points of `almsdm evaluate`."""
     return AdaptivePalpation(mesh, tissue, tol=tol, integrator=integrator, dt=dt, device=device)
+
+
+def hold_press(pal, depth, ramp, hold):
+    """Drive the touched vertex to `depth` [m] over `ramp` [s], hold `hold` [s] (no release): (peak
+    |force| [N], positions at the end of the hold [m], float64 [vertex_count, 3]).
+
+    The press that sizes an adaptive region (its rings grow only while pressed: sweep_auto) and that
+    the accuracy of a region is measured under. Raises SimulationDiverged."""
+    schedule = PressSchedule.from_times(pal.dt, ramp, hold)
+    total = schedule.release_step
+    rest, n = pal.rest_position(), pal.inward_normal()
+    peak = 0.0
+    for s in range(total):
+        pal.set_probe(PROBE_DISPLACEMENT, rest + n * depth * schedule.fraction(s))
+        f = pal.step()
+        peak = max(peak, float(np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])))
+    pal.check_finite(total)
+    return peak, pal.positions()

@@ -1,6 +1,6 @@
 """Several probes at once, each with its own region; regions that touch merge into one.
 
-The same Model, States and SolverALMSDM as one Palpation: a *patch* is a region with its own
+The same Model, States and solver as one Palpation: a *patch* is a region with its own
 solver, and every patch's step (plus the drive of its probes' vertices) goes into one captured
 graph. Regions are grown from several seeds (kernels/rings.py), so merging two patches is
 rebuilding one region from both probes' vertices with the larger ring count, which holds both.
@@ -24,9 +24,10 @@ from ..kernels.rings import seed_region_rings
 from ..kernels.region_state import reset_vertices_left_behind
 from ..kernels.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from .palpation import PressResult, _replayer
+from .palpation import PressResult, replayer
 from ..region.region import Region, check_rings
-from ..solvers.solver import SolverALMSDM
+from ..solvers import make_solver, solver_class
+from .schedule import PressSchedule, check_press
 
 
 class MultiRegion(Region):
@@ -81,7 +82,7 @@ class Patch:
         self.probes = sorted(probes)
         seeds = owner.vertices[self.probes]
         self.region = MultiRegion(owner.model.dmesh).build_seeds(seeds, rings)
-        self.solver = SolverALMSDM(owner.model, owner.integrator, **owner.solver_kw)
+        self.solver = make_solver(owner.model, owner.integrator, **owner.solver_kw)
         self.patch_probe = wp.array(np.asarray(self.probes, dtype=np.int32), dtype=wp.int32, device=owner.device)
         self.motion = wp.zeros(owner.max_rings + 2, dtype=wp.float32, device=owner.device)
         self.rings_chosen = self.region.outer_ring
@@ -132,7 +133,7 @@ class MultiPalpation:
         self.device = self.model.device
         self.mesh = self.model.mesh
         self.integrator = integrator
-        SolverALMSDM(self.model, integrator)  # checks the integrator's name now, not at the first touch
+        solver_class(integrator)  # checks the integrator's name now, not at the first touch
         self.solver_kw = solver_kw
         self.adaptive = rings is None
         self.tol, self.dt = float(tol), float(dt)
@@ -276,7 +277,7 @@ class MultiPalpation:
                 for i in (0, 1):
                     with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
                         self._launch_step(self.states[i], self.states[1 - i])
-                    graphs.append(_replayer(cap.graph, self.device))
+                    graphs.append(replayer(cap.graph, self.device))
                 self._graphs = graphs
             if not self.device.is_cpu:
                 wp.synchronize_device(self.device)
@@ -337,18 +338,15 @@ class MultiPalpation:
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0) -> list:
         """Every probe pressed at once: driven `depth` [m] along its inward normal over `ramp` [s],
         held `hold` [s], released for `settle` [s]; one PressResult per probe."""
-        for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"press {name} must be >= 0, got {value}")
-        ramp_n = max(int(round(ramp / self.dt)), 1)
-        hold_n = int(round(hold / self.dt))
-        total = ramp_n + hold_n + max(int(round(settle / self.dt)), 1)
+        check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
+        schedule = PressSchedule.from_times(self.dt, ramp, hold, settle)
+        total, release = schedule.total, schedule.release_step
         rest, normal = self.rest_positions(), self.inward_normals()
         count = len(self.vertices)
         force, disp = np.zeros((count, total)), np.zeros((count, total))
         for s in range(total):
-            if s < ramp_n + hold_n:
-                self.set_probes(PROBE_DISPLACEMENT, rest + normal * depth * min((s + 1) / ramp_n, 1.0))
+            if s < release:
+                self.set_probes(PROBE_DISPLACEMENT, rest + normal * depth * schedule.fraction(s))
             else:
                 self.set_probes(PROBE_OFF)
             f = self.step()
@@ -359,7 +357,7 @@ class MultiPalpation:
             raise FloatingPointError(f"the {self.integrator} integrator diverged: use a smaller dt or the implicit one")
         return [
             PressResult(
-                vertex=int(v), depth=float(depth), dt=self.dt, release_step=ramp_n + hold_n, force=force[i], displacement=disp[i]
+                vertex=int(v), depth=float(depth), dt=self.dt, release_step=release, force=force[i], displacement=disp[i]
             )
             for i, v in enumerate(self.vertices)
         ]

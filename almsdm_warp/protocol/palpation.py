@@ -17,12 +17,13 @@ import warp as wp
 from ..kernels.region_state import reset_vertices_left_behind
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, Model
 from ..region.region import Region
-from ..solvers.solver import SolverALMSDM
+from ..solvers import make_solver
+from .schedule import PressSchedule, check_press
 
 GLOBAL_MODELS = ("global", "global-free")
 
 
-def _replayer(graph, device):
+def replayer(graph, device):
     """A call that replays `graph` (and, on CUDA, waits for it so the pinned outputs are readable).
 
     On the CPU it binds Warp's native replay of a live capture directly: `wp.capture_launch` checks
@@ -118,7 +119,7 @@ class Palpation:
         self.mesh = self.model.mesh
         self.rings = rings
         self.dt = float(dt)
-        self.solver = SolverALMSDM(self.model, integrator, **solver_kw)
+        self.solver = make_solver(self.model, integrator, **solver_kw)
         self.states = [self.model.state(), self.model.state()]
         self._cur = 0  # states[_cur] is the current state
         self.control = self.model.control()
@@ -205,7 +206,7 @@ class Palpation:
         for i in (0, 1):
             with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
                 self._launch_step(self.states[i], self.states[1 - i])
-            replays.append(_replayer(cap.graph, self.device))
+            replays.append(replayer(cap.graph, self.device))
         self._graphs = replays
 
     def step(self) -> np.ndarray:
@@ -275,7 +276,7 @@ class Palpation:
         if not ok:
             free = self.region.vertices()[: self.region.free_count] if self.region is not None else None
             crit = self.model.critical_dt(free, anchors=self.solver.anchor_scale > 0)
-            if self.solver.integrator == "explicit" and self.dt > crit:
+            if self.solver.conditionally_stable and self.dt > crit:
                 raise SimulationDiverged(
                     f"the {self.solver.integrator} integrator diverged at step {step_index} "
                     f"(t = {step_index * self.dt:.4g} s): dt = {self.dt * 1e3:.4g} ms exceeds the critical "
@@ -289,6 +290,13 @@ class Palpation:
             )
 
     # -- the press protocol --------------------------------------------------------------------
+    def _begin_press(self, ramp, hold, settle, record, record_every, **amplitude):
+        """The checked press's schedule, the contact's rest position [m] and inward normal."""
+        check_press(**amplitude, ramp=ramp, hold=hold, settle=settle)
+        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
+            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
+        return PressSchedule.from_times(self.dt, ramp, hold, settle), self.rest_position(), self.inward_normal()
+
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Displacement-controlled press at the touched vertex: ramp to `depth` [m] along the inward
         normal over `ramp` [s], hold `hold` [s], release and settle `settle` [s].
@@ -296,67 +304,47 @@ class Palpation:
         record: called as ``record(k, total)`` after step k (1..total) of the press when k is a
         multiple of `record_every`, and after the last step; it reads the state itself (a USD
         recorder, say). None (the default) costs one test per step."""
-        for name, value in (("depth", depth), ("ramp", ramp), ("hold", hold), ("settle", settle)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"press {name} must be >= 0, got {value}")
-        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
-            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
-        dt = self.dt
-        ramp_n = max(int(round(ramp / dt)), 1)
-        hold_n = int(round(hold / dt))
-        settle_n = max(int(round(settle / dt)), 1)
-        total = ramp_n + hold_n + settle_n
-        rest = self.rest_position()
-        direction = self.inward_normal()
-        v = self.vertex
+        schedule, rest, direction = self._begin_press(ramp, hold, settle, record, record_every, depth=depth)
+        dt, v = self.dt, self.vertex
+        total, release = schedule.total, schedule.release_step
         force = np.zeros(total)
         disp = np.zeros(total)
         for s in range(total):
-            if s < ramp_n + hold_n:
-                frac = min((s + 1) / ramp_n, 1.0)
-                self.set_probe(PROBE_DISPLACEMENT, rest + direction * depth * frac)
+            if s < release:
+                self.set_probe(PROBE_DISPLACEMENT, rest + direction * depth * schedule.fraction(s))
             else:
                 self.set_probe(PROBE_OFF)
             f = self.step()
-            if s < ramp_n + hold_n:
+            if s < release:
                 force[s] = math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2)
                 if not math.isfinite(force[s]):
                     self.check_finite(s + 1)
-            if s >= ramp_n + hold_n or s % check_every == 0:
+            if s >= release or s % check_every == 0:
                 pos = self.state.particle_q.numpy()[v] if self._cpu else self.state.particle_q[v : v + 1].numpy()[0]
                 disp[s] = float(np.linalg.norm(pos - rest))
                 if not math.isfinite(disp[s]) or (s % check_every == 0 and s):
                     self.check_finite(s + 1)
             else:
-                disp[s] = depth * min((s + 1) / ramp_n, 1.0)
+                disp[s] = depth * schedule.fraction(s)
             if record is not None and ((s + 1) % record_every == 0 or s + 1 == total):
                 record(s + 1, total)
         self.check_finite(total)
-        return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=ramp_n + hold_n, force=force, displacement=disp)
+        return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=release, force=force, displacement=disp)
 
     def press_force(self, force=2.4, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Force-controlled press: push the touched vertex along the inward normal with a force
         ramped to `force` [N] over `ramp` [s], held `hold` [s], then released for `settle` [s].
         The result's `force` is the applied force; its `depth` the deepest displacement reached.
         record, record_every: as in :meth:`press`."""
-        for name, value in (("force", force), ("ramp", ramp), ("hold", hold), ("settle", settle)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"press {name} must be >= 0, got {value}")
-        if record is not None and not (isinstance(record_every, (int, np.integer)) and record_every >= 1):
-            raise ValueError(f"record_every must be an int >= 1, got {record_every!r}")
-        dt = self.dt
-        ramp_n = max(int(round(ramp / dt)), 1)
-        hold_n = int(round(hold / dt))
-        total = ramp_n + hold_n + max(int(round(settle / dt)), 1)
-        rest = self.rest_position()
-        direction = self.inward_normal()
-        v = self.vertex
+        schedule, rest, direction = self._begin_press(ramp, hold, settle, record, record_every, force=force)
+        dt, v = self.dt, self.vertex
+        total, release = schedule.total, schedule.release_step
         applied = np.zeros(total)
         disp = np.zeros(total)
         q_view = self.state.particle_q
         for s in range(total):
-            if s < ramp_n + hold_n:
-                applied[s] = force * min((s + 1) / ramp_n, 1.0)
+            if s < release:
+                applied[s] = force * schedule.fraction(s)
                 self.set_probe_force(direction * applied[s])
             else:
                 self.set_probe(PROBE_OFF)
@@ -369,6 +357,6 @@ class Palpation:
             if record is not None and ((s + 1) % record_every == 0 or s + 1 == total):
                 record(s + 1, total)
         self.check_finite(total)
-        depth = float(disp[: ramp_n + hold_n].max(initial=0.0))
-        return PressResult(vertex=v, depth=depth, dt=dt, release_step=ramp_n + hold_n, force=applied, displacement=disp)
+        depth = float(disp[:release].max(initial=0.0))
+        return PressResult(vertex=v, depth=depth, dt=dt, release_step=release, force=applied, displacement=disp)
 

@@ -74,3 +74,9 @@ class ContactQuery:
 def find_contacts(mesh, probes, *, device=None) -> Contacts:
     """Closest surface points and nearest surface vertices for probe positions [m], shape [3] or [B, 3]."""
     return ContactQuery(mesh, device)(probes)
+
+
+def top_vertex(mesh) -> int:
+    """The highest surface vertex (largest z; the first of equals): the default contact, a press from above."""
+    sv = mesh.surface_vertices
+    return int(sv[np.argmax(mesh.vertices[sv, 2])])

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import InputError
+from ..protocol.schedule import PressParams
 from .schema import _FIELD_RULE, AUTO, SCHEMA, _check_rings, _check_value, _describe
 
 try:
@@ -58,24 +59,6 @@ class TissueParams:
     def __post_init__(self):
         for f in fields(self):
             _check_value(getattr(self, f.name), float, _FIELD_RULE[("tissue", f.name)], f"TissueParams.{f.name}")
-
-
-@dataclass(frozen=True)
-class PressParams:
-    """The press protocol (DESIGN.md, evaluation protocol), in SI units."""
-
-    depth: float = 10.0e-3
-    """Indentation depth [m]: how far the contact vertex is driven along the inward surface normal."""
-    ramp: float = 0.1
-    """Ramp time [s] from rest to full depth."""
-    hold: float = 0.2
-    """Hold time [s] at full depth."""
-    settle: float = 1.0
-    """Settle window [s] after release; the recovery error is measured at its end."""
-
-    def __post_init__(self):
-        for f in fields(self):
-            _check_value(getattr(self, f.name), float, _FIELD_RULE[("press", f.name)], f"PressParams.{f.name}")
 
 
 @dataclass(frozen=True)

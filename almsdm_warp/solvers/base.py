@@ -1,0 +1,65 @@
+"""What every integrator of the ALMSDM shares: the model, the free vertices it steps, the step's checks."""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+
+class SolverBase:
+    """Steps the free vertices of a region (or of the whole mesh) under the ALMSDM's forces.
+
+    The free set comes from :meth:`set_region` (a Region: all but its fixed outer ring) or
+    :meth:`set_global` (every vertex; with or without anchors). A subclass names itself
+    (`integrator`, its key in solvers.INTEGRATORS) and implements :meth:`integrate`.
+    """
+
+    integrator = ""
+    """The integrator's name, its key in solvers.INTEGRATORS."""
+    conditionally_stable = False
+    """True where the step must stay under the critical step (Model.critical_dt) to be stable."""
+
+    def __init__(self, model):
+        self.model = model
+        n = model.particle_count
+        self._identity = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=model.device)
+        self.free_vertex = None
+        self.free_count = 0
+        self.vertex_local = None
+        self.anchor_scale = 1.0
+
+    def set_region(self, region) -> None:
+        """Integrate the region's vertices but its fixed outer ring (local order: ring after ring)."""
+        self.free_vertex = region.region_vertex
+        self.free_count = region.free_count
+        self.vertex_local = region.vertex_local
+        self.anchor_scale = 1.0
+        self.reset_warm_start()
+
+    def set_global(self, anchors: bool = True) -> None:
+        """Integrate every vertex: the global anchored model, or without anchors the paper's free surface."""
+        self.free_vertex = self._identity
+        self.free_count = self.model.particle_count
+        self.vertex_local = self._identity
+        self.anchor_scale = 1.0 if anchors else 0.0
+        self.reset_warm_start()
+
+    def reset_warm_start(self) -> None:
+        """Forget what the last steps left to start the next from (the free set changed)."""
+
+    @property
+    def cg_stats(self):
+        """(iterations, relative residual) of the last step's linear solve, or None (no solve)."""
+        return None
+
+    def step(self, state_in, state_out, control, dt: float) -> None:
+        """Advance `state_in` by `dt` [s] into `state_out` (only the free vertices are written)."""
+        if self.free_vertex is None:
+            raise RuntimeError("the solver has no region: call set_region() or set_global() first")
+        if self.free_count == 0:
+            return
+        self.integrate(state_in, state_out, control, dt)
+
+    def integrate(self, state_in, state_out, control, dt: float) -> None:
+        """One step of the free vertices (there are some): the integrator's own."""
+        raise NotImplementedError

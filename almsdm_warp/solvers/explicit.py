@@ -1,0 +1,17 @@
+"""The paper's integrator: semi-implicit (symplectic) Euler, eqs. (3)-(8)."""
+
+from __future__ import annotations
+
+from ..kernels.integrate_explicit import integrate_explicit
+from .base import SolverBase
+
+
+class SolverExplicit(SolverBase):
+    """Semi-implicit Euler: velocities from the forces at the start of the step, then positions.
+    Stable below the critical step (Model.critical_dt)."""
+
+    integrator = "explicit"
+    conditionally_stable = True
+
+    def integrate(self, state_in, state_out, control, dt: float) -> None:
+        integrate_explicit(self.model, self.free_vertex, self.free_count, self.anchor_scale, state_in, state_out, control, dt)
