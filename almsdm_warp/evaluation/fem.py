@@ -4,7 +4,7 @@ It shares no code with the mass-spring model: stiffness from Young's modulus and
 linear (P1, 4-node) or quadratic (P2, 10-node) tetrahedra, a clamped support and a rigid
 frictionless sphere pressed into the top. SI units throughout.
 
-P1 tets lock in bending and near incompressibility (nu = 0.45 makes them too stiff by several %
+P1 tets lock in bending and near incompressibility (at nu = 0.45 they are 15-45 % too stiff
 at practical sizes); P2 converges quickly and is the reference. Contact is node-to-rigid-sphere
 with the gap and its normal taken along z: for a shallow press (depth << sphere radius, contact
 radius a << R) the sphere's normal at the contact edge tilts by a/R only, and z is the direction
