@@ -13,7 +13,7 @@ the project's kernels), against the material it was derived from:
 
     python scripts/material_check.py          # the tables of docs/calibration.md, "Springs from a material"
 
-About 20 s on 2 CPU cores.
+About 40 s on 2 CPU cores.
 """
 
 from __future__ import annotations
