@@ -205,25 +205,14 @@ def network_moduli(points, cells, material, law="indentation"):
     return e_eff / young, nu_eff
 
 
-def table_tets(resolutions=(4, 8, 16)):
-    mat = Material(youngs_modulus=1.0, poisson_ratio=0.25)
-    print("| mesh | cells a side | vertices | tets | E_net / E (law young) | nu_net |")
+def table_refinement(make_mesh, kinds, material, header, resolutions=(4, 8, 16)):
+    """One row per mesh kind and resolution: sizes, E_net / E and nu_net (law young for tets)."""
+    print(header)
     print("|---|---|---|---|---|---|")
-    for kind in ("structured", "jittered", "random"):
+    for kind in kinds:
         for n in resolutions:
-            p, t = tet_box(n, kind=kind)
-            ratio, nu = network_moduli(p, t, mat, law="young")
-            print(f"| {kind} | {n} | {len(p)} | {len(t)} | {ratio:.3f} | {nu:.3f} |")
-
-
-def table_membrane(resolutions=(4, 8, 16)):
-    mat = Material(youngs_modulus=1.0, thickness=1.0)
-    print("| triangles | cells a side | vertices | triangles | E_net t / (E t) | nu_net |")
-    print("|---|---|---|---|---|---|")
-    for kind in ("right", "equilateral", "jittered"):
-        for n in resolutions:
-            p, t = membrane(n, kind=kind)
-            ratio, nu = network_moduli(p, t, mat)
+            p, t = make_mesh(n, kind=kind)
+            ratio, nu = network_moduli(p, t, material, law="young")
             print(f"| {kind} | {n} | {len(p)} | {len(t)} | {ratio:.3f} | {nu:.3f} |")
 
 
@@ -254,9 +243,11 @@ def table_punch(resolutions=(6, 12, 18)):
 
 def main(argv=None):
     print("(a) tet box, uniaxial stress along x, nu = 0.25, law young\n")
-    table_tets()
+    table_refinement(tet_box, ("structured", "jittered", "random"), Material(youngs_modulus=1.0, poisson_ratio=0.25),
+                     "| mesh | cells a side | vertices | tets | E_net / E (law young) | nu_net |")
     print("\n(b) membrane, in-plane uniaxial stress along x\n")
-    table_membrane()
+    table_refinement(membrane, ("right", "equilateral", "jittered"), Material(youngs_modulus=1.0, thickness=1.0),
+                     "| triangles | cells a side | vertices | triangles | E_net t / (E t) | nu_net |")
     print("\n(c) Poisson correction, jittered tet box 8 cells a side\n")
     table_poisson()
     print("\n(d) flat punch (radius 0.2 on a 1 x 1 x 0.5 block, bottom fixed): network force over P1 FEM\n")
