@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from ..kernels.arrays import CGArrays, struct_from
 from ..kernels.integrate_implicit import integrate_implicit
 from .base import SolverBase
 
@@ -21,6 +22,7 @@ class CGScratch:
         self.csr_block = wp.zeros(max(csr, 1), dtype=wp.mat33, device=device)
         self.csr_local = wp.zeros(max(csr, 1), dtype=wp.int32, device=device)
         self.stats = wp.zeros(2, dtype=wp.float32, device=device)
+        self.arrays = struct_from(CGArrays, self)
 
 
 class SolverImplicit(SolverBase):
