@@ -19,6 +19,7 @@ import warp as wp
 
 from .adaptive import FORCE_TOL, MARGIN, fixed_ring_estimate
 from ..mesh.device_mesh import check_vertex
+from ..kernels.arrays import ProbeArrays, struct_from
 from ..kernels.multi_probe import drive_probe_vertices
 from ..kernels.rings import seed_region_rings
 from ..kernels.region_state import reset_vertices_left_behind
@@ -58,6 +59,7 @@ class _Probes:
         self.probe_mode = wp.zeros(n, dtype=wp.int32, device=device)
         self.probe_target = wp.zeros(n, dtype=wp.vec3, device=device)
         self.probe_reaction = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.arrays = struct_from(ProbeArrays, self, probe_force=wp.zeros(n, dtype=wp.vec3, device=device))
         self.cpu = wp.get_device(device).is_cpu
         if self.cpu:
             self.mode, self.target, self.reaction = (a.numpy() for a in (self.probe_mode, self.probe_target, self.probe_reaction))
