@@ -17,6 +17,7 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import check_vertex
+from ..kernels.arrays import BatchPress, BatchRegionArrays, struct_from
 from ..kernels import batch_press as bk
 from ..kernels import batch_press_fast as bkf
 from ..kernels import batch_press_implicit as bki
@@ -87,6 +88,8 @@ class BatchRegions:
         self.entry_count = wp.zeros(B, dtype=wp.int32, device=d)
         """CSR entries of each palpation's free vertices (its local_offsets[b, free_count[b]])."""
         self.status = wp.zeros(B, dtype=wp.int32, device=d)
+        self.arrays = struct_from(BatchRegionArrays, self)
+        """The arrays above as one kernel argument (kernels/arrays.py)."""
 
 
 class BatchPalpation:
@@ -227,6 +230,8 @@ class BatchPalpation:
         normals = -self.model.vertex_normal_rest[self.vertices]
         self.press_direction = wp.array(normals, dtype=wp.vec3d, device=d)
         """Inward unit normal at each contact vertex (float64, as the host computes the target)."""
+        self.press_arrays = struct_from(BatchPress, self, depth=0.0, ramp_steps=0, press_steps=0)
+        """The press's schedule, directions and force records as one kernel argument (set again by start_press)."""
 
     def _fast_plan(self, max_vertices, max_free, max_entries, max_springs):
         """(threads, springs per thread, vertex, free-vertex and spring capacities, largest degree)
@@ -266,6 +271,7 @@ class BatchPalpation:
         ramp_n, press_n, total = self.schedule(depth, ramp, hold, settle)
         self.depth = float(depth)
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
+        self.press_arrays = struct_from(BatchPress, self)
         br.rest_states(self)
         if self.integrator == "implicit":
             self._implicit_press(total, on_launch)
