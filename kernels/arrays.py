@@ -52,38 +52,34 @@ class ProbeArrays:
     """Output: the tissue's internal forces on the held vertex [N]."""
 
 
-@wp.struct
-class CGArrays:
-    """The one-palpation implicit step's conjugate-gradient scratch (solvers/implicit.py CGScratch)."""
+CG_FIELDS = (
+    ("dv", wp.vec3, "vertex"),
+    ("r", wp.vec3, "vertex"),
+    ("p", wp.vec3, "vertex"),
+    ("Ap", wp.vec3, "vertex"),
+    ("diag", wp.mat33, "vertex"),
+    ("diag_inv", wp.mat33, "vertex"),
+    ("csr_block", wp.mat33, "entry"),
+    ("csr_local", wp.int32, "entry"),
+    ("stats", wp.float32, "stats"),
+)
+"""The conjugate-gradient solve's arrays (kernels/block_cg.py): name, element type and size
+(per unknown, per CSR entry, or the solve's (iterations, relative residual))."""
 
-    dv: wp.array(dtype=wp.vec3)
-    r: wp.array(dtype=wp.vec3)
-    p: wp.array(dtype=wp.vec3)
-    Ap: wp.array(dtype=wp.vec3)
-    diag: wp.array(dtype=wp.mat33)
-    diag_inv: wp.array(dtype=wp.mat33)
-    csr_block: wp.array(dtype=wp.mat33)
-    csr_local: wp.array(dtype=wp.int32)
-    stats: wp.array(dtype=wp.float32)
+
+def _cg_struct(name: str, array_type, doc: str):
+    # one member list for the one-palpation scratch (1-d) and the batch's (a row per palpation)
+    annotations = {field: array_type(dtype=dtype) for field, dtype, _ in CG_FIELDS}
+    return wp.struct(type(name, (), {"__annotations__": annotations, "__doc__": doc, "__module__": __name__}))
 
 
-@wp.struct
-class BatchCGArrays:
-    """The implicit batch's conjugate-gradient scratch, one row per palpation (BatchCGScratch)."""
-
-    dv: wp.array2d(dtype=wp.vec3)
-    r: wp.array2d(dtype=wp.vec3)
-    p: wp.array2d(dtype=wp.vec3)
-    Ap: wp.array2d(dtype=wp.vec3)
-    diag: wp.array2d(dtype=wp.mat33)
-    diag_inv: wp.array2d(dtype=wp.mat33)
-    csr_block: wp.array2d(dtype=wp.mat33)
-    csr_local: wp.array2d(dtype=wp.int32)
+CGArrays = _cg_struct("CGArrays", wp.array, "The one-palpation implicit step's conjugate-gradient scratch.")
+BatchCGArrays = _cg_struct("BatchCGArrays", wp.array2d, "The implicit batch's conjugate-gradient scratch, a row per palpation.")
 
 
 @wp.struct
 class BatchRegionArrays:
-    """Compacted per-palpation regions (almsdm_warp.batch.batch_palpation.BatchRegions, whose fields document them)."""
+    """Compacted per-palpation regions (almsdm_warp.batch.batch_palpation.BatchRegions documents each)."""
 
     region_vertex: wp.array2d(dtype=wp.int32)
     ring_offsets: wp.array2d(dtype=wp.int32)

@@ -11,7 +11,7 @@ vertex's springs in mesh CSR order), so a palpation of the batch gives the same 
 
 import warp as wp
 
-from .arrays import BatchCGArrays, BatchPress, BatchRegionArrays, TissueArrays, struct_from
+from .arrays import BatchCGArrays, BatchPress, BatchRegionArrays, TissueArrays
 from .block_cg import solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
 
@@ -110,22 +110,6 @@ def step_batch_implicit(
             u1 = qd_in[b, i] + cg.dv[b, i]
             q_out[b, i] = x + dt * u1
             qd_out[b, i] = u1
-
-
-class BatchCGScratch:
-    """Per-palpation conjugate-gradient arrays of the implicit batch, [B, capacity]."""
-
-    def __init__(self, batch: int, vertex_capacity: int, entry_capacity: int, device):
-        shape_v, shape_e = (batch, vertex_capacity), (batch, max(entry_capacity, 1))
-        self.dv = wp.zeros(shape_v, dtype=wp.vec3, device=device)
-        self.r = wp.zeros(shape_v, dtype=wp.vec3, device=device)
-        self.p = wp.zeros(shape_v, dtype=wp.vec3, device=device)
-        self.Ap = wp.zeros(shape_v, dtype=wp.vec3, device=device)
-        self.diag = wp.zeros(shape_v, dtype=wp.mat33, device=device)
-        self.diag_inv = wp.zeros(shape_v, dtype=wp.mat33, device=device)
-        self.csr_block = wp.zeros(shape_e, dtype=wp.mat33, device=device)
-        self.csr_local = wp.zeros(shape_e, dtype=wp.int32, device=device)
-        self.arrays = struct_from(BatchCGArrays, self)
 
 
 def step_batch(batch, step, state_in, state_out, scratch, max_iterations, tolerance):

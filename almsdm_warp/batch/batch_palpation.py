@@ -19,6 +19,7 @@ import warp as wp
 from ..mesh.device_mesh import check_vertex
 from ..kernels.arrays import BatchPress, BatchRegionArrays, struct_from
 from ..kernels import batch_press as bk
+from ..kernels.block_cg import CGScratch
 from ..kernels import batch_press_fast as bkf
 from ..kernels import batch_press_implicit as bki
 from ..kernels import batch_rings as br
@@ -287,7 +288,7 @@ class BatchPalpation:
         # two states (the fixed ring at rest in both) and CG scratch per palpation; one launch a step
         d, r = self.device, self.regions
         other = (wp.clone(self.q_state), wp.clone(self.qd_state))
-        scratch = bki.BatchCGScratch(self.batch_size, r.vertex_capacity, r.entry_capacity, d)
+        scratch = CGScratch(r.vertex_capacity, r.entry_capacity, d, rows=self.batch_size)
         states = [(self.q_state, self.qd_state), other]
         for s in range(total):
             bki.step_batch(self, s, states[s % 2], states[1 - s % 2], scratch, self.cg_max_iterations, self.cg_tolerance)
