@@ -22,10 +22,10 @@ from ..mesh.device_mesh import check_vertex
 from ..kernels.arrays import ProbeArrays, struct_from
 from ..kernels.multi_probe import drive_probe_vertices
 from ..kernels.rings import seed_region_rings
-from ..kernels.region_state import reset_vertices_left_behind
+from ..kernels.region_state import clear_region
 from ..kernels.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from .palpation import PressResult, replayer
+from .palpation import PressResult, capture_step_pair
 from ..region.region import Region, check_rings
 from ..solvers import make_solver, solver_class
 from .schedule import PressSchedule, check_press
@@ -211,11 +211,7 @@ class MultiPalpation:
     # -- patches -------------------------------------------------------------------------------
     def _retire(self, patch):
         region = patch.region
-        count = region.vertex_count
-        if count:
-            old = wp.clone(region.region_vertex[:count])
-            region.clear()
-            reset_vertices_left_behind(self.model, old, count, region, self.states)
+        clear_region(self.model, region, self.states)
         self.patches.remove(patch)
         self._dirty = True
 
@@ -275,12 +271,7 @@ class MultiPalpation:
             self._launch_step(self.states[self._cur], self.states[1 - self._cur])  # loads the modules uncaptured
             self._cur ^= 1
             if self.capture:
-                graphs = []
-                for i in (0, 1):
-                    with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
-                        self._launch_step(self.states[i], self.states[1 - i])
-                    graphs.append(replayer(cap.graph, self.device))
-                self._graphs = graphs
+                self._graphs = capture_step_pair(self._launch_step, self.states, self.device)
             if not self.device.is_cpu:
                 wp.synchronize_device(self.device)
         self._steps += 1
