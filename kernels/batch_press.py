@@ -21,6 +21,7 @@ import functools
 
 import warp as wp
 
+from .arrays import BatchPress, BatchRegionArrays, TissueArrays
 from .block_memory import SHARED_BYTES_MAX, block_sync, work_array
 from .forces import add_spring_force, anchor_force
 
@@ -98,25 +99,10 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
     @wp.kernel(module="unique", enable_backward=False)
     def press_batch_explicit(
         threads: int,
-        region_vertex: wp.array2d(dtype=wp.int32),
-        region_count: wp.array(dtype=wp.int32),
-        free_count: wp.array(dtype=wp.int32),
-        local_offsets: wp.array2d(dtype=wp.int32),
-        local_neighbour: wp.array2d(dtype=wp.int32),
-        local_edge: wp.array2d(dtype=wp.int32),
-        q_rest: wp.array(dtype=wp.vec3),
-        particle_mass: wp.array(dtype=wp.float32),
-        anchor_ke: wp.array(dtype=wp.float32),
-        anchor_kd: wp.array(dtype=wp.float32),
+        regions: BatchRegionArrays,
+        tissue: TissueArrays,
         anchor_scale: float,
-        spring_ke: wp.array(dtype=wp.float32),
-        spring_kd: wp.array(dtype=wp.float32),
-        spring_rest_length: wp.array(dtype=wp.float32),
-        press_direction: wp.array(dtype=wp.vec3d),
-        depth: wp.float64,
-        ramp_steps: int,
-        press_steps: int,
-        dt: float,
+        press: BatchPress,
         step_begin: int,
         step_count: int,
         scratch_vec3: wp.array(dtype=wp.vec3),
@@ -124,16 +110,13 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
         scratch_int: wp.array(dtype=wp.int32),
         q_state: wp.array2d(dtype=wp.vec3),
         qd_state: wp.array2d(dtype=wp.vec3),
-        peak_force: wp.array(dtype=wp.float64),
-        peak_reaction: wp.array(dtype=wp.vec3),
-        hold_reaction: wp.array(dtype=wp.vec3),
     ):
         tid = wp.tid()
         b = tid // threads
         lane = tid - b * threads
-        n = region_count[b]
-        nf = free_count[b]
-        ne = local_offsets[b, nf]
+        n = regions.region_count[b]
+        nf = regions.free_count[b]
+        ne = regions.local_offsets[b, nf]
         # working arrays (shared memory on CUDA; offsets are used only by the global fallback)
         q_a = w_q_a(scratch_vec3, (5 * b + 0) * cv)
         qd_a = w_qd_a(scratch_vec3, (5 * b + 1) * cv)
@@ -150,37 +133,38 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
         nbr = w_nbr(scratch_int, b * (cv + 1 + ce) + cv + 1)
         # load the region once: state, per-vertex parameters, local topology with spring parameters
         for i in range(lane, n, threads):
-            v = region_vertex[b, i]
-            rest[i] = q_rest[v]
-            mass[i] = particle_mass[v]
-            ka[i] = anchor_ke[v]
-            kda[i] = anchor_kd[v]
+            v = regions.region_vertex[b, i]
+            rest[i] = tissue.q_rest[v]
+            mass[i] = tissue.particle_mass[v]
+            ka[i] = tissue.anchor_ke[v]
+            kda[i] = tissue.anchor_kd[v]
             q_a[i] = q_state[b, i]
             qd_a[i] = qd_state[b, i]
             q_b[i] = q_state[b, i]
             qd_b[i] = qd_state[b, i]
         for i in range(lane, nf + 1, threads):
-            off[i] = local_offsets[b, i]
+            off[i] = regions.local_offsets[b, i]
         for k in range(lane, ne, threads):
-            nbr[k] = local_neighbour[b, k]
-            e = local_edge[b, k]
-            ke[k] = spring_ke[e]
-            kd[k] = spring_kd[e]
-            l0[k] = spring_rest_length[e]
+            nbr[k] = regions.local_neighbour[b, k]
+            e = regions.local_edge[b, k]
+            ke[k] = tissue.spring_ke[e]
+            kd[k] = tissue.spring_kd[e]
+            l0[k] = tissue.spring_rest_length[e]
         block_sync()
 
+        dt = press.dt
         rest0 = wp.vec3d(rest[0])
-        direction = press_direction[b]
-        peak = peak_force[b]
-        peak_f = peak_reaction[b]
+        direction = press.press_direction[b]
+        peak = press.peak_force[b]
+        peak_f = press.peak_reaction[b]
         for s in range(step_begin, step_begin + step_count):
             pressed = int(0)
             target = wp.vec3(0.0)
-            if s < press_steps:
+            if s < press.press_steps:
                 pressed = 1
                 # the probe's target, in float64 as the host computes it, then float32
-                frac = wp.min(wp.float64(s + 1) / wp.float64(ramp_steps), wp.float64(1.0))
-                target = wp.vec3(rest0 + direction * depth * frac)
+                frac = wp.min(wp.float64(s + 1) / wp.float64(press.ramp_steps), wp.float64(1.0))
+                target = wp.vec3(rest0 + direction * press.depth * frac)
             if (s - step_begin) % 2 == 0:
                 f = substep_explicit(lane, threads, nf, off, nbr, ke, kd, l0, rest, mass, ka, kda, anchor_scale, pressed, target, dt, q_a, qd_a, q_b, qd_b)
             else:
@@ -193,8 +177,8 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
                 if m > peak:
                     peak = m
                     peak_f = f
-                if s == press_steps - 1:
-                    hold_reaction[b] = f
+                if s == press.press_steps - 1:
+                    press.hold_reaction[b] = f
             block_sync()
         # write the state back (the last step wrote b when step_count is odd)
         odd = step_count % 2
@@ -206,8 +190,8 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
                 q_state[b, i] = q_a[i]
                 qd_state[b, i] = qd_a[i]
         if lane == 0:
-            peak_force[b] = peak
-            peak_reaction[b] = peak_f
+            press.peak_force[b] = peak
+            press.peak_reaction[b] = peak_f
 
     return press_batch_explicit
 
@@ -234,12 +218,7 @@ def press_batch(batch, step_begin, step_count):
         kernel,
         dim=p.batch_size * p.threads,
         block_dim=p.threads,
-        inputs=[
-            p.threads, r.region_vertex, r.region_count, r.free_count, r.local_offsets, r.local_neighbour, r.local_edge,
-            m.particle_q_rest, m.particle_mass, m.anchor_ke, m.anchor_kd, 1.0, m.spring_ke, m.spring_kd, m.spring_rest_length,
-            p.press_direction, p.depth, p.ramp_steps, p.press_steps, p.dt, int(step_begin), int(step_count),
-            p.scratch_vec3, p.scratch_float, p.scratch_int,
-        ],
-        outputs=[p.q_state, p.qd_state, p.peak_force, p.peak_reaction, p.hold_reaction],
+        inputs=[p.threads, r.arrays, m.arrays, 1.0, p.press_arrays, int(step_begin), int(step_count), p.scratch_vec3, p.scratch_float, p.scratch_int],
+        outputs=[p.q_state, p.qd_state],
         device=m.device,
     )

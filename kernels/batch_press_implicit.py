@@ -11,6 +11,7 @@ vertex's springs in mesh CSR order), so a palpation of the batch gives the same 
 
 import warp as wp
 
+from .arrays import BatchCGArrays, BatchPress, BatchRegionArrays, TissueArrays
 from .block_cg import solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
 
@@ -20,79 +21,56 @@ wp.set_module_options({"enable_backward": False})
 
 @wp.kernel
 def step_batch_implicit(
-    region_vertex: wp.array2d(dtype=wp.int32),
-    free_count: wp.array(dtype=wp.int32),
-    local_offsets: wp.array2d(dtype=wp.int32),
-    local_neighbour: wp.array2d(dtype=wp.int32),
-    local_edge: wp.array2d(dtype=wp.int32),
-    q_rest: wp.array(dtype=wp.vec3),
-    particle_mass: wp.array(dtype=wp.float32),
-    anchor_ke: wp.array(dtype=wp.float32),
-    anchor_kd: wp.array(dtype=wp.float32),
+    regions: BatchRegionArrays,
+    tissue: TissueArrays,
     anchor_scale: float,
-    spring_ke: wp.array(dtype=wp.float32),
-    spring_kd: wp.array(dtype=wp.float32),
-    spring_rest_length: wp.array(dtype=wp.float32),
-    press_direction: wp.array(dtype=wp.vec3d),
-    depth: wp.float64,
-    ramp_steps: int,
-    press_steps: int,
+    press: BatchPress,
     step: int,
-    dt: float,
     max_iterations: int,
     tolerance: float,
     q_in: wp.array2d(dtype=wp.vec3),
     qd_in: wp.array2d(dtype=wp.vec3),
-    dv: wp.array2d(dtype=wp.vec3),
-    cg_r: wp.array2d(dtype=wp.vec3),
-    cg_p: wp.array2d(dtype=wp.vec3),
-    cg_Ap: wp.array2d(dtype=wp.vec3),
-    block_diag: wp.array2d(dtype=wp.mat33),
-    block_diag_inv: wp.array2d(dtype=wp.mat33),
-    csr_block: wp.array2d(dtype=wp.mat33),
-    csr_local: wp.array2d(dtype=wp.int32),
+    cg: BatchCGArrays,
     q_out: wp.array2d(dtype=wp.vec3),
     qd_out: wp.array2d(dtype=wp.vec3),
-    peak_force: wp.array(dtype=wp.float64),
-    peak_reaction: wp.array(dtype=wp.vec3),
-    hold_reaction: wp.array(dtype=wp.vec3),
 ):
     b = wp.tid()
-    free_n = free_count[b]
+    dt = press.dt
+    free_n = regions.free_count[b]
     driven = int(-1)
     dv_driven = wp.vec3(0.0)
     target = wp.vec3(0.0)
-    if step < press_steps:
+    if step < press.press_steps:
         # the probe's target, in float64 as the host computes it, then float32; local vertex 0 is driven
-        frac = wp.min(wp.float64(step + 1) / wp.float64(ramp_steps), wp.float64(1.0))
-        target = wp.vec3(wp.vec3d(q_rest[region_vertex[b, 0]]) + press_direction[b] * depth * frac)
+        frac = wp.min(wp.float64(step + 1) / wp.float64(press.ramp_steps), wp.float64(1.0))
+        target = wp.vec3(wp.vec3d(tissue.q_rest[regions.region_vertex[b, 0]]) + press.press_direction[b] * press.depth * frac)
         driven = 0
         dv_driven = (target - q_in[b, 0]) / dt - qd_in[b, 0]
 
     # 1) forces, diagonal blocks and right-hand side b = dt (f0 - dt K v0) - A_ic dv_c
     b_norm2 = float(0.0)
     for i in range(free_n):
-        v = region_vertex[b, i]
+        v = regions.region_vertex[b, i]
         x = q_in[b, i]
         u = qd_in[b, i]
         # anchor spring and damper, eq. (3); springs and dampers along the edges below, eqs. (4)-(6)
-        f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
-        ka = anchor_scale * anchor_ke[v]
-        kda = anchor_scale * anchor_kd[v]
-        D = (particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
+        f = anchor_force(x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale)
+        ka = anchor_scale * tissue.anchor_ke[v]
+        kda = anchor_scale * tissue.anchor_kd[v]
+        D = (tissue.particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
         Kv = ka * u
         correction = wp.vec3(0.0)
-        for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
-            j = local_neighbour[b, k]
-            e = local_edge[b, k]
-            f = add_spring_force(f, x, u, q_in[b, j], qd_in[b, j], spring_ke[e], spring_kd[e], spring_rest_length[e])
-            B, Kb = spring_block(spring_ke[e], spring_kd[e], spring_rest_length[e], q_in[b, j] - x, dt)
-            csr_block[b, k] = B
+        for k in range(regions.local_offsets[b, i], regions.local_offsets[b, i + 1]):
+            j = regions.local_neighbour[b, k]
+            e = regions.local_edge[b, k]
+            f = add_spring_force(f, x, u, q_in[b, j], qd_in[b, j], tissue.spring_ke[e], tissue.spring_kd[e], tissue.spring_rest_length[e])
+            B, Kb = spring_block(tissue.spring_ke[e], tissue.spring_kd[e], tissue.spring_rest_length[e], q_in[b, j] - x, dt)
+            cg.csr_block[b, k] = B
             # the neighbour's local index where it is an unknown of the solve (free, not driven), else -1
             lj = j
             if lj >= free_n or j == driven or i == driven:
                 lj = -1
-            csr_local[b, k] = lj
+            cg.csr_local[b, k] = lj
             D += B
             Kv += Kb * (u - qd_in[b, j])
             if j == driven:
@@ -103,23 +81,23 @@ def step_batch_implicit(
             fy = wp.float64(f[1])
             fz = wp.float64(f[2])
             mag = wp.sqrt(fx * fx + fy * fy + fz * fz)
-            if mag > peak_force[b]:
-                peak_force[b] = mag
-                peak_reaction[b] = f
-            if step == press_steps - 1:
-                hold_reaction[b] = f
-        block_diag[b, i] = D
-        block_diag_inv[b, i] = wp.inverse(D)
+            if mag > press.peak_force[b]:
+                press.peak_force[b] = mag
+                press.peak_reaction[b] = f
+            if step == press.press_steps - 1:
+                press.hold_reaction[b] = f
+        cg.diag[b, i] = D
+        cg.diag_inv[b, i] = wp.inverse(D)
         rhs = dt * (f - dt * Kv) + correction
         if i == driven:
             rhs = wp.vec3(0.0)
-        cg_r[b, i] = rhs
+        cg.r[b, i] = rhs
         b_norm2 += wp.dot(rhs, rhs)
 
     # 2) and 3): r = b - A dv (warm start), then conjugate gradients (kernels/block_cg.py), on this palpation's rows
     solve_block_cg(
-        free_n, driven, local_offsets[b], local_offsets[b], 0, csr_local[b], csr_block[b], block_diag[b], block_diag_inv[b],
-        b_norm2, max_iterations, tolerance, dv[b], cg_r[b], cg_p[b], cg_Ap[b],
+        free_n, driven, regions.local_offsets[b], regions.local_offsets[b], 0, cg.csr_local[b], cg.csr_block[b], cg.diag[b], cg.diag_inv[b],
+        b_norm2, max_iterations, tolerance, cg.dv[b], cg.r[b], cg.p[b], cg.Ap[b],
     )
 
     # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
@@ -129,24 +107,9 @@ def step_batch_implicit(
             q_out[b, i] = target
             qd_out[b, i] = (target - x) / dt
         else:
-            u1 = qd_in[b, i] + dv[b, i]
+            u1 = qd_in[b, i] + cg.dv[b, i]
             q_out[b, i] = x + dt * u1
             qd_out[b, i] = u1
-
-
-class BatchCGScratch:
-    """Per-palpation conjugate-gradient arrays of the implicit batch, [B, capacity]."""
-
-    def __init__(self, batch: int, vertex_capacity: int, entry_capacity: int, device):
-        shape_v, shape_e = (batch, vertex_capacity), (batch, max(entry_capacity, 1))
-        self.dv = wp.zeros(shape_v, dtype=wp.vec3, device=device)
-        self.r = wp.zeros(shape_v, dtype=wp.vec3, device=device)
-        self.p = wp.zeros(shape_v, dtype=wp.vec3, device=device)
-        self.Ap = wp.zeros(shape_v, dtype=wp.vec3, device=device)
-        self.diag = wp.zeros(shape_v, dtype=wp.mat33, device=device)
-        self.diag_inv = wp.zeros(shape_v, dtype=wp.mat33, device=device)
-        self.csr_block = wp.zeros(shape_e, dtype=wp.mat33, device=device)
-        self.csr_local = wp.zeros(shape_e, dtype=wp.int32, device=device)
 
 
 def step_batch(batch, step, state_in, state_out, scratch, max_iterations, tolerance):
@@ -156,11 +119,9 @@ def step_batch(batch, step, state_in, state_out, scratch, max_iterations, tolera
         step_batch_implicit,
         dim=p.batch_size,
         inputs=[
-            r.region_vertex, r.free_count, r.local_offsets, r.local_neighbour, r.local_edge,
-            m.particle_q_rest, m.particle_mass, m.anchor_ke, m.anchor_kd, 1.0, m.spring_ke, m.spring_kd, m.spring_rest_length,
-            p.press_direction, p.depth, p.ramp_steps, p.press_steps, int(step), p.dt, int(max_iterations), float(tolerance),
-            state_in[0], state_in[1], scratch.dv, scratch.r, scratch.p, scratch.Ap, scratch.diag, scratch.diag_inv, scratch.csr_block, scratch.csr_local,
+            r.arrays, m.arrays, 1.0, p.press_arrays, int(step), int(max_iterations), float(tolerance),
+            state_in[0], state_in[1], scratch.arrays,
         ],
-        outputs=[state_out[0], state_out[1], p.peak_force, p.peak_reaction, p.hold_reaction],
+        outputs=[state_out[0], state_out[1]],
         device=m.device,
     )

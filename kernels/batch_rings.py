@@ -11,6 +11,7 @@ needed per palpation (memory stays proportional to B x region, not B x mesh).
 
 import warp as wp
 
+from .arrays import BatchPress, BatchRegionArrays, TissueArrays
 from .rings import sort_ring
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
@@ -38,28 +39,16 @@ def build_batch_regions(
     adj_edge: wp.array(dtype=wp.int32),
     seeds: wp.array(dtype=wp.int32),
     rings: int,
-    region_vertex: wp.array2d(dtype=wp.int32),
-    ring_offsets: wp.array2d(dtype=wp.int32),
-    region_count: wp.array(dtype=wp.int32),
-    free_count: wp.array(dtype=wp.int32),
-    local_offsets: wp.array2d(dtype=wp.int32),
-    local_neighbour: wp.array2d(dtype=wp.int32),
-    local_edge: wp.array2d(dtype=wp.int32),
-    local_owner: wp.array2d(dtype=wp.int32),
-    local_spring: wp.array2d(dtype=wp.int32),
-    spring_entry: wp.array2d(dtype=wp.int32),
-    spring_count: wp.array(dtype=wp.int32),
-    entry_count: wp.array(dtype=wp.int32),
-    status: wp.array(dtype=wp.int32),
+    regions: BatchRegionArrays,
 ):
     b = wp.tid()
-    capacity = region_vertex.shape[1]
-    entry_capacity = local_neighbour.shape[1]
+    capacity = regions.region_vertex.shape[1]
+    entry_capacity = regions.local_neighbour.shape[1]
     seed = seeds[b]
     # ring 0 is the contact vertex itself
-    region_vertex[b, 0] = seed
-    ring_offsets[b, 0] = 0
-    ring_offsets[b, 1] = 1
+    regions.region_vertex[b, 0] = seed
+    regions.ring_offsets[b, 0] = 0
+    regions.ring_offsets[b, 1] = 1
     count = int(1)
     begin = int(0)
     end = int(1)
@@ -68,18 +57,18 @@ def build_batch_regions(
     for r in range(1, rings + 1):
         # ring r: the neighbours of ring r - 1 not yet inside (breadth-first)
         for i in range(begin, end):
-            v = region_vertex[b, i]
+            v = regions.region_vertex[b, i]
             for k in range(adj_offsets[v], adj_offsets[v + 1]):
                 u = adj_vertex[k]
-                if find_local(region_vertex, b, count, u) < 0:
+                if find_local(regions.region_vertex, b, count, u) < 0:
                     if count < capacity:
-                        region_vertex[b, count] = u
+                        regions.region_vertex[b, count] = u
                         count += 1
                     else:
                         flags = flags | 1
         # sort the new ring by vertex id, as Region does
-        sort_ring(region_vertex[b], end, count)
-        ring_offsets[b, r + 1] = count
+        sort_ring(regions.region_vertex[b], end, count)
+        regions.ring_offsets[b, r + 1] = count
         if count > end:
             outer = r
         begin = end
@@ -87,41 +76,41 @@ def build_batch_regions(
     # the outermost non-empty ring is fixed; everything inside it is free
     nf = count
     if outer > 0:
-        nf = ring_offsets[b, outer]
-    region_count[b] = count
-    free_count[b] = nf
+        nf = regions.ring_offsets[b, outer]
+    regions.region_count[b] = count
+    regions.free_count[b] = nf
     # local topology of the free vertices: neighbours in mesh CSR order, as local indices
     slot = int(0)
-    local_offsets[b, 0] = 0
+    regions.local_offsets[b, 0] = 0
     for i in range(nf):
-        v = region_vertex[b, i]
+        v = regions.region_vertex[b, i]
         for k in range(adj_offsets[v], adj_offsets[v + 1]):
             if slot < entry_capacity:
-                local_neighbour[b, slot] = find_local(region_vertex, b, count, adj_vertex[k])
-                local_edge[b, slot] = adj_edge[k]
-                local_owner[b, slot] = i
+                regions.local_neighbour[b, slot] = find_local(regions.region_vertex, b, count, adj_vertex[k])
+                regions.local_edge[b, slot] = adj_edge[k]
+                regions.local_owner[b, slot] = i
             else:
                 flags = flags | 2
             slot += 1
-        local_offsets[b, i + 1] = slot
-    entry_count[b] = slot
+        regions.local_offsets[b, i + 1] = slot
+    regions.entry_count[b] = slot
     # each spring once: an entry i -> j is a spring's own when j is fixed or j > i; the entry
     # j -> i of two free ends reads it negated (its force is exactly the negation, bit for bit)
     springs = int(0)
     if flags == 0:
         for i in range(nf):
-            for k in range(local_offsets[b, i], local_offsets[b, i + 1]):
-                j = local_neighbour[b, k]
+            for k in range(regions.local_offsets[b, i], regions.local_offsets[b, i + 1]):
+                j = regions.local_neighbour[b, k]
                 if j >= nf or j > i:
-                    spring_entry[b, springs] = k
-                    local_spring[b, k] = springs + 1
+                    regions.spring_entry[b, springs] = k
+                    regions.local_spring[b, k] = springs + 1
                     springs += 1
                 else:
-                    for kk in range(local_offsets[b, j], local_offsets[b, j + 1]):
-                        if local_neighbour[b, kk] == i:
-                            local_spring[b, k] = -local_spring[b, kk]
-    spring_count[b] = springs
-    status[b] = flags
+                    for kk in range(regions.local_offsets[b, j], regions.local_offsets[b, j + 1]):
+                        if regions.local_neighbour[b, kk] == i:
+                            regions.local_spring[b, k] = -regions.local_spring[b, kk]
+    regions.spring_count[b] = springs
+    regions.status[b] = flags
 
 
 def build_regions(dmesh, seeds, rings, arrays):
@@ -129,44 +118,35 @@ def build_regions(dmesh, seeds, rings, arrays):
     wp.launch(
         build_batch_regions,
         dim=len(seeds),
-        inputs=[dmesh.adj_offsets, dmesh.adj_vertex, dmesh.adj_edge, seeds, rings],
-        outputs=[
-            arrays.region_vertex, arrays.ring_offsets, arrays.region_count, arrays.free_count,
-            arrays.local_offsets, arrays.local_neighbour, arrays.local_edge, arrays.local_owner,
-            arrays.local_spring, arrays.spring_entry, arrays.spring_count, arrays.entry_count, arrays.status,
-        ],
+        inputs=[dmesh.adj_offsets, dmesh.adj_vertex, dmesh.adj_edge, seeds, rings, arrays.arrays],
         device=dmesh.device,
     )
 
 
 @wp.kernel
 def rest_batch_state(
-    region_vertex: wp.array2d(dtype=wp.int32),
-    region_count: wp.array(dtype=wp.int32),
-    q_rest: wp.array(dtype=wp.vec3),
+    regions: BatchRegionArrays,
+    tissue: TissueArrays,
+    press: BatchPress,
     q_state: wp.array2d(dtype=wp.vec3),
     qd_state: wp.array2d(dtype=wp.vec3),
-    peak_force: wp.array(dtype=wp.float64),
-    peak_reaction: wp.array(dtype=wp.vec3),
-    hold_reaction: wp.array(dtype=wp.vec3),
 ):
     # every region vertex at rest, the probe's records cleared
     b = wp.tid()
-    for i in range(region_count[b]):
-        q_state[b, i] = q_rest[region_vertex[b, i]]
+    for i in range(regions.region_count[b]):
+        q_state[b, i] = tissue.q_rest[regions.region_vertex[b, i]]
         qd_state[b, i] = wp.vec3(0.0)
-    peak_force[b] = wp.float64(0.0)
-    peak_reaction[b] = wp.vec3(0.0)
-    hold_reaction[b] = wp.vec3(0.0)
+    press.peak_force[b] = wp.float64(0.0)
+    press.peak_reaction[b] = wp.vec3(0.0)
+    press.hold_reaction[b] = wp.vec3(0.0)
 
 
 def rest_states(batch):
     """Put every palpation's region at rest and clear its force records."""
-    r = batch.regions
     wp.launch(
         rest_batch_state,
         dim=batch.batch_size,
-        inputs=[r.region_vertex, r.region_count, batch.model.particle_q_rest],
-        outputs=[batch.q_state, batch.qd_state, batch.peak_force, batch.peak_reaction, batch.hold_reaction],
+        inputs=[batch.regions.arrays, batch.model.arrays, batch.press_arrays],
+        outputs=[batch.q_state, batch.qd_state],
         device=batch.device,
     )

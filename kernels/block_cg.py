@@ -14,6 +14,8 @@ vertex (local index `driven`, -1 for none) has dv = 0.
 
 import warp as wp
 
+from .arrays import CG_FIELDS, BatchCGArrays, CGArrays, struct_from
+
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
@@ -99,3 +101,15 @@ def solve_block_cg(
             cg_p[i] = cg_Ap[i] + beta * cg_p[i]
         iterations += 1
     return iterations, r_norm2
+
+
+class CGScratch:
+    """The solve's arrays (CG_FIELDS), zeroed: `rows` None for one palpation's, else a row per palpation."""
+
+    def __init__(self, vertex_capacity: int, entry_capacity: int, device, rows: int | None = None):
+        sizes = {"vertex": vertex_capacity, "entry": max(entry_capacity, 1), "stats": 2}
+        for name, dtype, size in CG_FIELDS:
+            shape = sizes[size] if rows is None else (rows, sizes[size])
+            setattr(self, name, wp.zeros(shape, dtype=dtype, device=device))
+        self.arrays = struct_from(CGArrays if rows is None else BatchCGArrays, self)
+        """The arrays above as one kernel argument (kernels/arrays.py)."""

@@ -8,6 +8,8 @@ vertex's CSR neighbours (a gather: no atomics, the same bits on every run).
 
 import warp as wp
 
+from .arrays import TissueArrays
+
 EPS_LENGTH = 1.0e-9
 """Shorter springs than this [m] have no direction: their force is zero (no 1/0, no NaN)."""
 
@@ -75,23 +77,15 @@ def gather_vertex_force(
     v: int,
     x: wp.vec3,
     u: wp.vec3,
-    adj_offsets: wp.array(dtype=wp.int32),
-    adj_vertex: wp.array(dtype=wp.int32),
-    adj_edge: wp.array(dtype=wp.int32),
-    q_rest: wp.array(dtype=wp.vec3),
-    anchor_ke: wp.array(dtype=wp.float32),
-    anchor_kd: wp.array(dtype=wp.float32),
+    tissue: TissueArrays,
     anchor_scale: float,
-    spring_ke: wp.array(dtype=wp.float32),
-    spring_kd: wp.array(dtype=wp.float32),
-    spring_rest_length: wp.array(dtype=wp.float32),
     q: wp.array(dtype=wp.vec3),
     qd: wp.array(dtype=wp.vec3),
 ):
     # the internal force on vertex v: its anchor, then its springs in mesh CSR order
-    f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
-    for k in range(adj_offsets[v], adj_offsets[v + 1]):
-        e = adj_edge[k]
-        j = adj_vertex[k]
-        f = add_spring_force(f, x, u, q[j], qd[j], spring_ke[e], spring_kd[e], spring_rest_length[e])
+    f = anchor_force(x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale)
+    for k in range(tissue.adj_offsets[v], tissue.adj_offsets[v + 1]):
+        e = tissue.adj_edge[k]
+        j = tissue.adj_vertex[k]
+        f = add_spring_force(f, x, u, q[j], qd[j], tissue.spring_ke[e], tissue.spring_kd[e], tissue.spring_rest_length[e])
     return f

@@ -13,6 +13,7 @@ import warp as wp
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
+from .arrays import CGArrays, ProbeArrays, TissueArrays
 from .block_cg import solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
 
@@ -22,43 +23,25 @@ def integrate_region_implicit(
     free_vertex: wp.array(dtype=wp.int32),
     free_count: int,
     vertex_local: wp.array(dtype=wp.int32),
-    adj_offsets: wp.array(dtype=wp.int32),
-    adj_vertex: wp.array(dtype=wp.int32),
-    adj_spring: wp.array(dtype=wp.vec3),
-    q_rest: wp.array(dtype=wp.vec3),
-    particle_mass: wp.array(dtype=wp.float32),
-    anchor_ke: wp.array(dtype=wp.float32),
-    anchor_kd: wp.array(dtype=wp.float32),
+    tissue: TissueArrays,
     anchor_scale: float,
-    probe_vertex: wp.array(dtype=wp.int32),
-    probe_mode: wp.array(dtype=wp.int32),
-    probe_target: wp.array(dtype=wp.vec3),
-    probe_force: wp.array(dtype=wp.vec3),
+    probe: ProbeArrays,
     dt: float,
     max_iterations: int,
     tolerance: float,
     q_in: wp.array(dtype=wp.vec3),
     qd_in: wp.array(dtype=wp.vec3),
-    dv: wp.array(dtype=wp.vec3),
-    cg_r: wp.array(dtype=wp.vec3),
-    cg_p: wp.array(dtype=wp.vec3),
-    cg_Ap: wp.array(dtype=wp.vec3),
-    block_diag: wp.array(dtype=wp.mat33),
-    block_diag_inv: wp.array(dtype=wp.mat33),
-    csr_block: wp.array(dtype=wp.mat33),
-    csr_local: wp.array(dtype=wp.int32),
+    cg: CGArrays,
     q_out: wp.array(dtype=wp.vec3),
     qd_out: wp.array(dtype=wp.vec3),
-    probe_reaction: wp.array(dtype=wp.vec3),
-    cg_stats: wp.array(dtype=wp.float32),
 ):
-    pv = probe_vertex[0]
-    mode = probe_mode[0]
+    pv = probe.probe_vertex[0]
+    mode = probe.probe_mode[0]
     driven = int(-1)
     dv_driven = wp.vec3(0.0)
     if mode == 1 and pv >= 0:
         driven = pv
-        dv_driven = (probe_target[0] - q_in[pv]) / dt - qd_in[pv]
+        dv_driven = (probe.probe_target[0] - q_in[pv]) / dt - qd_in[pv]
 
     # 1) forces, diagonal blocks and right-hand side b = dt (f0 - dt K v0) - A_ic dv_c
     b_norm2 = float(0.0)
@@ -67,37 +50,37 @@ def integrate_region_implicit(
         x = q_in[v]
         u = qd_in[v]
         # anchor spring and damper, eq. (3); springs and dampers along the edges below, eqs. (4)-(6)
-        f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
-        ka = anchor_scale * anchor_ke[v]
-        kda = anchor_scale * anchor_kd[v]
-        D = (particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
+        f = anchor_force(x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale)
+        ka = anchor_scale * tissue.anchor_ke[v]
+        kda = anchor_scale * tissue.anchor_kd[v]
+        D = (tissue.particle_mass[v] + dt * kda + dt * dt * ka) * wp.identity(n=3, dtype=float)
         Kv = ka * u
         correction = wp.vec3(0.0)
-        for k in range(adj_offsets[v], adj_offsets[v + 1]):
-            j = adj_vertex[k]
-            spring = adj_spring[k]  # (k_ij, d_ij, rest length)
+        for k in range(tissue.adj_offsets[v], tissue.adj_offsets[v + 1]):
+            j = tissue.adj_vertex[k]
+            spring = tissue.adj_spring[k]  # (k_ij, d_ij, rest length)
             f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
             B, Kb = spring_block(spring[0], spring[1], spring[2], q_in[j] - x, dt)
-            csr_block[k] = B
+            cg.csr_block[k] = B
             # the neighbour's local index where it is an unknown of the solve (free, not driven), else -1
             lj = vertex_local[j]
             if lj >= free_count or j == driven or v == driven:
                 lj = -1
-            csr_local[k] = lj
+            cg.csr_local[k] = lj
             D += B
             Kv += Kb * (u - qd_in[j])
             if j == driven:
                 correction += B * dv_driven  # -A_ic dv_c, with A_ic = -B
         if v == pv and mode != 0:
-            probe_reaction[0] = f  # the feedback force: internal forces on the probe's vertex
+            probe.probe_reaction[0] = f  # the feedback force: internal forces on the probe's vertex
         if v == pv and mode == 2:
-            f += probe_force[0]
-        block_diag[i] = D
-        block_diag_inv[i] = wp.inverse(D)
+            f += probe.probe_force[0]
+        cg.diag[i] = D
+        cg.diag_inv[i] = wp.inverse(D)
         b = dt * (f - dt * Kv) + correction
         if v == driven:
             b = wp.vec3(0.0)
-        cg_r[i] = b
+        cg.r[i] = b
         b_norm2 += wp.dot(b, b)
 
     # 2) and 3): r = b - A dv (warm start), then conjugate gradients (kernels/block_cg.py)
@@ -105,8 +88,8 @@ def integrate_region_implicit(
     if driven >= 0:
         driven_local = vertex_local[driven]
     iterations, r_norm2 = solve_block_cg(
-        free_count, driven_local, adj_offsets, free_vertex, 1, csr_local, csr_block, block_diag, block_diag_inv,
-        b_norm2, max_iterations, tolerance, dv, cg_r, cg_p, cg_Ap,
+        free_count, driven_local, tissue.adj_offsets, free_vertex, 1, cg.csr_local, cg.csr_block, cg.diag, cg.diag_inv,
+        b_norm2, max_iterations, tolerance, cg.dv, cg.r, cg.p, cg.Ap,
     )
 
     # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
@@ -114,31 +97,27 @@ def integrate_region_implicit(
         v = free_vertex[i]
         x = q_in[v]
         if v == driven:
-            target = probe_target[0]
+            target = probe.probe_target[0]
             q_out[v] = target
             qd_out[v] = (target - x) / dt
         else:
-            u1 = qd_in[v] + dv[i]
+            u1 = qd_in[v] + cg.dv[i]
             q_out[v] = x + dt * u1
             qd_out[v] = u1
-    cg_stats[0] = float(iterations)
-    cg_stats[1] = wp.sqrt(r_norm2 / wp.max(b_norm2, 1.0e-30))
+    cg.stats[0] = float(iterations)
+    cg.stats[1] = wp.sqrt(r_norm2 / wp.max(b_norm2, 1.0e-30))
 
 
 def integrate_implicit(model, region_arrays, anchor_scale, state_in, state_out, control, dt, scratch, max_iterations, tolerance):
     """Advance the free vertices by one backward-Euler step of `dt` [s] (one launch)."""
     free_vertex, free_count, vertex_local = region_arrays
-    dm = model.dmesh
     wp.launch(
         integrate_region_implicit,
         dim=1,
         inputs=[
-            free_vertex, free_count, vertex_local, dm.adj_offsets, dm.adj_vertex, model.adj_spring, model.particle_q_rest,
-            model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale, control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force,
-            dt, max_iterations, tolerance, state_in.particle_q, state_in.particle_qd,
-            scratch.dv, scratch.r, scratch.p, scratch.Ap, scratch.diag, scratch.diag_inv, scratch.csr_block,
-            scratch.csr_local,
+            free_vertex, free_count, vertex_local, model.arrays, anchor_scale, control.arrays, dt, max_iterations, tolerance,
+            state_in.particle_q, state_in.particle_qd, scratch.arrays,
         ],
-        outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction, scratch.stats],
+        outputs=[state_out.particle_q, state_out.particle_qd],
         device=model.device,
     )

@@ -39,3 +39,12 @@ def reset_vertices_left_behind(model, old_vertex, old_count, region, states):
         outputs=[a.particle_q, a.particle_qd, b.particle_q, b.particle_qd],
         device=model.device,
     )
+
+
+def clear_region(model, region, states):
+    """Empty `region` (Region.clear) and put the vertices it held back at rest in both `states`."""
+    count = region.vertex_count
+    if count:
+        old = wp.clone(region.region_vertex[:count])
+        region.clear()
+        reset_vertices_left_behind(model, old, count, region, states)

@@ -7,6 +7,7 @@ vertices at most between checks), so the maxima need no atomics and the launch n
 
 import warp as wp
 
+from .arrays import TissueArrays
 from .forces import add_spring_force, anchor_force, edge_direction
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
@@ -20,13 +21,7 @@ def eval_ring_motion(
     region_boundary: wp.array(dtype=wp.int32),
     count: int,
     slots: int,
-    adj_offsets: wp.array(dtype=wp.int32),
-    adj_vertex: wp.array(dtype=wp.int32),
-    adj_edge: wp.array(dtype=wp.int32),
-    q_rest: wp.array(dtype=wp.vec3),
-    anchor_ke: wp.array(dtype=wp.float32),
-    spring_ke: wp.array(dtype=wp.float32),
-    spring_rest_length: wp.array(dtype=wp.float32),
+    tissue: TissueArrays,
     q: wp.array(dtype=wp.vec3),
     motion: wp.array(dtype=wp.float32),
 ):
@@ -39,35 +34,33 @@ def eval_ring_motion(
         x = q[v]
         if region_boundary[i] == 0:
             slot = wp.min(1 + region_ring[i], slots - 1)  # rings past the array share its last entry
-            motion[slot] = wp.max(motion[slot], wp.length(x - q_rest[v]))
+            motion[slot] = wp.max(motion[slot], wp.length(x - tissue.q_rest[v]))
         else:
             # one Jacobi step of the static equilibrium K u = f at v: anchor and springs, eqs. (3)-(5),
             # linearized at the current state, with v's neighbours held where they are
             # (a static equilibrium: velocities zero, so the dampers add nothing)
-            ka = anchor_ke[v]
+            ka = tissue.anchor_ke[v]
             zero = wp.vec3(0.0)
-            f = anchor_force(x, zero, q_rest[v], ka, 0.0, 1.0)
+            f = anchor_force(x, zero, tissue.q_rest[v], ka, 0.0, 1.0)
             D = ka * wp.identity(n=3, dtype=float)
-            for k in range(adj_offsets[v], adj_offsets[v + 1]):
-                j = adj_vertex[k]
-                e = adj_edge[k]
-                f = add_spring_force(f, x, zero, q[j], zero, spring_ke[e], 0.0, spring_rest_length[e])
+            for k in range(tissue.adj_offsets[v], tissue.adj_offsets[v + 1]):
+                j = tissue.adj_vertex[k]
+                e = tissue.adj_edge[k]
+                f = add_spring_force(f, x, zero, q[j], zero, tissue.spring_ke[e], 0.0, tissue.spring_rest_length[e])
                 d = edge_direction(q[j] - x)
-                D += spring_ke[e] * wp.outer(d, d)
+                D += tissue.spring_ke[e] * wp.outer(d, d)
             if wp.determinant(D) > 0.0:
                 motion[0] = wp.max(motion[0], wp.length(wp.inverse(D) * f))
 
 
 def eval_region_motion(model, region, state, motion):
     """Fill `motion` (float32, >= rings + 2 entries) for `region` at `state`: see eval_ring_motion."""
-    dm = model.dmesh
     wp.launch(
         eval_ring_motion,
         dim=1,
         inputs=[
             region.region_vertex, region.region_ring, region.region_boundary, region.vertex_count, motion.shape[0],
-            dm.adj_offsets, dm.adj_vertex, dm.adj_edge, model.particle_q_rest, model.anchor_ke, model.spring_ke,
-            model.spring_rest_length, state.particle_q,
+            model.arrays, state.particle_q,
         ],
         outputs=[motion],
         device=model.device,

@@ -7,6 +7,7 @@ signed tet volumes written out here.
 
 import numpy as np
 import pytest
+from helpers import spring_stiffness_matrix
 from test_simulation_press import DEPTH, internal_forces, scene_and_mesh, static_reaction
 
 from almsdm_warp.mesh.tissue_mesh import TissueMesh
@@ -107,10 +108,8 @@ def test_deep_press_inverts_tets_without_nan(device, integrator, dt):
 def static_reaction_per_edge(mesh, ke, ka, vertex, target, free):
     """float64 Newton solve of the static equilibrium with a stiffness per edge `ke` and per vertex
     `ka`: the force on `vertex` held at `target`, the other `free` vertices in equilibrium."""
-    import scipy.sparse as sp
     from scipy.sparse.linalg import spsolve
 
-    n = mesh.vertex_count
     e = mesh.edges.astype(np.int64)
     L0 = mesh.edge_rest_length
 
@@ -125,25 +124,12 @@ def static_reaction_per_edge(mesh, ke, ka, vertex, target, free):
 
     unknown = np.setdiff1d(np.asarray(free, dtype=np.int64), [vertex])
     dof = (3 * unknown[:, None] + np.arange(3)).ravel()
-    eye = np.eye(3)
 
     def residual(x):
         return forces(x).ravel()[dof]
 
     def stiffness(x):
-        r = x[e[:, 1]] - x[e[:, 0]]
-        length = np.linalg.norm(r, axis=1)
-        d = r / length[:, None]
-        ddt = d[:, :, None] * d[:, None, :]
-        blocks = ke[:, None, None] * (ddt + (1.0 - L0 / length)[:, None, None] * (eye - ddt))
-        rows, cols, vals = [np.arange(3 * n)], [np.arange(3 * n)], [np.repeat(ka, 3)]
-        for a, b, sign in ((0, 0, 1.0), (1, 1, 1.0), (0, 1, -1.0), (1, 0, -1.0)):
-            for i in range(3):
-                for j in range(3):
-                    rows.append(3 * e[:, a] + i)
-                    cols.append(3 * e[:, b] + j)
-                    vals.append(sign * blocks[:, i, j])
-        K = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
+        K = spring_stiffness_matrix(x, e, ke, L0, ka)
         return K[dof][:, dof].tocsc()
 
     # load stepping (the probe moved in 20 increments) and Newton with backtracking at each

@@ -1,6 +1,5 @@
 """The project's own meshes (scripts/make_scenes.py) and scene files (almsdm_warp.scene.loader)."""
 
-import importlib.util
 import math
 import shutil
 from pathlib import Path
@@ -9,6 +8,7 @@ import meshio
 import numpy as np
 import pytest
 import trimesh
+from helpers import load_script
 
 from almsdm_warp.errors import InputError
 from almsdm_warp.scene.loader import (
@@ -24,15 +24,11 @@ from almsdm_warp.scene.loader import (
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"
-SCRIPT = ROOT / "scripts" / "make_scenes.py"
 
 
 @pytest.fixture(scope="module")
 def make_scenes():
-    spec = importlib.util.spec_from_file_location("make_scenes", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("make_scenes")
 
 
 @pytest.fixture(scope="module")

@@ -3,21 +3,14 @@ Memory stays flat, the tissue comes back to its rest shape after every cycle, an
 rest positions and rest lengths keep their bits. The long run (1e6 steps, 1e4 relocations)
 is `python scripts/soak.py`; its results are in docs/reliability.md."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
-
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "soak.py"
+from helpers import load_script
 
 
 @pytest.fixture(scope="module")
 def soak_module():
-    spec = importlib.util.spec_from_file_location("soak", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("soak")
 
 
 @pytest.mark.parametrize("integrator, steps, relocations", [("explicit", 60_000, 600), ("implicit", 6_000, 150)])

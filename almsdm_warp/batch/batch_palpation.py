@@ -17,7 +17,9 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import check_vertex
+from ..kernels.arrays import BatchPress, BatchRegionArrays, struct_from
 from ..kernels import batch_press as bk
+from ..kernels.block_cg import CGScratch
 from ..kernels import batch_press_fast as bkf
 from ..kernels import batch_press_implicit as bki
 from ..kernels import batch_rings as br
@@ -87,6 +89,8 @@ class BatchRegions:
         self.entry_count = wp.zeros(B, dtype=wp.int32, device=d)
         """CSR entries of each palpation's free vertices (its local_offsets[b, free_count[b]])."""
         self.status = wp.zeros(B, dtype=wp.int32, device=d)
+        self.arrays = struct_from(BatchRegionArrays, self)
+        """The arrays above as one kernel argument (kernels/arrays.py)."""
 
 
 class BatchPalpation:
@@ -227,6 +231,8 @@ class BatchPalpation:
         normals = -self.model.vertex_normal_rest[self.vertices]
         self.press_direction = wp.array(normals, dtype=wp.vec3d, device=d)
         """Inward unit normal at each contact vertex (float64, as the host computes the target)."""
+        self.press_arrays = struct_from(BatchPress, self, depth=0.0, ramp_steps=0, press_steps=0)
+        """The press's schedule, directions and force records as one kernel argument (set again by start_press)."""
 
     def _fast_plan(self, max_vertices, max_free, max_entries, max_springs):
         """(threads, springs per thread, vertex, free-vertex and spring capacities, largest degree)
@@ -266,6 +272,7 @@ class BatchPalpation:
         ramp_n, press_n, total = self.schedule(depth, ramp, hold, settle)
         self.depth = float(depth)
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
+        self.press_arrays = struct_from(BatchPress, self)
         br.rest_states(self)
         if self.integrator == "implicit":
             self._implicit_press(total, on_launch)
@@ -281,7 +288,7 @@ class BatchPalpation:
         # two states (the fixed ring at rest in both) and CG scratch per palpation; one launch a step
         d, r = self.device, self.regions
         other = (wp.clone(self.q_state), wp.clone(self.qd_state))
-        scratch = bki.BatchCGScratch(self.batch_size, r.vertex_capacity, r.entry_capacity, d)
+        scratch = CGScratch(r.vertex_capacity, r.entry_capacity, d, rows=self.batch_size)
         states = [(self.q_state, self.qd_state), other]
         for s in range(total):
             bki.step_batch(self, s, states[s % 2], states[1 - s % 2], scratch, self.cg_max_iterations, self.cg_tolerance)

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import warp as wp
 
-from ..kernels.region_state import reset_vertices_left_behind
+from ..kernels.region_state import clear_region
 from ..kernels.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF
 from .palpation import Palpation, replayer
@@ -148,11 +148,7 @@ class AdaptivePalpation(Palpation):
     def retire_region(self) -> None:
         """Put the region's vertices at rest in both states and integrate nothing until the next touch."""
         region = self.region
-        count = region.vertex_count
-        if count:
-            old = wp.clone(region.region_vertex[:count])
-            region.clear()
-            reset_vertices_left_behind(self.model, old, count, region, self.states)
+        clear_region(self.model, region, self.states)
         self.solver.set_region(region)
         self._graphs = None
         self._motion_graphs = None

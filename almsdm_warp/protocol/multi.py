@@ -19,12 +19,13 @@ import warp as wp
 
 from .adaptive import FORCE_TOL, MARGIN, fixed_ring_estimate
 from ..mesh.device_mesh import check_vertex
+from ..kernels.arrays import ProbeArrays, struct_from
 from ..kernels.multi_probe import drive_probe_vertices
 from ..kernels.rings import seed_region_rings
-from ..kernels.region_state import reset_vertices_left_behind
+from ..kernels.region_state import clear_region
 from ..kernels.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from .palpation import PressResult, replayer
+from .palpation import PressResult, capture_step_pair
 from ..region.region import Region, check_rings
 from ..solvers import make_solver, solver_class
 from .schedule import PressSchedule, check_press
@@ -58,6 +59,7 @@ class _Probes:
         self.probe_mode = wp.zeros(n, dtype=wp.int32, device=device)
         self.probe_target = wp.zeros(n, dtype=wp.vec3, device=device)
         self.probe_reaction = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.arrays = struct_from(ProbeArrays, self, probe_force=wp.zeros(n, dtype=wp.vec3, device=device))
         self.cpu = wp.get_device(device).is_cpu
         if self.cpu:
             self.mode, self.target, self.reaction = (a.numpy() for a in (self.probe_mode, self.probe_target, self.probe_reaction))
@@ -209,11 +211,7 @@ class MultiPalpation:
     # -- patches -------------------------------------------------------------------------------
     def _retire(self, patch):
         region = patch.region
-        count = region.vertex_count
-        if count:
-            old = wp.clone(region.region_vertex[:count])
-            region.clear()
-            reset_vertices_left_behind(self.model, old, count, region, self.states)
+        clear_region(self.model, region, self.states)
         self.patches.remove(patch)
         self._dirty = True
 
@@ -273,12 +271,7 @@ class MultiPalpation:
             self._launch_step(self.states[self._cur], self.states[1 - self._cur])  # loads the modules uncaptured
             self._cur ^= 1
             if self.capture:
-                graphs = []
-                for i in (0, 1):
-                    with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
-                        self._launch_step(self.states[i], self.states[1 - i])
-                    graphs.append(replayer(cap.graph, self.device))
-                self._graphs = graphs
+                self._graphs = capture_step_pair(self._launch_step, self.states, self.device)
             if not self.device.is_cpu:
                 wp.synchronize_device(self.device)
         self._steps += 1

@@ -50,6 +50,16 @@ def replayer(graph, device):
     return replay
 
 
+def capture_step_pair(launch_step, states, device):
+    """Two replays: launch_step(states[0], states[1]) and back, each captured once (see replayer)."""
+    replays = []
+    for i in (0, 1):
+        with wp.ScopedCapture(device=device, force_module_load=False) as cap:
+            launch_step(states[i], states[1 - i])
+        replays.append(replayer(cap.graph, device))
+    return replays
+
+
 class SimulationDiverged(RuntimeError):
     """The explicit integrator blew up: its step exceeds the critical step of the region."""
 
@@ -201,13 +211,7 @@ class Palpation:
             wp.copy(self._pinned["reaction"], self.control.probe_reaction)
 
     def _capture(self):
-        # two graphs: states[0] -> states[1] and back; replayed by a bound call each, no checks
-        replays = []
-        for i in (0, 1):
-            with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
-                self._launch_step(self.states[i], self.states[1 - i])
-            replays.append(replayer(cap.graph, self.device))
-        self._graphs = replays
+        self._graphs = capture_step_pair(self._launch_step, self.states, self.device)
 
     def step(self) -> np.ndarray:
         """One step of dt; returns the feedback force [N]: a view that every step updates in place."""

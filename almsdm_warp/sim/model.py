@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from ..kernels.arrays import ProbeArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
 from ..scene.loader import TissueParams
 
@@ -79,6 +80,10 @@ class Model:
         [2 * spring_count], vec3: the step reads one vector per neighbour, not three arrays by edge id."""
         self.vertex_normal_rest = vertex_normals(self.mesh.vertices, self.mesh.triangles)
         """Outward unit normal of each surface vertex at rest (host, float64): the press direction."""
+        self.arrays = struct_from(
+            TissueArrays, self, q_rest=dm.rest_position, adj_offsets=dm.adj_offsets, adj_vertex=dm.adj_vertex, adj_edge=dm.adj_edge
+        )
+        """The arrays above as one kernel argument (kernels/arrays.py)."""
         self._ke_host = t.edge_stiffness * es
         self._kd_host = t.edge_damping * es
         self._ka_host = t.anchor_stiffness * an
@@ -174,6 +179,8 @@ class Control:
         """Force the probe applies [N] (force mode), shape [1], vec3."""
         self.probe_reaction = wp.zeros(1, dtype=wp.vec3, device=device)
         """Output: sum of the tissue's internal forces on the held vertex [N], shape [1], vec3."""
+        self.arrays = struct_from(ProbeArrays, self)
+        """The probe's arrays as one kernel argument (kernels/arrays.py)."""
 
     def set(self, vertex: int | None = None, mode: int | None = None, target=None, force=None) -> None:
         """Update the probe from the host (small copies; the hot loop writes views instead)."""

@@ -2,25 +2,9 @@
 
 from __future__ import annotations
 
-import warp as wp
-
+from ..kernels.block_cg import CGScratch
 from ..kernels.integrate_implicit import integrate_implicit
 from .base import SolverBase
-
-
-class CGScratch:
-    """The conjugate-gradient solve's vectors, block diagonal and CSR blocks, sized to the model."""
-
-    def __init__(self, n, csr, device):
-        self.dv = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.r = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.p = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.Ap = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.diag = wp.zeros(n, dtype=wp.mat33, device=device)
-        self.diag_inv = wp.zeros(n, dtype=wp.mat33, device=device)
-        self.csr_block = wp.zeros(max(csr, 1), dtype=wp.mat33, device=device)
-        self.csr_local = wp.zeros(max(csr, 1), dtype=wp.int32, device=device)
-        self.stats = wp.zeros(2, dtype=wp.float32, device=device)
 
 
 class SolverImplicit(SolverBase):

@@ -1,0 +1,123 @@
+"""The arrays the kernels share, grouped as Warp structs: each kernel takes one value per group.
+
+Each struct is built once where its data lives (the Model, a Control, the batch's regions, a
+press, a conjugate-gradient scratch) and passed as it is to every launch. A new per-vertex or
+per-spring field is one member here and one line where the struct is built.
+"""
+
+import warp as wp
+
+
+@wp.struct
+class TissueArrays:
+    """The Model's static arrays (almsdm_warp.sim.model.Model.arrays)."""
+
+    q_rest: wp.array(dtype=wp.vec3)
+    """Rest positions [m], [particle_count]."""
+    particle_mass: wp.array(dtype=wp.float32)
+    """Lumped vertex mass [kg], [particle_count]."""
+    anchor_ke: wp.array(dtype=wp.float32)
+    """Anchor stiffness k_i [N/m], [particle_count], eq. (3)."""
+    anchor_kd: wp.array(dtype=wp.float32)
+    """Anchor damping d_i [N s/m], [particle_count], eq. (3)."""
+    spring_ke: wp.array(dtype=wp.float32)
+    """Spring stiffness k_ij [N/m], [spring_count], eqs. (4)-(5)."""
+    spring_kd: wp.array(dtype=wp.float32)
+    """Spring damping d_ij [N s/m], [spring_count], eq. (6)."""
+    spring_rest_length: wp.array(dtype=wp.float32)
+    """Spring rest length [m], [spring_count]."""
+    adj_offsets: wp.array(dtype=wp.int32)
+    """Mesh CSR vertex adjacency: vertex v's entries are adj_offsets[v]..adj_offsets[v + 1]."""
+    adj_vertex: wp.array(dtype=wp.int32)
+    """Neighbour of each CSR entry, [2 * spring_count]."""
+    adj_edge: wp.array(dtype=wp.int32)
+    """Spring (mesh edge id) of each CSR entry, [2 * spring_count]."""
+    adj_spring: wp.array(dtype=wp.vec3)
+    """(k_ij, d_ij, rest length) of each CSR entry's spring, [2 * spring_count]."""
+
+
+@wp.struct
+class ProbeArrays:
+    """One or several probes (a Control, or the probes of a MultiPalpation), one entry each."""
+
+    probe_vertex: wp.array(dtype=wp.int32)
+    """Mesh id of the held vertex (-1: none)."""
+    probe_mode: wp.array(dtype=wp.int32)
+    """Off / displacement / force."""
+    probe_target: wp.array(dtype=wp.vec3)
+    """Target of the held vertex [m] (displacement mode)."""
+    probe_force: wp.array(dtype=wp.vec3)
+    """Force the probe applies [N] (force mode)."""
+    probe_reaction: wp.array(dtype=wp.vec3)
+    """Output: the tissue's internal forces on the held vertex [N]."""
+
+
+CG_FIELDS = (
+    ("dv", wp.vec3, "vertex"),
+    ("r", wp.vec3, "vertex"),
+    ("p", wp.vec3, "vertex"),
+    ("Ap", wp.vec3, "vertex"),
+    ("diag", wp.mat33, "vertex"),
+    ("diag_inv", wp.mat33, "vertex"),
+    ("csr_block", wp.mat33, "entry"),
+    ("csr_local", wp.int32, "entry"),
+    ("stats", wp.float32, "stats"),
+)
+"""The conjugate-gradient solve's arrays (kernels/block_cg.py): name, element type and size
+(per unknown, per CSR entry, or the solve's (iterations, relative residual))."""
+
+
+def _cg_struct(name: str, array_type, doc: str):
+    # one member list for the one-palpation scratch (1-d) and the batch's (a row per palpation)
+    annotations = {field: array_type(dtype=dtype) for field, dtype, _ in CG_FIELDS}
+    return wp.struct(type(name, (), {"__annotations__": annotations, "__doc__": doc, "__module__": __name__}))
+
+
+CGArrays = _cg_struct("CGArrays", wp.array, "The one-palpation implicit step's conjugate-gradient scratch.")
+BatchCGArrays = _cg_struct("BatchCGArrays", wp.array2d, "The implicit batch's conjugate-gradient scratch, a row per palpation.")
+
+
+@wp.struct
+class BatchRegionArrays:
+    """Compacted per-palpation regions (almsdm_warp.batch.batch_palpation.BatchRegions documents each)."""
+
+    region_vertex: wp.array2d(dtype=wp.int32)
+    ring_offsets: wp.array2d(dtype=wp.int32)
+    region_count: wp.array(dtype=wp.int32)
+    free_count: wp.array(dtype=wp.int32)
+    local_offsets: wp.array2d(dtype=wp.int32)
+    local_neighbour: wp.array2d(dtype=wp.int32)
+    local_edge: wp.array2d(dtype=wp.int32)
+    local_owner: wp.array2d(dtype=wp.int32)
+    local_spring: wp.array2d(dtype=wp.int32)
+    spring_entry: wp.array2d(dtype=wp.int32)
+    spring_count: wp.array(dtype=wp.int32)
+    entry_count: wp.array(dtype=wp.int32)
+    status: wp.array(dtype=wp.int32)
+
+
+@wp.struct
+class BatchPress:
+    """One press of a batch: its schedule and each palpation's direction and force records."""
+
+    press_direction: wp.array(dtype=wp.vec3d)
+    """Inward unit normal at each contact vertex, [B] (float64, as the host computes the target)."""
+    depth: wp.float64
+    """Press depth [m]."""
+    ramp_steps: int
+    press_steps: int
+    """Steps of the ramp; steps while pressed (ramp and hold)."""
+    dt: float
+    """Step [s]."""
+    peak_force: wp.array(dtype=wp.float64)
+    """Running largest |feedback force| [N] (its square with the "fast" kernel), [B]."""
+    peak_reaction: wp.array(dtype=wp.vec3)
+    hold_reaction: wp.array(dtype=wp.vec3)
+
+
+def struct_from(struct, source, **values):
+    """An instance of `struct` with each member taken from `values`, else from `source`'s attribute of that name."""
+    out = struct()
+    for name in struct.vars:
+        setattr(out, name, values[name] if name in values else getattr(source, name))
+    return out

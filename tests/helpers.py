@@ -1,0 +1,39 @@
+"""What several test files share: independent float64 answers (NumPy and SciPy, no Warp) and the
+project's scripts loaded as modules."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+
+
+def load_script(name: str):
+    """scripts/<name>.py imported as a module (the scripts are not a package)."""
+    spec = importlib.util.spec_from_file_location(name, SCRIPTS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def spring_stiffness_matrix(x, edges, ke, rest_length, anchor_ke):
+    """The tangent stiffness K = -df/dx [N/m] of springs and anchors at positions `x` [n, 3]:
+    each spring's exact block ke (d d^T + (1 - L0/l)(I - d d^T)), each anchor ka I; sparse, [3n, 3n].
+    `ke`, `rest_length` per edge and `anchor_ke` per vertex: arrays or scalars."""
+    n = len(x)
+    r = x[edges[:, 1]] - x[edges[:, 0]]
+    length = np.linalg.norm(r, axis=1)
+    d = r / length[:, None]
+    ddt = d[:, :, None] * d[:, None, :]
+    eye = np.eye(3)
+    blocks = np.asarray(ke)[..., None, None] * (ddt + (1.0 - rest_length / length)[:, None, None] * (eye - ddt))
+    rows, cols, vals = [np.arange(3 * n)], [np.arange(3 * n)], [np.repeat(np.broadcast_to(anchor_ke, n), 3)]
+    for a, b, sign in ((0, 0, 1.0), (1, 1, 1.0), (0, 1, -1.0), (1, 0, -1.0)):
+        for i in range(3):
+            for j in range(3):
+                rows.append(3 * edges[:, a] + i)
+                cols.append(3 * edges[:, b] + j)
+                vals.append(sign * blocks[:, i, j])
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
