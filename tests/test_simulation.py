@@ -13,7 +13,7 @@ import pytest
 
 from almsdm_warp import Region, TissueMesh
 from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from almsdm_warp.scene.loader import TissueParams
+from almsdm_warp.tissue.params import TissueParams
 from almsdm_warp.solvers.solver import SolverALMSDM
 
 LEG = 10.0e-3  # [m]

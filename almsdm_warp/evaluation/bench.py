@@ -102,7 +102,7 @@ def measure_newton(mesh, device, steps=2000):
     except ImportError:
         return {"skipped": "newton is not installed (pip install newton)"}
     try:
-        from ..scene.loader import TissueParams
+        from ..tissue.params import TissueParams
 
         t = TissueParams()
         builder = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))

@@ -17,7 +17,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import InputError
-from .schema import _FIELD_RULE, AUTO, SCHEMA, _check_rings, _check_value, _describe
+from ..checks import AUTO, check_rings, check_value, describe
+from ..tissue.params import TissueParams
+from .schema import FIELD_RULE, SCHEMA
 
 try:
     import tomllib
@@ -31,33 +33,7 @@ if TYPE_CHECKING:
 DEFAULT_SCENE = "stomach"
 """The scene used when none is given."""
 
-
-@dataclass(frozen=True)
-class TissueParams:
-    """Mass, spring and damper parameters of the tissue, in SI units.
-
-    The defaults are the stomach scene's, calibrated so that a 10 mm press with 4 rings gives the
-    paper's feedback force (about 2.4 N, Table 1) and the explicit scheme is stable at dt = 1 ms
-    (docs/calibration.md).
-    """
-
-    density: float = 1000.0
-    """Tissue density [kg/m^3], for the lumped vertex masses."""
-    thickness: float = 25.0e-3
-    """Shell thickness [m] of a surface mesh, for its lumped masses (area x thickness x density);
-    ignored for a tet mesh, whose masses come from the tet volumes."""
-    edge_stiffness: float = 62.0
-    """k_ij [N/m]: stiffness of the spring on each mesh edge, eqs. (4)-(6)."""
-    edge_damping: float = 0.02
-    """d_ij [N s/m]: damping along each mesh edge, eqs. (4)-(6)."""
-    anchor_stiffness: float = 124.0
-    """k_i [N/m]: stiffness of the spring that pulls each vertex back to its rest position, eq. (3)."""
-    anchor_damping: float = 0.1
-    """d_i [N s/m]: damping of each vertex's velocity, eq. (3)."""
-
-    def __post_init__(self):
-        for f in fields(self):
-            _check_value(getattr(self, f.name), float, _FIELD_RULE[("tissue", f.name)], f"TissueParams.{f.name}")
+_check_value, _FIELD_RULE = check_value, FIELD_RULE  # the names PressParams's checks use
 
 
 @dataclass(frozen=True)
@@ -105,10 +81,10 @@ class Scene:
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
         if self.path is not None:
             object.__setattr__(self, "path", Path(self.path))
-        object.__setattr__(self, "scale_mm", _check_value(self.scale_mm, float, "> 0", "Scene.scale_mm"))
-        _check_rings(self.rings, "Scene.rings")
+        object.__setattr__(self, "scale_mm", check_value(self.scale_mm, float, "> 0", "Scene.scale_mm"))
+        check_rings(self.rings, "Scene.rings")
         if self.tol is not None:
-            object.__setattr__(self, "tol", _check_value(self.tol, float, "> 0", "Scene.tol"))
+            object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
                 raise InputError(f"Scene.tol is for rings = {AUTO!r} (the region sized to a tolerance), "
                                  f"but rings = {self.rings!r}")
@@ -205,7 +181,7 @@ def load_scene(path) -> Scene:
                 f"allowed sections: {allowed_sections}"
             )
         if not isinstance(table, dict):
-            raise InputError(f"{where}: [{section}] must be a table (a [{section}] section), got {_describe(table)}")
+            raise InputError(f"{where}: [{section}] must be a table (a [{section}] section), got {describe(table)}")
         keys = SCHEMA[section]
         for key, value in table.items():
             if key not in keys:
@@ -216,9 +192,9 @@ def load_scene(path) -> Scene:
             attr, kind, factor, rule = keys[key]
             try:
                 if (section, key) == ("region", "rings"):
-                    value = _check_rings(value, f"[{section}] {key}")
+                    value = check_rings(value, f"[{section}] {key}")
                 else:
-                    value = _check_value(value, kind, rule, f"[{section}] {key}")
+                    value = check_value(value, kind, rule, f"[{section}] {key}")
             except InputError as exc:
                 raise InputError(f"{where}: {exc}") from None
             if kind is float and factor != 1.0:
@@ -313,5 +289,5 @@ def resolve_scene_or_mesh(arg=None, *, scale_mm: float = 1.0) -> Scene:
         raise InputError(f"{arg}: no such file (give a scene .toml or a mesh file{hint})")
     if p.is_dir():
         raise InputError(f"{arg}: is a directory, not a scene or mesh file")
-    scale_mm = _check_value(scale_mm, float, "> 0", "scale_mm")
+    scale_mm = check_value(scale_mm, float, "> 0", "scale_mm")
     return Scene(path=None, mesh_path=Path(os.path.abspath(p)), scale_mm=scale_mm)

@@ -10,7 +10,7 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import as_device_mesh
-from ..scene.loader import TissueParams
+from ..tissue.params import TissueParams
 
 PROBE_OFF = 0
 """The probe does not touch: every free vertex moves under the tissue's forces alone."""
