@@ -150,13 +150,43 @@ def load_scene(path) -> Scene:
     """
     where = str(path)
     p = Path(path)
+    data = _read_toml(p, where)
+    lesion = None
+    if "lesion" in data:  # an optional table of its own (an array and scalars: almsdm_warp/tissue/lesion.py)
+        from ..tissue.lesion import parse_lesion
+
+        lesion = parse_lesion(data.pop("lesion"), where)
+    values = _section_values(data, where)
+    region = values["region"]
+    if "tol" in region and region.get("rings") != AUTO:
+        rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
+        raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
+    mesh_path = _mesh_path(values["mesh"].get("path"), p, where)
+
+    try:  # the SI values are checked again: say which file they came from
+        return Scene(
+            path=Path(os.path.abspath(p)),
+            mesh_path=mesh_path,
+            scale_mm=values["mesh"].get("scale_mm", 1.0),
+            tissue=TissueParams(**values["tissue"]),
+            rings=region.get("rings", Scene.rings),
+            tol=region.get("tol"),
+            press=PressParams(**values["press"]),
+            lesion=lesion,
+        )
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+
+
+def _read_toml(p: Path, where: str) -> dict:
+    """The scene file's TOML document; InputError when it is missing, unreadable or not TOML."""
     if not p.exists():
         raise InputError(f"{where}: no such scene file")
     if p.is_dir():
         raise InputError(f"{where}: is a directory, not a scene file")
     try:
         with open(p, "rb") as f:
-            data = tomllib.load(f)
+            return tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{where}: TOML syntax error: {exc}") from exc
     except UnicodeDecodeError as exc:
@@ -166,13 +196,11 @@ def load_scene(path) -> Scene:
     except OSError as exc:
         raise InputError(f"{where}: cannot read the scene file: {exc.strerror or exc}") from exc
 
+
+def _section_values(data: dict, where: str) -> dict[str, dict[str, object]]:
+    """Section -> attribute -> value in SI units, every key checked against SCHEMA."""
     allowed_sections = ", ".join(f"[{s}]" for s in SCHEMA)
     values: dict[str, dict[str, object]] = {section: {} for section in SCHEMA}
-    lesion = None
-    if "lesion" in data:  # an optional table of its own (an array and scalars: almsdm_warp/lesion.py)
-        from ..tissue.lesion import parse_lesion
-
-        lesion = parse_lesion(data.pop("lesion"), where)
     for section, table in data.items():
         if section not in SCHEMA:
             what = "section" if isinstance(table, dict) else "top-level key"
@@ -200,33 +228,19 @@ def load_scene(path) -> Scene:
             if kind is float and factor != 1.0:
                 value = value / factor  # mm -> m: divide (correctly rounded: 10 mm is exactly 0.01)
             values[section][attr] = value
+    return values
 
-    region = values["region"]
-    if "tol" in region and region.get("rings") != AUTO:
-        rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
-        raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
-    raw_mesh = values["mesh"].get("path")
+
+def _mesh_path(raw_mesh, scene_path: Path, where: str) -> Path:
+    """[mesh] path, absolute (relative to the scene file's folder); it must name a file."""
     if raw_mesh is None:
         raise InputError(f"{where}: missing [mesh] path (the mesh file, relative to the scene file)")
-    mesh_path = Path(os.path.abspath(p.parent / Path(str(raw_mesh)).expanduser()))
+    mesh_path = Path(os.path.abspath(scene_path.parent / Path(str(raw_mesh)).expanduser()))
     if not mesh_path.exists():
         raise InputError(f"{where}: mesh file not found: {mesh_path} ([mesh] path = {raw_mesh!r})")
     if mesh_path.is_dir():
         raise InputError(f"{where}: [mesh] path = {raw_mesh!r} is a directory, not a mesh file ({mesh_path})")
-
-    try:  # the SI values are checked again: say which file they came from
-        return Scene(
-            path=Path(os.path.abspath(p)),
-            mesh_path=mesh_path,
-            scale_mm=values["mesh"].get("scale_mm", 1.0),
-            tissue=TissueParams(**values["tissue"]),
-            rings=region.get("rings", Scene.rings),
-            tol=region.get("tol"),
-            press=PressParams(**values["press"]),
-            lesion=lesion,
-        )
-    except InputError as exc:
-        raise InputError(f"{where}: {exc}") from None
+    return mesh_path
 
 
 def _did_you_mean(word: str, choices, fmt: str) -> str:
