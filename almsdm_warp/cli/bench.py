@@ -69,7 +69,7 @@ def cmd_bench(args) -> int:
     if "skipped" in newton:
         print(f"newton: {newton['skipped']}")
     else:
-        print(f"newton: {newton['steps_per_s']:,.0f} steps/s (global, semi-implicit, no anchors)")
+        print(f"newton: {newton['steps_per_s']:,.0f} steps/s (global, semi-implicit, springs alone: no anchors, no particle contact)")
     if args.json:
         write_output(
             args.json,
