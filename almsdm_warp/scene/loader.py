@@ -75,7 +75,7 @@ class Scene:
     """A sphere of stiffer tissue (the scene's optional [lesion] table), or None."""
     tol: float | None = None
     """With rings = "auto": the displacement tolerance [m] the region is sized to (None: the
-    command line's default, cli_palpate.AUTO_TOL_MM); None otherwise."""
+    command line's default, almsdm_warp.cli.args.AUTO_TOL_MM); None otherwise."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
