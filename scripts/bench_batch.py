@@ -67,7 +67,7 @@ def sphere(subdivisions, stomach_mean_mass):
     import trimesh
 
     from almsdm_warp.mesh.tissue_mesh import TissueMesh
-    from almsdm_warp.scene.loader import TissueParams
+    from almsdm_warp.tissue.params import TissueParams
 
     s = trimesh.creation.icosphere(subdivisions=subdivisions, radius=50.0)
     mesh = TissueMesh.from_arrays(np.asarray(s.vertices), np.asarray(s.faces))
@@ -94,7 +94,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     from almsdm_warp import load_mesh
     from almsdm_warp.evaluation.bench import measure_batch
-    from almsdm_warp.scene.loader import TissueParams
+    from almsdm_warp.tissue.params import TissueParams
     from almsdm_warp.warp_init import init_warp
 
     init_warp()

@@ -63,7 +63,7 @@ def test_png_at_a_chosen_time_before_the_press_shows_no_displacement(tmp_path, c
     [
         (("--usd", "{tmp}/missing/out.usda"), "folder .*missing does not exist"),
         (("--usd", "{tmp}/out.abc"), r"unknown USD suffix '\.abc'"),
-        (("--png", "{tmp}/out.jpg"), "allowed suffix: .png"),
+        (("--png", "{tmp}/out.jpg"), r"unknown PNG suffix '\.jpg' \(allowed: \.png\)"),
         (("--png-at-s", "0.1"), "--png-at-s needs --png"),
         (("--png", "{tmp}/out.png", "--png-at-s", "9"), "--png-at-s 9 is after the last step"),
         (("--usd", "{tmp}/out.usdc", "--usd-every", "0"), "must be >= 1"),

@@ -14,9 +14,11 @@ import trimesh
 
 from almsdm_warp.errors import InputError
 from almsdm_warp.mesh.io import KNOWN_FORMATS, load_mesh
-from almsdm_warp.mesh.validate import build_mesh
+from almsdm_warp.mesh.tissue_mesh import TissueMesh
 
 from conftest import SHARED_MESHES as MESHES  # noqa: E402
+
+build_mesh = TissueMesh.from_arrays  # validate and repair raw arrays, as load_mesh does
 EXTENT_MM = np.array([20.0, 30.0, 10.0])  # the test box
 GRID = (2, 3, 1)  # cells per axis of the tetrahedralized box
 

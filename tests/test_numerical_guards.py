@@ -14,7 +14,7 @@ from almsdm_warp.mesh.tissue_mesh import TissueMesh
 from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF
 from almsdm_warp.protocol.palpation import Palpation
 from almsdm_warp.region.region import Region
-from almsdm_warp.scene.loader import TissueParams
+from almsdm_warp.tissue.params import TissueParams
 
 
 def signed_volumes(x, tets):

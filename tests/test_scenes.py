@@ -11,10 +11,10 @@ import trimesh
 from helpers import load_script
 
 from almsdm_warp.errors import InputError
+from almsdm_warp.tissue.params import TissueParams
 from almsdm_warp.scene.loader import (
     PressParams,
     Scene,
-    TissueParams,
     default_scene_path,
     load_scene,
     resolve_scene_or_mesh,

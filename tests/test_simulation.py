@@ -13,8 +13,8 @@ import pytest
 
 from almsdm_warp import Region, TissueMesh
 from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from almsdm_warp.scene.loader import TissueParams
 from almsdm_warp.solvers import INTEGRATORS as REGISTERED, make_solver
+from almsdm_warp.tissue.params import TissueParams
 
 LEG = 10.0e-3  # [m]
 EPS32 = float(np.finfo(np.float32).eps)

@@ -122,7 +122,7 @@ def test_interrupted_sweep_resumes_to_the_same_file(tmp_path, monkeypatch, capsy
 def test_chunks_over_several_devices_interleave(stomach, tmp_path):
     # two batches in flight at once (as on two GPUs), here both on the CPU: the same numbers
     points, vertices = sw.sample_points(stomach, 12)
-    from almsdm_warp.scene.loader import TissueParams
+    from almsdm_warp.tissue.params import TissueParams
 
     plan = sw.SweepPlan(stomach, TissueParams(), None, None, 3, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 5)
     results = []
@@ -170,7 +170,7 @@ def test_sweep_png(tmp_path):
 @pytest.mark.parametrize(
     "args,message",
     [
-        (["--out", "x.txt"], "unknown format"),
+        (["--out", "x.txt"], "--out x.txt: unknown table suffix '.txt' (allowed: .csv, .npz)"),
         (["--out", "/nonexistent/x.csv"], "does not exist"),
         (["--out", "x.csv", "--device", "tpu"], "unknown device"),
         (["--out", "x.csv", "--points", "0"], "must be >= 1"),
@@ -225,7 +225,7 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     from almsdm_warp.protocol.adaptive import AdaptivePalpation
     from almsdm_warp.evaluation.adaptive_accuracy import hold_press
     from almsdm_warp.protocol.palpation import Palpation
-    from almsdm_warp.scene.loader import TissueParams
+    from almsdm_warp.tissue.params import TissueParams
 
     press = ["--points", "6", "--ramp-s", "0.1", "--hold-s", "0.2", "--settle-s", "0.01", "--dt-ms", "1"]
     assert main(["sweep", *press, "--rings", "auto", "--tol-mm", "0.1", "--out", str(tmp_path / "auto.npz")]) == 0

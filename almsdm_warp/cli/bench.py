@@ -2,24 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
-
-
-def _int_list(text):
-    try:
-        values = [int(t) for t in text.split(",") if t.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a comma list of integers: {text!r}") from None
-    if not values or min(values) < 1:
-        raise argparse.ArgumentTypeError(f"must be integers >= 1, got {text!r}")
-    return values
+from .args import count_arg, get_device, int_list, quiet_warp
 
 
 def add_parser(sub) -> None:
-    from .palpate import _count_arg
-
     p = sub.add_parser(
         "bench",
         help="benchmark: one palpation (rings 1..4, both integrators), batches, the global model; JSON",
@@ -29,23 +17,22 @@ def add_parser(sub) -> None:
     p.add_argument("mesh", nargs="?", default=None, metavar="MESH", help="mesh file or scene (default: the stomach scene)")
     p.add_argument("--device", default="cpu", help="Warp device (default cpu)")
     p.add_argument("--json", default=None, metavar="PATH", help="write the results as JSON here")
-    p.add_argument("--rings", type=_count_arg, default=4, metavar="K", help="rings of the batch benchmark (default 4)")
-    p.add_argument("--batch", type=_int_list, default=None, metavar="B1,B2,...", help="batch sizes (default 16,64 on the CPU; 1000,10000,100000 on CUDA)")
-    p.add_argument("--blocks", type=_count_arg, default=10, metavar="N", help="timed blocks of 2000 steps per single-palpation case (default 10)")
+    p.add_argument("--rings", type=count_arg, default=4, metavar="K", help="rings of the batch benchmark (default 4)")
+    p.add_argument("--batch", type=int_list, default=None, metavar="B1,B2,...", help="batch sizes (default 16,64 on the CPU; 1000,10000,100000 on CUDA)")
+    p.add_argument("--blocks", type=count_arg, default=10, metavar="N", help="timed blocks of 2000 steps per single-palpation case (default 10)")
     p.add_argument("--quick", action="store_true", help="fewer and shorter blocks (a smoke run)")
     p.set_defaults(func=cmd_bench)
 
 
 def cmd_bench(args) -> int:
     from ..evaluation.bench import measure, measure_batch, measure_newton
-    from .main import _device, _quiet_warp
-    from ..export.output import check_writable, write_json
+    from ..export.writers import check_output, write_output
     from ..scene.loader import resolve_scene_or_mesh
 
     if args.json:
-        check_writable(args.json)
-    _quiet_warp()
-    device = _device(args.device)
+        check_output(args.json, "record", "--json")
+    quiet_warp()
+    device = get_device(args.device)
     scene = resolve_scene_or_mesh(args.mesh)
     mesh = scene.load_mesh()
     print(f"{mesh.summary()}; device {device.alias}")
@@ -82,11 +69,12 @@ def cmd_bench(args) -> int:
     if "skipped" in newton:
         print(f"newton: {newton['skipped']}")
     else:
-        print(f"newton: {newton['steps_per_s']:,.0f} steps/s (global, semi-implicit, no anchors)")
+        print(f"newton: {newton['steps_per_s']:,.0f} steps/s (global, semi-implicit, springs alone: no anchors, no particle contact)")
     if args.json:
-        write_json(
+        write_output(
             args.json,
             {"device": device.alias, "mesh": str(Path(mesh.path)) if mesh.path else None, "single": single, "batch": batch, "global": glob, "ratios": ratios, "newton": newton},
+            "record",
         )
         print(f"wrote {args.json}")
     return 0

@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 
 from ..errors import InputError
+from .args import get_device, quiet_warp
 
 
 def add_parser(sub) -> None:
@@ -28,7 +29,6 @@ def add_parser(sub) -> None:
 
 
 def cmd_evaluate(args) -> int:
-    from .main import _device, _quiet_warp
     from ..evaluation.evaluate import run_evaluation
 
     out = Path(args.out)
@@ -40,8 +40,8 @@ def cmd_evaluate(args) -> int:
         from ..evaluation.accuracy import read_extra_points
 
         read_extra_points(args.extra_json)  # bad input fails now, not after the run
-    _quiet_warp()
-    device = _device(args.device)
+    quiet_warp()
+    device = get_device(args.device)
     settings = args.settings or ("quick" if args.quick else "full")
     results = run_evaluation(out, settings, str(device), command=_command(args, settings), extra_json=args.extra_json, progress=args.progress)
     print(f"wrote {out / 'results.md'}, {out / 'results.json'} and {len(results['figures'])} figures in {out / 'figures'} ({results['elapsed_s']:.0f} s)")

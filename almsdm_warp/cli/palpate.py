@@ -4,16 +4,32 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
+from dataclasses import dataclass
 
 import numpy as np
 
-from .main import _device, _mesh_json, _quiet_warp
 from ..errors import InputError
+from ..solvers import INTEGRATORS
+from .args import (
+    AUTO_TOL_MM,
+    GLOBAL_RINGS,
+    auto_tol,
+    check_contact,
+    count_arg,
+    finite,
+    get_device,
+    mesh_json,
+    number_arg,
+    path_arg,
+    press_steps,
+    print_notes,
+    probe_position,
+    quiet_warp,
+    rings_arg,
+)
 
-GLOBAL_RINGS = ("global", "global-free")
-AUTO_TOL_MM = 0.1
-"""--tol-mm when --rings auto is given without it [mm]."""
+__all__ = ["AUTO_TOL_MM", "GLOBAL_RINGS", "MAX_STEPS", "add_parser", "check_protocol", "cmd_palpate"]
+
 TIMING_STEPS = 2000
 """Steps timed after the presses, in batches (fewer when a step is slow: about 1 s in all)."""
 MAX_STEPS = 10_000_000
@@ -21,80 +37,34 @@ MAX_STEPS = 10_000_000
 typo (a dt in seconds given to --dt-ms, a hold in ms given to --hold-s), not a run to wait for."""
 
 
-def rings_arg(words=("auto", *GLOBAL_RINGS)):
-    """An argparse type for --rings: an integer >= 1 or one of `words`."""
-    items = ["an integer >= 1", *(repr(w) for w in words)]
-    allowed = ", ".join(items[:-1]) + " or " + items[-1]
+def add_parser(sub) -> None:
+    from .record import add_record_args
 
-    def parse(text):
-        if text in words:
-            return text
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"unknown value {text!r} (allowed: {allowed})") from None
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"must be >= 1 (ring 0 is the contact vertex alone; allowed: {allowed}), got {value}")
-        return value
-
-    return parse
-
-
-_rings_arg = rings_arg()
-
-
-def _number_arg(rule):
-    """An argparse type: a finite float that is "> 0" or ">= 0"."""
-
-    def parse(text):
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-        if (rule == "> 0" and not value > 0) or (rule == ">= 0" and not value >= 0):
-            raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
-        return value
-
-    parse.__name__ = "number"
-    return parse
-
-
-def _count_arg(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
-def _finite(value):
-    """A float for JSON, or None where it is not finite (JSON has no inf or nan)."""
-    value = float(value)
-    return value if math.isfinite(value) else None
-
-
-def probe_position(probe_mm, flag="--probe-mm"):
-    """--probe-mm X Y Z -> metres, finite and within the +-1 km that meshes are held to."""
-    from ..mesh.validate import MAX_COORDINATE_M
-
-    probe = np.asarray(probe_mm, dtype=np.float64) * 1e-3
-    if not np.all(np.isfinite(probe)):
-        raise InputError(f"{flag} must be finite, got {list(probe_mm)}")
-    if np.abs(probe).max() > MAX_COORDINATE_M:
-        raise InputError(f"{flag} {list(probe_mm)} is more than {MAX_COORDINATE_M * 1e3:g} mm from the origin, "
-                         f"beyond any mesh the simulator holds")
-    return probe
-
-
-def check_contact(contact, probe, mesh):
-    """A contact that found no surface vertex is an InputError, not a vertex id of -1."""
-    if int(contact.vertex) < 0 or int(contact.face) < 0:
-        raise InputError(f"the probe at {np.round(probe * 1e3, 3).tolist()} mm finds no surface of {mesh.name} "
-                         f"(it is too far from the mesh)")
+    palpate = sub.add_parser(
+        "palpate",
+        help="press the probe into a scene or mesh; print force, recovery and speed (the default command)",
+        description="Press the probe into a scene or mesh (the local ALMSDM region, or the whole mesh) and print "
+        "the feedback force, the recovery after release and the speed of a step. Defaults come from the scene.",
+    )
+    palpate.add_argument("scene", nargs="?", default=None, type=path_arg, metavar="MESH_OR_SCENE", help="scene (.toml), scene name or mesh file; default: the stomach scene")
+    palpate.add_argument("--rings", type=rings_arg(), default=None, metavar="{N,auto,global,global-free}", help="rings of the local region (outermost fixed), auto (sized to --tol-mm), or a global model (default: the scene's)")
+    palpate.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: grow the region until its fixed ring would move less than this [mm] (default 0.1)")
+    palpate.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
+    palpate.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="time step [ms] (default 1)")
+    palpate.add_argument("--depth-mm", "--depth", dest="depth_mm", type=number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
+    palpate.add_argument("--ramp-s", type=number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
+    palpate.add_argument("--hold-s", type=number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
+    palpate.add_argument("--settle-s", type=number_arg(">= 0"), default=None, metavar="S", help="settle window after release [s] (default: the scene's)")
+    palpate.add_argument("--presses", type=count_arg, default=1, metavar="N", help="presses at the same spot (default 1)")
+    palpate.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default 1; 10 for cm, 1000 for m)")
+    where = palpate.add_mutually_exclusive_group()
+    where.add_argument("--vertex", type=int, default=None, metavar="V", help="contact vertex (a surface vertex id)")
+    where.add_argument("--probe-mm", type=float, nargs=3, metavar=("X", "Y", "Z"), help="probe position [mm]; the contact is its nearest surface vertex")
+    palpate.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
+    palpate.add_argument("--json", default=None, type=path_arg, metavar="PATH", help="write the result as JSON here")
+    palpate.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal, for runs over ~2 s)")
+    add_record_args(palpate)
+    palpate.set_defaults(func=cmd_palpate)
 
 
 def check_protocol(depth, dt, ramp, hold, settle, presses, mesh):
@@ -141,34 +111,75 @@ def _contact(args, mesh, device):
     return v, mesh.vertices[v], {}
 
 
-def _press_steps(dt, ramp, hold, settle):
-    """Steps of one press, counted as Palpation.press counts them (for the progress bar only)."""
-    return max(int(round(ramp / dt)), 1) + int(round(hold / dt)) + max(int(round(settle / dt)), 1)
+@dataclass
+class _Run:
+    """What `palpate` resolved from its arguments and the scene (SI units)."""
+
+    scene: object
+    mesh: object
+    device: object
+    rings: object
+    """An int, "auto", "global" or "global-free"."""
+    tol: float | None
+    depth: float
+    ramp: float
+    hold: float
+    settle: float
+    dt: float
+    vertex: int
+    point: np.ndarray
+    contact_extra: dict
 
 
 def cmd_palpate(args) -> int:
     """Press the probe into a scene or mesh, report force, recovery and speed."""
-    from ..export.output import check_writable, write_json
-    from ..progress import Progress
-    from ..protocol.timing import time_palpation
-    from ..scene.loader import resolve_scene_or_mesh
-    from ..sim.model import PROBE_OFF
-
-    from .record import Recording, check_record_args
+    from ..export.writers import check_output, write_output
+    from ..protocol.palpation import SimulationDiverged
+    from .record import check_record_args
 
     if args.json:
-        check_writable(args.json)
+        check_output(args.json, "record", "--json")
     check_record_args(args)
-    _quiet_warp()
-    device = _device(args.device)
+    run = _resolve(args)
+    pal = _build(args, run)
+    critical, free_count = _report_model(args, run, pal)
+    presses = _press(args, run, pal)
+    if run.tol is not None:  # time the region as the presses grew it, not a retired one
+        pal.rebuild(max(r["rings"] for r in pal.press_log), retire=False)
+        critical = pal.model.critical_dt(pal.region.vertices()[: pal.region.free_count])
+        free_count = pal.region.free_count
+    try:
+        from ..protocol.timing import time_palpation
+        from ..sim.model import PROBE_OFF
+
+        pal.set_probe(PROBE_OFF)
+        times = time_palpation(pal, 20, warmup=5, budget_s=1.0, max_steps=TIMING_STEPS // 20)  # about 1 s at most: no bar
+        step_s, timed = times.median, times.steps
+    except SimulationDiverged as exc:
+        raise InputError(str(exc)) from exc
+    step_us = step_s * 1e6
+    steps_per_s = 1.0 / step_s if step_s > 0 else math.inf
+    print(f"speed: {step_us:.1f} us per step (median of 20 batches, {timed} steps), {steps_per_s:,.0f} steps/s")
+
+    if args.json:
+        record = _record(args, run, pal, presses, critical, free_count)
+        record.update({"step_us_median": finite(step_us), "steps_per_s": finite(steps_per_s), "timing_steps": int(timed)})
+        write_output(args.json, record, "record")
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _resolve(args) -> _Run:
+    """The device, scene, mesh, region, press protocol and contact that the arguments ask for."""
+    from ..scene.loader import resolve_scene_or_mesh
+
+    quiet_warp()
+    device = get_device(args.device)
     scene = resolve_scene_or_mesh(args.scene, scale_mm=1.0 if args.scale_mm is None else args.scale_mm)
     if args.scale_mm is not None and scene.path is not None:
         raise InputError(f"--scale-mm is for a mesh file; the scene {scene.name!r} sets its own ([mesh] scale_mm)")
     mesh = scene.load_mesh()
-    for note in mesh.notes:
-        print(f"note: {note}", file=sys.stderr)
-
-    from ..protocol.palpation import Palpation, SimulationDiverged
+    print_notes(mesh)
 
     rings = scene.rings if args.rings is None else args.rings
     if isinstance(rings, int) and rings > mesh.vertex_count:  # (not "global", "global-free")
@@ -184,39 +195,53 @@ def cmd_palpate(args) -> int:
     dt = args.dt_ms * 1e-3
     check_protocol(depth, dt, ramp, hold, settle, args.presses, mesh)
     vertex, point, contact_extra = _contact(args, mesh, device)
-    tol = _auto_tol(args, rings, scene)
+    tol = auto_tol(args, rings, scene)
+    return _Run(scene, mesh, device, rings, tol, depth, ramp, hold, settle, dt, vertex, point, contact_extra)
 
+
+def _build(args, run: _Run):
+    """Say what is pressed, then make the palpation (adaptive for rings "auto") and touch the contact."""
+    from ..protocol.palpation import Palpation
+
+    mesh, scene = run.mesh, run.scene
     print(mesh.summary())
     if scene.lesion is not None:
         les = scene.lesion.as_dict()
         print(f"lesion: {les['stiffness_factor']:g}x stiffer within {les['radius_mm']:g} mm of {[round(c, 2) for c in les['center_mm']]} mm")
     print(
-        f"contact: vertex {vertex} at {np.round(point * 1e3, 2).tolist()} mm; press {depth * 1e3:g} mm "
-        f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s) x {args.presses}"
+        f"contact: vertex {run.vertex} at {np.round(run.point * 1e3, 2).tolist()} mm; press {run.depth * 1e3:g} mm "
+        f"(ramp {run.ramp:g} s, hold {run.hold:g} s, settle {run.settle:g} s) x {args.presses}"
     )
     scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
     lesion = dict(zip(("edge_scale", "anchor_scale"), scales))
     try:
-        if tol is not None:
+        if run.tol is not None:
             from ..protocol.adaptive import AdaptivePalpation
 
-            pal = AdaptivePalpation(mesh, scene.tissue, tol=tol, integrator=args.integrator, dt=dt, device=device, **lesion)
+            pal = AdaptivePalpation(mesh, scene.tissue, tol=run.tol, integrator=args.integrator, dt=run.dt, device=run.device, **lesion)
         else:
-            pal = Palpation(mesh, scene.tissue, rings=rings, integrator=args.integrator, dt=dt, device=device, **lesion)
-        pal.touch(vertex)
+            pal = Palpation(mesh, scene.tissue, rings=run.rings, integrator=args.integrator, dt=run.dt, device=run.device, **lesion)
+        pal.touch(run.vertex)
     except ValueError as exc:  # a parameter Palpation rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
+    return pal
+
+
+def _report_model(args, run: _Run, pal):
+    """Print the model line: region, springs, integrator and the explicit critical step; returns
+    (critical step [s], free vertices)."""
+    rings, tol, dt = run.rings, run.tol, run.dt
     anchored = rings != "global-free"
     free = pal.region.vertices()[: pal.region.free_count] if pal.region is not None else None
     critical = pal.model.critical_dt(free, anchors=anchored)
     free_count = len(free) if free is not None else pal.region_vertices
     if tol is not None:
         what = (
-            f"auto rings (tol {tol * 1e3:g} mm) around vertex {vertex}, grown from "
+            f"auto rings (tol {tol * 1e3:g} mm) around vertex {run.vertex}, grown from "
             f"{pal.region.outer_ring} ring(s) of {pal.region_vertices} vertices"
         )
     elif pal.region is not None:
-        what = f"{rings} rings around vertex {vertex}, {pal.region_vertices} vertices ({free_count} free)"
+        what = f"{rings} rings around vertex {run.vertex}, {pal.region_vertices} vertices ({free_count} free)"
     else:
         kind = "anchored" if anchored else "free, no anchors"
         what = f"{rings} ({kind}), all {pal.region_vertices} vertices free"
@@ -224,16 +249,25 @@ def cmd_palpate(args) -> int:
     beyond += ", dt exceeds it" if args.integrator == "explicit" and dt > critical else ""
     print(
         f"model: {what}, {pal.region_springs} springs; {args.integrator} integrator, dt {dt * 1e3:g} ms "
-        f"(explicit critical step {critical * 1e3:.3g} ms{beyond}), device {device}"
+        f"(explicit critical step {critical * 1e3:.3g} ms{beyond}), device {run.device}"
     )
+    return critical, free_count
 
-    press_steps = _press_steps(dt, ramp, hold, settle)
+
+def _press(args, run: _Run, pal) -> list:
+    """Run the presses with the progress bar and the recording; print and return their results."""
+    from ..progress import Progress
+    from ..protocol.palpation import SimulationDiverged
+    from .record import Recording
+
+    dt, ramp, hold, settle = run.dt, run.ramp, run.hold, run.settle
+    per_press = press_steps(dt, ramp, hold, settle)
     presses = []
     original_step = pal.step
-    deepest = _press_steps(dt, ramp, hold, 0) - 1  # the end of the first hold
-    label = f"{mesh.name}, {rings} {'rings' if pal.region is not None else 'model'}, {depth * 1e3:g} mm press"
-    recording = Recording(args, pal, args.presses, press_steps, deepest, label)
-    with recording, Progress(args.presses * press_steps, enabled=args.progress) as bar:
+    deepest = press_steps(dt, ramp, hold, 0) - 1  # the end of the first hold
+    label = f"{run.mesh.name}, {run.rings} {'rings' if pal.region is not None else 'model'}, {run.depth * 1e3:g} mm press"
+    recording = Recording(args, pal, args.presses, per_press, deepest, label)
+    with recording, Progress(args.presses * per_press, enabled=args.progress) as bar:
 
         def counted_step():
             # counts the steps Palpation.press takes (it calls self.step), for the bar
@@ -246,12 +280,12 @@ def cmd_palpate(args) -> int:
             for i in range(args.presses):
                 bar.label = f"press {i + 1}/{args.presses}"
                 try:
-                    result = pal.press(depth, ramp, hold, settle, **recording.press_kwargs())
+                    result = pal.press(run.depth, ramp, hold, settle, **recording.press_kwargs())
                 except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
                     raise InputError(str(exc)) from exc
-                bar.done = (i + 1) * press_steps
+                bar.done = (i + 1) * per_press
                 presses.append(result)
-                auto = f", {pal.rings_chosen} rings ({pal.auto_reason})" if tol is not None else ""
+                auto = f", {pal.rings_chosen} rings ({pal.auto_reason})" if run.tol is not None else ""
                 rt = result.recovery_time_s
                 rt_text = f"{rt:.3f} s" if math.isfinite(rt) else f"not within the {settle:g} s settle window"
                 bar.close()
@@ -263,69 +297,38 @@ def cmd_palpate(args) -> int:
             del pal.step  # back to the class's step, uncounted
         for line in recording.finish():
             print(line)
-    if tol is not None:  # time the region as the presses grew it, not a retired one
-        pal.rebuild(max(r["rings"] for r in pal.press_log), retire=False)
-        critical = pal.model.critical_dt(pal.region.vertices()[: pal.region.free_count])
-        free_count = pal.region.free_count
-    try:
-        pal.set_probe(PROBE_OFF)
-        times = time_palpation(pal, 20, warmup=5, budget_s=1.0, max_steps=TIMING_STEPS // 20)  # about 1 s at most: no bar
-        step_s, timed = times.median, times.steps
-    except SimulationDiverged as exc:
-        raise InputError(str(exc)) from exc
-    step_us = step_s * 1e6
-    steps_per_s = 1.0 / step_s if step_s > 0 else math.inf
-    print(f"speed: {step_us:.1f} us per step (median of 20 batches, {timed} steps), {steps_per_s:,.0f} steps/s")
+    return presses
 
-    if args.json:
-        write_json(
-            args.json,
+
+def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:
+    """The JSON record of the run, but for its timing keys."""
+    tol = run.tol
+    return {
+        "scene": str(run.scene.path) if run.scene.path else None,
+        "mesh": mesh_json(run.mesh),
+        "device": str(run.device),
+        "contact": {"vertex": int(run.vertex), "point_mm": (np.asarray(run.point) * 1e3).tolist(), **run.contact_extra},
+        "press": {"depth_mm": run.depth * 1e3, "ramp_s": run.ramp, "hold_s": run.hold, "settle_s": run.settle},
+        "model": {
+            "rings": run.rings,
+            **(_auto_json(pal, tol) if tol is not None else {}),
+            "region_vertices": int(pal.region_vertices),
+            "region_springs": int(pal.region_springs),
+            "free_vertices": int(free_count),
+            "integrator": args.integrator,
+            "dt_s": run.dt,
+            "critical_dt_s": finite(critical),
+        },
+        "presses": [
             {
-                "scene": str(scene.path) if scene.path else None,
-                "mesh": _mesh_json(mesh),
-                "device": str(device),
-                "contact": {"vertex": int(vertex), "point_mm": (np.asarray(point) * 1e3).tolist(), **contact_extra},
-                "press": {"depth_mm": depth * 1e3, "ramp_s": ramp, "hold_s": hold, "settle_s": settle},
-                "model": {
-                    "rings": rings,
-                    **(_auto_json(pal, tol) if tol is not None else {}),
-                    "region_vertices": int(pal.region_vertices),
-                    "region_springs": int(pal.region_springs),
-                    "free_vertices": int(free_count),
-                    "integrator": args.integrator,
-                    "dt_s": dt,
-                    "critical_dt_s": _finite(critical),
-                },
-                "presses": [
-                    {
-                        "peak_force_N": _finite(r.peak_force_N),
-                        "recovery_error_mm": _finite(r.recovery_error_mm),
-                        "recovery_time_s": _finite(r.recovery_time_s),
-                        **({"rings_chosen": log["rings"]} if tol is not None else {}),
-                    }
-                    for r, log in zip(presses, pal.press_log if tol is not None else [None] * len(presses))
-                ],
-                "step_us_median": _finite(step_us),
-                "steps_per_s": _finite(steps_per_s),
-                "timing_steps": int(timed),
-            },
-        )
-        print(f"wrote {args.json}")
-    return 0
-
-
-def _auto_tol(args, rings, scene=None):
-    """The tolerance [m] of rings "auto" (--tol-mm, else the scene's [region] tol_mm, else AUTO_TOL_MM),
-    None for the others; --tol-mm with a fixed ring count is an error."""
-    if rings != "auto":
-        if args.tol_mm is not None:
-            where = f"--rings {rings}" if args.rings is not None else f"the scene's [region] rings = {rings}"
-            raise InputError(f"--tol-mm is for --rings auto (the region sized to a tolerance), not {where}")
-        return None
-    if args.tol_mm is not None:
-        return args.tol_mm * 1e-3
-    tol = getattr(scene, "tol", None)
-    return tol if tol is not None else AUTO_TOL_MM * 1e-3
+                "peak_force_N": finite(r.peak_force_N),
+                "recovery_error_mm": finite(r.recovery_error_mm),
+                "recovery_time_s": finite(r.recovery_time_s),
+                **({"rings_chosen": log["rings"]} if tol is not None else {}),
+            }
+            for r, log in zip(presses, pal.press_log if tol is not None else [None] * len(presses))
+        ],
+    }
 
 
 def _auto_json(pal, tol):

@@ -7,30 +7,27 @@ the presses run exactly as before (no per-step hook).
 from __future__ import annotations
 
 from ..errors import InputError
+from .args import count_arg, number_arg
 
 
 def add_record_args(parser) -> None:
     """The recording flags of `palpate`."""
-    from .palpate import _count_arg, _number_arg
-
     g = parser.add_argument_group("recording")
     g.add_argument("--usd", default=None, metavar="PATH", help="record the presses to a USD stage (.usda text, .usdc or .usd crate)")
-    g.add_argument("--usd-every", type=_count_arg, default=1, metavar="N", help="record every Nth step (default 1)")
+    g.add_argument("--usd-every", type=count_arg, default=1, metavar="N", help="record every Nth step (default 1)")
     g.add_argument("--normals", choices=("global", "search", "precomputed"), default="precomputed", help="how the recorded normals are updated (default precomputed: the region's vertices from the vertex-to-face incidence)")
     g.add_argument("--png", default=None, metavar="PATH", help="draw one frame to a PNG: displacement, region outline, probe")
-    g.add_argument("--png-at-s", type=_number_arg(">= 0"), default=None, metavar="S", help="time of that frame [s] from the first step (default: the end of the first press's hold, the deepest)")
+    g.add_argument("--png-at-s", type=number_arg(">= 0"), default=None, metavar="S", help="time of that frame [s] from the first step (default: the end of the first press's hold, the deepest)")
 
 
 def check_record_args(args) -> None:
     """Fail before any work when a recording path is unusable (suffix, folder)."""
+    from ..export.writers import check_output
+
     if args.usd:
-        from ..export.usd import check_usd_path
-
-        check_usd_path(args.usd)
+        check_output(args.usd, "stage", "--usd")
     if args.png:
-        from ..export.preview import check_png_path
-
-        check_png_path(args.png)
+        check_output(args.png, "image", "--png")
     elif args.png_at_s is not None:
         raise InputError("--png-at-s needs --png")
 

@@ -10,12 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..solvers import INTEGRATORS
+from .args import auto_tol, count_arg, get_device, number_arg, press_steps, print_notes, quiet_warp, rings_arg
 
 
 def add_parser(sub) -> None:
-    from ..solvers import INTEGRATORS
-    from .palpate import _count_arg, _number_arg, rings_arg
-
     p = sub.add_parser(
         "sweep",
         help="press N points spread over a scene or mesh at once (batched); write a force map (.csv/.npz)",
@@ -26,18 +25,18 @@ def add_parser(sub) -> None:
     )
     p.add_argument("scene", nargs="?", default=None, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     p.add_argument("--out", required=True, metavar="FILE", help="output table: .csv or .npz")
-    p.add_argument("--points", type=_count_arg, default=200, metavar="N", help="points to press (default 200)")
+    p.add_argument("--points", type=count_arg, default=200, metavar="N", help="points to press (default 200)")
     p.add_argument("--rings", type=rings_arg(("auto",)), default=None, metavar="{K,auto}", help="rings of each local region, or auto: each point's sized to --tol-mm as almsdm palpate --rings auto sizes it (default: the scene's)")
-    p.add_argument("--tol-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
-    p.add_argument("--depth-mm", "--depth", dest="depth_mm", type=_number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
-    p.add_argument("--ramp-s", type=_number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
-    p.add_argument("--hold-s", type=_number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
-    p.add_argument("--settle-s", type=_number_arg(">= 0"), default=None, metavar="S", help="settle window [s] (default: the scene's)")
+    p.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
+    p.add_argument("--depth-mm", "--depth", dest="depth_mm", type=number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
+    p.add_argument("--ramp-s", type=number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
+    p.add_argument("--hold-s", type=number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
+    p.add_argument("--settle-s", type=number_arg(">= 0"), default=None, metavar="S", help="settle window [s] (default: the scene's)")
     p.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's; default) or implicit (backward Euler, CG: one thread a palpation)")
-    p.add_argument("--dt-ms", type=_number_arg("> 0"), default=None, metavar="MS", help="time step [ms] (default 1, less where the model's critical step asks)")
-    p.add_argument("--scale-mm", type=_number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
+    p.add_argument("--dt-ms", type=number_arg("> 0"), default=None, metavar="MS", help="time step [ms] (default 1, less where the model's critical step asks)")
+    p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
-    p.add_argument("--chunk", type=_count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU, all points split over the GPUs)")
+    p.add_argument("--chunk", type=count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU, all points split over the GPUs)")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks as Ray tasks (one GPU each with a CUDA --device, else one CPU); ADDRESS of a cluster, or a local one")
     p.add_argument("--png", default=None, metavar="PATH", help="also draw the organ coloured by stiffness (matplotlib)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
@@ -47,8 +46,6 @@ def add_parser(sub) -> None:
 def _devices(text: str) -> list[str]:
     import warp as wp
 
-    from .main import _device
-
     if text == "all":
         found = [d.alias for d in wp.get_cuda_devices()]
         if not found:
@@ -57,34 +54,60 @@ def _devices(text: str) -> list[str]:
     names = [t.strip() for t in text.split(",") if t.strip()]
     if not names:
         raise InputError(f"--device: no device in {text!r}")
-    return list(dict.fromkeys(_device(n).alias for n in names))
+    return list(dict.fromkeys(get_device(n).alias for n in names))
 
 
 def cmd_sweep(args) -> int:
-    from .main import _quiet_warp
-    from ..export.output import check_writable
+    from ..batch.sweep import run_local, run_ray
+    from ..export.writers import check_output, write_output
     from ..progress import Progress
-    from ..scene.loader import resolve_scene_or_mesh
-    from ..batch.sweep import FORMATS, Parts, SweepPlan, auto_dt, run_local, run_ray, sample_points, write_table
-    from ..batch.sweep_auto import rings_summary
 
     out = Path(args.out)
-    if out.suffix.lower() not in FORMATS:
-        raise InputError(f"--out {out}: unknown format {out.suffix or '(none)'!r} (allowed: {', '.join(FORMATS)})")
-    check_writable(out)
+    check_output(out, "table", "--out")
     if args.png:
-        check_writable(args.png)
-    _quiet_warp()
+        check_output(args.png, "image", "--png")
+    quiet_warp()
     devices = _devices(args.device)
+    plan, scene, rings_text = _plan(args, devices)
+    parts, todo, left = _resume(out, plan)
+    steps = press_steps(plan.dt, plan.ramp, plan.hold, plan.settle)
+    t0 = time.perf_counter()
+    try:
+        with Progress(left * steps, enabled=args.progress, label="sweep") as bar:
+            if args.ray:
+                run_ray(plan, parts, todo, devices[0] != "cpu", None if args.ray == "local" else args.ray, bar)
+            else:
+                run_local(plan, parts, todo, devices, bar)
+    except KeyboardInterrupt:
+        print(f"almsdm: interrupted; the chunks done are in {parts.dir}: run the same command again to resume", file=sys.stderr)
+        return 130
+    elapsed = time.perf_counter() - t0
+    columns = parts.gather()
+    write_output(out, columns, "table", "--out")
+    parts.remove()
+    _report(columns, left, steps, elapsed)
+    print(f"wrote {out}")
+    if args.png:
+        from ..export.sweep_png import plot_sweep
+
+        plot_sweep(plan.mesh, columns, args.png, title=f"{scene.name}: stiffness under a {plan.depth * 1e3:g} mm press, {rings_text}")
+        print(f"wrote {args.png}")
+    return 0
+
+
+def _plan(args, devices):
+    """The scene, its mesh and the sweep's plan (points, chunks, rings, step); says what will be pressed.
+    Returns (plan, scene, the rings in words)."""
+    from ..batch.sweep import SweepPlan, auto_dt, sample_points
+    from ..batch.sweep_auto import rings_summary
+    from ..scene.loader import resolve_scene_or_mesh
+
     scene = resolve_scene_or_mesh(args.scene, scale_mm=args.scale_mm or 1.0)
     mesh = scene.load_mesh()
-    for note in mesh.notes:
-        print(f"note: {note}", file=sys.stderr)
+    print_notes(mesh)
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings
-    from .palpate import _auto_tol
-
-    tol = _auto_tol(args, rings, scene)
+    tol = auto_tol(args, rings, scene)
     depth = press.depth if args.depth_mm is None else args.depth_mm * 1e-3
     ramp = press.ramp if args.ramp_s is None else args.ramp_s
     hold = press.hold if args.hold_s is None else args.hold_s
@@ -111,27 +134,24 @@ def cmd_sweep(args) -> int:
         f"sweep: {len(vertices)} points ({len(np.unique(vertices))} distinct vertices), {rings_text}, press {depth * 1e3:g} mm "
         f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s), {args.integrator}, dt {plan.dt * 1e3:g} ms, chunks of {chunk} on {where}{lesion}"
     )
+    return plan, scene, rings_text
+
+
+def _resume(out: Path, plan):
+    """The chunks already written beside `out` (OUT.parts/): (parts, chunks to do, points left)."""
+    from ..batch.sweep import Parts
+
     parts = Parts(out, plan)
     done = parts.open()
     todo = [i for i in range(len(plan.chunks)) if i not in set(done)]
     if done:
         print(f"resuming: {len(done)} of {len(plan.chunks)} chunks already in {parts.dir}")
-    steps = _total_steps(plan)
     left = sum(e - b for i, (b, e) in enumerate(plan.chunks) if i in set(todo))
-    t0 = time.perf_counter()
-    try:
-        with Progress(left * steps, enabled=args.progress, label="sweep") as bar:
-            if args.ray:
-                run_ray(plan, parts, todo, cuda, None if args.ray == "local" else args.ray, bar)
-            else:
-                run_local(plan, parts, todo, devices, bar)
-    except KeyboardInterrupt:
-        print(f"almsdm: interrupted; the chunks done are in {parts.dir}: run the same command again to resume", file=sys.stderr)
-        return 130
-    elapsed = time.perf_counter() - t0
-    columns = parts.gather()
-    write_table(out, columns)
-    parts.remove()
+    return parts, todo, left
+
+
+def _report(columns, left: int, steps: int, elapsed: float) -> None:
+    """One line: the rate, the range of peak forces and the stiffest point."""
     stiff = columns["stiffness_N_per_mm"]
     k = int(np.nanargmax(stiff)) if np.isfinite(stiff).any() else 0
     print(
@@ -140,13 +160,6 @@ def cmd_sweep(args) -> int:
         f"stiffest at vertex {columns['vertex'][k]} {np.round([columns['x_mm'][k], columns['y_mm'][k], columns['z_mm'][k]], 1).tolist()} mm "
         f"({stiff[k]:.4f} N/mm)"
     )
-    print(f"wrote {out}")
-    if args.png:
-        from ..export.sweep_png import plot_sweep
-
-        plot_sweep(mesh, columns, args.png, title=f"{scene.name}: stiffness under a {depth * 1e3:g} mm press, {rings_text}")
-        print(f"wrote {args.png}")
-    return 0
 
 
 def _size(plan, scene, scales, tol, progress):
@@ -167,9 +180,3 @@ def _size(plan, scene, scales, tol, progress):
     print(f"auto rings: {distinct} contacts sized to {tol * 1e3:g} mm in {time.perf_counter() - t0:.2f} s "
           f"(an adaptive press each, CPU): {rings_summary(rings)}")
     return rings
-
-
-def _total_steps(plan) -> int:
-    from ..batch.sweep import press_steps
-
-    return press_steps(plan)

@@ -93,13 +93,18 @@ def measure_batch(mesh, rings, batch, device, *, steps=1000, repeats=5, threads=
 
 def measure_newton(mesh, device, steps=2000):
     """newton's semi-implicit spring solver on the same particles and springs (the whole mesh,
-    anchors left out: newton has no per-particle anchor spring), or why it was skipped."""
+    anchors left out: newton has no per-particle anchor spring), or why it was skipped.
+
+    Set up as newton's users set up springs alone: no gravity, no triangles (so no triangle
+    contact), no bodies, no contacts, and particle-particle contact off (``model.particle_grid =
+    None``, which SolverSemiImplicit.step checks before it launches its hash-grid contact kernel):
+    the timed step is newton's spring forces and integration, what our step computes."""
     try:
         import newton
     except ImportError:
         return {"skipped": "newton is not installed (pip install newton)"}
     try:
-        from ..scene.loader import TissueParams
+        from ..tissue.params import TissueParams
 
         t = TissueParams()
         builder = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
@@ -109,6 +114,7 @@ def measure_newton(mesh, device, steps=2000):
         for a, b in mesh.edges:
             builder.add_spring(int(a), int(b), t.edge_stiffness, t.edge_damping, control=0.0)
         model = builder.finalize(device=device)
+        model.particle_grid = None  # no particle-particle contact: springs alone
         solver = newton.solvers.SolverSemiImplicit(model)
         s0, s1 = model.state(), model.state()
         control = model.control()
@@ -140,6 +146,7 @@ def measure_newton(mesh, device, steps=2000):
             "steps_per_s": 1.0 / dt,
             "step_us_median": dt * 1e6,
             "captured": graph is not None,
+            "particle_contact": False,
         }
     except Exception as exc:  # a peer's API changes: report it, do not fail the benchmark
         return {"skipped": f"newton failed: {type(exc).__name__}: {exc}"}

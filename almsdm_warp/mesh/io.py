@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import InputError
 from .gmsh_v1 import is_gmsh_v1, read_gmsh_v1
 from .tissue_mesh import TissueMesh
-from .validate import _check_scale, build_mesh
+from .validate import check_scale
 from .vtk_polydata import read_vtk_polydata, vtk_dataset
 
 KNOWN_FORMATS = {
@@ -43,7 +43,7 @@ def load_mesh(path, *, scale: float = 1.0) -> TissueMesh:
     Returns a :class:`TissueMesh` in metres whose `notes` list every repair; raises InputError.
     """
     where = str(path)
-    _check_scale(scale, where)  # before reading, not after
+    check_scale(scale, where)  # before reading, not after
     p = Path(path)
     if not p.exists():
         raise InputError(f"{where}: no such file")
@@ -78,7 +78,7 @@ def load_mesh(path, *, scale: float = 1.0) -> TissueMesh:
     except Exception as exc:  # wrapped, never let through: the message says which file and format
         raise InputError(f"{where}: cannot read as {fmt}: {_explain_bare(exc, p) or _one_line(exc)}") from exc
 
-    mesh = build_mesh(vertices, triangles, tetrahedra, scale=scale, path=where)
+    mesh = TissueMesh.from_arrays(vertices, triangles, tetrahedra, scale=scale, path=where)
     if notes:
         mesh.notes = tuple(notes) + mesh.notes
     return mesh

@@ -8,6 +8,7 @@ from functools import cached_property
 import numpy as np
 
 from . import topology as topo
+from .validate import check_edge_lengths, repair_arrays
 
 
 @dataclass(eq=False)
@@ -105,9 +106,10 @@ class TissueMesh:
     @classmethod
     def from_arrays(cls, vertices, triangles=None, tetrahedra=None, *, scale: float = 1.0, path=None):
         """Validate and repair raw arrays (coordinates in mm x `scale`) into a mesh, as load_mesh does."""
-        from .validate import build_mesh
-
-        return build_mesh(vertices, triangles, tetrahedra, scale=scale, path=path)
+        fields, keep, where = repair_arrays(vertices, triangles, tetrahedra, scale=scale, path=path)
+        mesh = cls(**fields)
+        check_edge_lengths(mesh, keep, where)
+        return mesh
 
     def summary(self) -> str:
         kind = f"{self.tet_count} tets, " if self.is_volume else ""

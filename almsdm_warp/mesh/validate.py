@@ -2,7 +2,7 @@
 
 Fatal problems raise :class:`InputError` with one line that names the file, the element and the
 value; repairs (merged, dropped, reoriented) and findings (open surface, non-manifold edges,
-components) become one-line ``notes`` on the returned :class:`TissueMesh`.
+components) become one-line ``notes`` of the TissueMesh built from them.
 Element and vertex numbers in messages are those of the input, so that they can be found in the file.
 """
 
@@ -15,7 +15,6 @@ import numpy as np
 
 from . import topology as topo
 from ..errors import InputError
-from .tissue_mesh import TissueMesh
 
 MERGE_TOL = 1e-9
 """Vertices closer than this x the bounding-box diagonal are one vertex."""
@@ -37,16 +36,18 @@ MIN_EDGE_RELATIVE = 2.0**-20
 _KINDS = {3: ("triangle", "triangles"), 4: ("tetrahedron", "tetrahedra")}
 
 
-def build_mesh(vertices, triangles=None, tetrahedra=None, *, scale: float = 1.0, path=None) -> TissueMesh:
-    """Validate and repair raw arrays into a :class:`TissueMesh` (vertices in metres).
+def repair_arrays(vertices, triangles=None, tetrahedra=None, *, scale: float = 1.0, path=None):
+    """Validate and repair raw arrays into the fields of a TissueMesh (vertices in metres).
 
     vertices: [n, 3] coordinates in file units; file units x `scale` = millimetres.
     triangles: [m, 3] and tetrahedra: [t, 4] vertex indices (0-based); either may be None.
     When there are tetrahedra, the surface is recomputed from them and `triangles` is ignored.
+    Returns (fields, keep, where): the TissueMesh keyword arguments, the input index of each kept
+    vertex and the name messages use (for :func:`check_edge_lengths` on the mesh built from them).
     """
     where = str(path) if path is not None else "<arrays>"
     notes: list[str] = []
-    scale = _check_scale(scale, where)
+    scale = check_scale(scale, where)
     v = _as_vertices(vertices, where)
     tri = _as_elements(triangles, 3, where)
     tet = _as_elements(tetrahedra, 4, where)
@@ -107,19 +108,19 @@ def build_mesh(vertices, triangles=None, tetrahedra=None, *, scale: float = 1.0,
         elements = surface
     _report_components(elements, len(keep), notes)
 
-    mesh = TissueMesh(
+    fields = dict(
         vertices=v_kept * (scale * 1e-3),
         triangles=surface.astype(np.int32),
         tetrahedra=elements.astype(np.int32) if volume else np.zeros((0, 4), dtype=np.int32),
         path=path if path is None else str(path),
         notes=tuple(notes),
     )
-    _check_edge_lengths(mesh, keep, where)
-    return mesh
+    return fields, keep, where
 
 
 # -- input checks ---------------------------------------------------------------------------------
-def _check_scale(scale, where: str) -> float:
+def check_scale(scale, where: str) -> float:
+    """The mesh scale (millimetres per file unit) as a positive finite float, else InputError."""
     if isinstance(scale, bool) or not isinstance(scale, numbers.Real):
         raise InputError(f"{where}: scale must be a positive number, got {scale!r}")
     s = float(scale)
@@ -205,8 +206,9 @@ def _check_extent(v: np.ndarray, used: np.ndarray, scale: float, where: str) -> 
         )
 
 
-def _check_edge_lengths(mesh: TissueMesh, keep: np.ndarray, where: str) -> None:
-    """Every spring long enough for the force kernels and for float32 on the device."""
+def check_edge_lengths(mesh, keep: np.ndarray, where: str) -> None:
+    """Every spring of `mesh` (a TissueMesh) long enough for the force kernels and for float32 on the
+    device; `keep` maps its vertices to the input's, for the message."""
     if mesh.edge_count == 0:
         return
     length = mesh.edge_rest_length

@@ -10,7 +10,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
-from ..scene.schema import _FIELD_RULE, _check_value
+from ..checks import check_value
+
+PRESS_KEYS: dict[str, tuple[str, type, float, str]] = {
+    "depth_mm": ("depth", float, 1000.0, "> 0"),
+    "ramp_s": ("ramp", float, 1.0, "> 0"),
+    "hold_s": ("hold", float, 1.0, ">= 0"),
+    "settle_s": ("settle", float, 1.0, "> 0"),
+}
+"""The [press] section of a scene file: key -> (attribute, type, file units per SI unit, rule)."""
+
+_RULE = {attr: rule for attr, _kind, _factor, rule in PRESS_KEYS.values()}
 
 
 @dataclass(frozen=True)
@@ -28,7 +38,7 @@ class PressParams:
 
     def __post_init__(self):
         for f in fields(self):
-            _check_value(getattr(self, f.name), float, _FIELD_RULE[("press", f.name)], f"PressParams.{f.name}")
+            check_value(getattr(self, f.name), float, _RULE[f.name], f"PressParams.{f.name}")
 
 
 def check_press(**values) -> None:

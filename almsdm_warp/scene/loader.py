@@ -12,13 +12,15 @@ from __future__ import annotations
 
 import difflib
 import os
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import InputError
+from ..checks import AUTO, check_rings, check_value, describe
 from ..protocol.schedule import PressParams
-from .schema import _FIELD_RULE, AUTO, SCHEMA, _check_rings, _check_value, _describe
+from ..tissue.params import TissueParams
+from .schema import SCHEMA
 
 try:
     import tomllib
@@ -32,33 +34,6 @@ if TYPE_CHECKING:
 DEFAULT_SCENE = "stomach"
 """The scene used when none is given."""
 
-
-@dataclass(frozen=True)
-class TissueParams:
-    """Mass, spring and damper parameters of the tissue, in SI units.
-
-    The defaults are the stomach scene's, calibrated so that a 10 mm press with 4 rings gives the
-    paper's feedback force (about 2.4 N, Table 1) and the explicit scheme is stable at dt = 1 ms
-    (docs/calibration.md).
-    """
-
-    density: float = 1000.0
-    """Tissue density [kg/m^3], for the lumped vertex masses."""
-    thickness: float = 25.0e-3
-    """Shell thickness [m] of a surface mesh, for its lumped masses (area x thickness x density);
-    ignored for a tet mesh, whose masses come from the tet volumes."""
-    edge_stiffness: float = 62.0
-    """k_ij [N/m]: stiffness of the spring on each mesh edge, eqs. (4)-(6)."""
-    edge_damping: float = 0.02
-    """d_ij [N s/m]: damping along each mesh edge, eqs. (4)-(6)."""
-    anchor_stiffness: float = 124.0
-    """k_i [N/m]: stiffness of the spring that pulls each vertex back to its rest position, eq. (3)."""
-    anchor_damping: float = 0.1
-    """d_i [N s/m]: damping of each vertex's velocity, eq. (3)."""
-
-    def __post_init__(self):
-        for f in fields(self):
-            _check_value(getattr(self, f.name), float, _FIELD_RULE[("tissue", f.name)], f"TissueParams.{f.name}")
 
 
 @dataclass(frozen=True)
@@ -82,16 +57,16 @@ class Scene:
     """A sphere of stiffer tissue (the scene's optional [lesion] table), or None."""
     tol: float | None = None
     """With rings = "auto": the displacement tolerance [m] the region is sized to (None: the
-    command line's default, cli_palpate.AUTO_TOL_MM); None otherwise."""
+    command line's default, almsdm_warp.cli.args.AUTO_TOL_MM); None otherwise."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
         if self.path is not None:
             object.__setattr__(self, "path", Path(self.path))
-        object.__setattr__(self, "scale_mm", _check_value(self.scale_mm, float, "> 0", "Scene.scale_mm"))
-        _check_rings(self.rings, "Scene.rings")
+        object.__setattr__(self, "scale_mm", check_value(self.scale_mm, float, "> 0", "Scene.scale_mm"))
+        check_rings(self.rings, "Scene.rings")
         if self.tol is not None:
-            object.__setattr__(self, "tol", _check_value(self.tol, float, "> 0", "Scene.tol"))
+            object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
                 raise InputError(f"Scene.tol is for rings = {AUTO!r} (the region sized to a tolerance), "
                                  f"but rings = {self.rings!r}")
@@ -157,69 +132,18 @@ def load_scene(path) -> Scene:
     """
     where = str(path)
     p = Path(path)
-    if not p.exists():
-        raise InputError(f"{where}: no such scene file")
-    if p.is_dir():
-        raise InputError(f"{where}: is a directory, not a scene file")
-    try:
-        with open(p, "rb") as f:
-            data = tomllib.load(f)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{where}: TOML syntax error: {exc}") from exc
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{where}: not a UTF-8 text file (TOML), byte {exc.start} is 0x{exc.object[exc.start]:02x}") from exc
-    except PermissionError as exc:
-        raise InputError(f"{where}: permission denied, cannot read the scene file") from exc
-    except OSError as exc:
-        raise InputError(f"{where}: cannot read the scene file: {exc.strerror or exc}") from exc
-
-    allowed_sections = ", ".join(f"[{s}]" for s in SCHEMA)
-    values: dict[str, dict[str, object]] = {section: {} for section in SCHEMA}
+    data = _read_toml(p, where)
     lesion = None
-    if "lesion" in data:  # an optional table of its own (an array and scalars: almsdm_warp/lesion.py)
+    if "lesion" in data:  # an optional table of its own (an array and scalars: almsdm_warp/tissue/lesion.py)
         from ..tissue.lesion import parse_lesion
 
         lesion = parse_lesion(data.pop("lesion"), where)
-    for section, table in data.items():
-        if section not in SCHEMA:
-            what = "section" if isinstance(table, dict) else "top-level key"
-            raise InputError(
-                f"{where}: unknown {what} {section!r}{_did_you_mean(section, SCHEMA, '[{}]')}; "
-                f"allowed sections: {allowed_sections}"
-            )
-        if not isinstance(table, dict):
-            raise InputError(f"{where}: [{section}] must be a table (a [{section}] section), got {_describe(table)}")
-        keys = SCHEMA[section]
-        for key, value in table.items():
-            if key not in keys:
-                raise InputError(
-                    f"{where}: unknown key {key!r} in [{section}]{_did_you_mean(key, keys, '{}')}; "
-                    f"allowed: {', '.join(keys)}"
-                )
-            attr, kind, factor, rule = keys[key]
-            try:
-                if (section, key) == ("region", "rings"):
-                    value = _check_rings(value, f"[{section}] {key}")
-                else:
-                    value = _check_value(value, kind, rule, f"[{section}] {key}")
-            except InputError as exc:
-                raise InputError(f"{where}: {exc}") from None
-            if kind is float and factor != 1.0:
-                value = value / factor  # mm -> m: divide (correctly rounded: 10 mm is exactly 0.01)
-            values[section][attr] = value
-
+    values = _section_values(data, where)
     region = values["region"]
     if "tol" in region and region.get("rings") != AUTO:
         rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
         raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
-    raw_mesh = values["mesh"].get("path")
-    if raw_mesh is None:
-        raise InputError(f"{where}: missing [mesh] path (the mesh file, relative to the scene file)")
-    mesh_path = Path(os.path.abspath(p.parent / Path(str(raw_mesh)).expanduser()))
-    if not mesh_path.exists():
-        raise InputError(f"{where}: mesh file not found: {mesh_path} ([mesh] path = {raw_mesh!r})")
-    if mesh_path.is_dir():
-        raise InputError(f"{where}: [mesh] path = {raw_mesh!r} is a directory, not a mesh file ({mesh_path})")
+    mesh_path = _mesh_path(values["mesh"].get("path"), p, where)
 
     try:  # the SI values are checked again: say which file they came from
         return Scene(
@@ -234,6 +158,71 @@ def load_scene(path) -> Scene:
         )
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None
+
+
+def _read_toml(p: Path, where: str) -> dict:
+    """The scene file's TOML document; InputError when it is missing, unreadable or not TOML."""
+    if not p.exists():
+        raise InputError(f"{where}: no such scene file")
+    if p.is_dir():
+        raise InputError(f"{where}: is a directory, not a scene file")
+    try:
+        with open(p, "rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{where}: TOML syntax error: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{where}: not a UTF-8 text file (TOML), byte {exc.start} is 0x{exc.object[exc.start]:02x}") from exc
+    except PermissionError as exc:
+        raise InputError(f"{where}: permission denied, cannot read the scene file") from exc
+    except OSError as exc:
+        raise InputError(f"{where}: cannot read the scene file: {exc.strerror or exc}") from exc
+
+
+def _section_values(data: dict, where: str) -> dict[str, dict[str, object]]:
+    """Section -> attribute -> value in SI units, every key checked against SCHEMA."""
+    allowed_sections = ", ".join(f"[{s}]" for s in SCHEMA)
+    values: dict[str, dict[str, object]] = {section: {} for section in SCHEMA}
+    for section, table in data.items():
+        if section not in SCHEMA:
+            what = "section" if isinstance(table, dict) else "top-level key"
+            raise InputError(
+                f"{where}: unknown {what} {section!r}{_did_you_mean(section, SCHEMA, '[{}]')}; "
+                f"allowed sections: {allowed_sections}"
+            )
+        if not isinstance(table, dict):
+            raise InputError(f"{where}: [{section}] must be a table (a [{section}] section), got {describe(table)}")
+        keys = SCHEMA[section]
+        for key, value in table.items():
+            if key not in keys:
+                raise InputError(
+                    f"{where}: unknown key {key!r} in [{section}]{_did_you_mean(key, keys, '{}')}; "
+                    f"allowed: {', '.join(keys)}"
+                )
+            attr, kind, factor, rule = keys[key]
+            try:
+                if (section, key) == ("region", "rings"):
+                    value = check_rings(value, f"[{section}] {key}")
+                else:
+                    value = check_value(value, kind, rule, f"[{section}] {key}")
+            except InputError as exc:
+                raise InputError(f"{where}: {exc}") from None
+            if kind is float and factor != 1.0:
+                value = value / factor  # mm -> m: divide (correctly rounded: 10 mm is exactly 0.01)
+            values[section][attr] = value
+    return values
+
+
+def _mesh_path(raw_mesh, scene_path: Path, where: str) -> Path:
+    """[mesh] path, absolute (relative to the scene file's folder); it must name a file."""
+    if raw_mesh is None:
+        raise InputError(f"{where}: missing [mesh] path (the mesh file, relative to the scene file)")
+    mesh_path = Path(os.path.abspath(scene_path.parent / Path(str(raw_mesh)).expanduser()))
+    if not mesh_path.exists():
+        raise InputError(f"{where}: mesh file not found: {mesh_path} ([mesh] path = {raw_mesh!r})")
+    if mesh_path.is_dir():
+        raise InputError(f"{where}: [mesh] path = {raw_mesh!r} is a directory, not a mesh file ({mesh_path})")
+    return mesh_path
 
 
 def _did_you_mean(word: str, choices, fmt: str) -> str:
@@ -296,5 +285,5 @@ def resolve_scene_or_mesh(arg=None, *, scale_mm: float = 1.0) -> Scene:
         raise InputError(f"{arg}: no such file (give a scene .toml or a mesh file{hint})")
     if p.is_dir():
         raise InputError(f"{arg}: is a directory, not a scene or mesh file")
-    scale_mm = _check_value(scale_mm, float, "> 0", "scale_mm")
+    scale_mm = check_value(scale_mm, float, "> 0", "scale_mm")
     return Scene(path=None, mesh_path=Path(os.path.abspath(p)), scale_mm=scale_mm)

@@ -11,7 +11,7 @@ import warp as wp
 
 from ..kernels.arrays import ProbeArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
-from ..scene.loader import TissueParams
+from ..tissue.params import TissueParams
 
 PROBE_OFF = 0
 """The probe does not touch: every free vertex moves under the tissue's forces alone."""

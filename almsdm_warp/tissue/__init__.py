@@ -1,1 +1,1 @@
-"""Tissue: the material parameters and lesions (regions of stiffer tissue)."""
+"""Tissue: the material parameters (params) and lesions (regions of stiffer tissue)."""
