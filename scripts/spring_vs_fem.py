@@ -196,7 +196,7 @@ SHELL_MATERIALS = (
 def shell_table(subdivisions, sphere_radius=0.01, depth=0.005, network_max=5):
     print("\n(b) icosphere R 50 mm, sphere R 10 mm pressed 5 mm: membrane E t on a Winkler foundation kappa")
     kappa = SHELL_MATERIALS[0][1].foundation
-    print(f"foundation alone, kappa 1 kPa/mm: flat closed form kappa pi d^2 (R - d/3) = "
+    print(f"foundation alone, kappa {kappa * 1e-6:g} kPa/mm: flat closed form kappa pi d^2 (R - d/3) = "
           f"{winkler_force_flat(kappa, sphere_radius, depth):.4f} N; on the R 50 mm sphere (quadrature) "
           f"{winkler_force_on_sphere(kappa, 0.05, sphere_radius, depth):.4f} N\n")
     print("| material | subdivisions | vertices | edge [mm] | foundation only [N] | membrane + foundation, "
