@@ -8,8 +8,8 @@ the project's kernels), against the material it was derived from:
 (b) a flat membrane pulled in its plane (right, equilateral and jittered triangles): effective E t, nu;
 (c) the Poisson correction (law "young" or "indentation") at nu = 0.3, 0.45, 0.49: the network's
     Young's and indentation moduli, E/(1-nu^2), against the material's;
-(d) a flat punch pressed into a tet block, the network against linear finite elements (P1 tets,
-    assembled here) on the same mesh and supports.
+(d) a flat punch pressed into a tet block, the network against linear finite elements (P1 tets of
+    almsdm_warp.evaluation.fem) on the same mesh and supports.
 
     python scripts/material_check.py          # the tables of docs/calibration.md, "Springs from a material"
 
@@ -23,9 +23,9 @@ import sys
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from scipy.spatial import Delaunay
 
+from almsdm_warp.evaluation import fem
 from almsdm_warp.mesh.topology import tet_signed_volumes, unique_edges
 from almsdm_warp.tissue.material import Material, edge_stiffness
 
@@ -106,54 +106,39 @@ def membrane(n, size=(1.0, 1.0), kind="right", seed=0):
 
 
 # -- linear statics ----------------------------------------------------------------------------------
-def spring_matrix(points, edges, k):
-    """Stiffness matrix of linear springs on `edges`: block k n n^T, shape [dim n, dim n], CSR."""
-    dim = points.shape[1]
-    d = points[edges[:, 1]] - points[edges[:, 0]]
-    unit = d / np.linalg.norm(d, axis=1, keepdims=True)
-    block = k[:, None, None] * unit[:, :, None] * unit[:, None, :]
+def edge_block_matrix(edges, blocks, n_points):
+    """Assemble one [dim, dim] block B per edge ij (+B at ii and jj, -B at ij and ji), CSR [dim n, dim n]."""
+    dim = blocks.shape[1]
     dof = lambda v: (v[:, None] * dim + np.arange(dim)).reshape(-1, dim)  # noqa: E731
     i, j = dof(edges[:, 0]), dof(edges[:, 1])
     rows, cols, vals = [], [], []
     for a, b, sign in ((i, i, 1), (j, j, 1), (i, j, -1), (j, i, -1)):
         rows.append(np.repeat(a, dim, axis=1).ravel())
         cols.append(np.tile(b, (1, dim)).ravel())
-        vals.append(sign * block.reshape(len(edges), -1).ravel())
-    n = len(points) * dim
+        vals.append(sign * blocks.reshape(len(edges), -1).ravel())
+    n = n_points * dim
     return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)).tocsr()
 
 
+def spring_matrix(points, edges, k):
+    """Stiffness matrix of linear springs on `edges`: block k n n^T, shape [dim n, dim n], CSR."""
+    d = points[edges[:, 1]] - points[edges[:, 0]]
+    unit = d / np.linalg.norm(d, axis=1, keepdims=True)
+    return edge_block_matrix(edges, k[:, None, None] * unit[:, :, None] * unit[:, None, :], len(points))
+
+
 def fem_matrix(points, tets, young, nu):
-    """Stiffness matrix of linear (P1) tetrahedra of an isotropic material, shape [3 n, 3 n], CSR."""
-    lam, mu = young * nu / ((1 + nu) * (1 - 2 * nu)), young / (2 * (1 + nu))
-    D = lam * np.outer([1, 1, 1, 0, 0, 0], [1, 1, 1, 0, 0, 0]) + mu * np.diag([2, 2, 2, 1, 1, 1])
-    p = points[tets]
-    J = p[:, 1:] - p[:, :1]  # rows: edge vectors from corner 0
-    grad = np.linalg.solve(J, np.array([[-1, 1, 0, 0], [-1, 0, 1, 0], [-1, 0, 0, 1]], float))  # [t, 3, 4]
-    vol = np.abs(np.linalg.det(J)) / 6.0
-    B = np.zeros((len(tets), 6, 12))
-    for a in range(4):
-        gx, gy, gz = grad[:, 0, a], grad[:, 1, a], grad[:, 2, a]
-        B[:, 0, 3 * a], B[:, 1, 3 * a + 1], B[:, 2, 3 * a + 2] = gx, gy, gz
-        B[:, 3, 3 * a], B[:, 3, 3 * a + 1] = gy, gx
-        B[:, 4, 3 * a + 1], B[:, 4, 3 * a + 2] = gz, gy
-        B[:, 5, 3 * a], B[:, 5, 3 * a + 2] = gz, gx
-    Ke = vol[:, None, None] * np.einsum("tki,kl,tlj->tij", B, D, B)
-    dofs = (tets[:, :, None] * 3 + np.arange(3)).reshape(len(tets), 12)
-    rows = np.repeat(dofs, 12, axis=1).ravel()
-    cols = np.tile(dofs, (1, 12)).ravel()
-    n = len(points) * 3
-    return sp.coo_matrix((Ke.ravel(), (rows, cols)), shape=(n, n)).tocsr()
+    """Stiffness matrix of linear (P1) tetrahedra, shape [3 n, 3 n]: almsdm_warp.evaluation.fem's."""
+    return fem.stiffness(points, np.asarray(tets, dtype=np.int64), young, nu)
 
 
 def solve_fixed(K, fixed, value):
     """Displacements u with u[fixed] = value and zero force on every other dof; also the reactions K u."""
-    n = K.shape[0]
-    u = np.zeros(n)
-    u[fixed] = value
-    free = np.setdiff1d(np.arange(n), fixed)
-    rhs = -K[free][:, fixed] @ u[fixed]
-    u[free] = spla.spsolve(K[free][:, free].tocsc(), rhs)
+    mask = np.zeros(K.shape[0], dtype=bool)
+    mask[fixed] = True
+    values = np.zeros(K.shape[0])
+    values[fixed] = value
+    u, _ = fem.solve_dirichlet(K, mask, values)
     return u, K @ u
 
 

@@ -132,7 +132,7 @@ def symmetry_planes(nodes: np.ndarray, axes: str, centre_xy=(0.0, 0.0), tol: flo
     return mask
 
 
-def _sphere_gap(nodes: np.ndarray, radius: float, depth: float, centre_xy) -> np.ndarray:
+def sphere_gap(nodes: np.ndarray, radius: float, depth: float, centre_xy) -> np.ndarray:
     """Vertical gap [m] from each node up to the sphere's lower surface (negative: overlap).
 
     The sphere is lowered along z until it first touches a node, then `depth` further.
@@ -192,6 +192,49 @@ def _active_set(compliance: np.ndarray, gap: np.ndarray, tol: float, max_iter: i
     raise RuntimeError(f"the contact set did not settle in {max_iter} iterations")
 
 
+def solve_contact(stiff, fixed_dofs, surface, gap, *, tol, load=None, first=None):
+    """Frictionless one-sided contact along z on `surface` nodes of any linear(ised) stiffness matrix.
+
+    Solves K u = f - sum_c p_c e_z(c), u[fixed] = 0, u_z(c) <= gap(c), p >= 0, p (gap - u_z) = 0.
+    stiff [3n, 3n] (dof 3 i + c), fixed_dofs: mask [3n]; surface: node ids that may touch (none
+    fixed along z); gap [n] [m] (inf where no contact can be); load f [3n] (default zero); first:
+    the nodes tried first (default: those with gap < 0.5 x the deepest overlap). The candidate set
+    grows until no surface node outside it penetrates. Returns (u [n, 3], p [n] (>= 0 on the nodes
+    in contact, 0 elsewhere), active-set iterations of the last pass).
+    """
+    n = stiff.shape[0] // 3
+    fixed_dofs = np.asarray(fixed_dofs, dtype=bool).ravel()
+    free = np.flatnonzero(~fixed_dofs)
+    position = np.full(3 * n, -1)
+    position[free] = np.arange(len(free))
+    stiff = sp.csr_matrix(stiff)
+    lu = spla.splu(sp.csc_matrix(stiff[free][:, free]), permc_spec="MMD_AT_PLUS_A")
+    preload = np.zeros(3 * n)
+    if load is not None:
+        preload[free] = lu.solve(np.asarray(load, dtype=np.float64).ravel()[free])
+    surface = np.asarray(surface, dtype=np.int64)
+    if first is None:
+        first = surface[gap[surface] < 0.5 * max(-gap[surface].min(), 0.0)]
+    candidates = np.asarray(first, dtype=np.int64)
+    for _ in range(10):
+        rows = position[3 * candidates + 2]
+        p, iterations = _active_set(_compliance(lu, rows, len(free)), gap[candidates] - preload[3 * candidates + 2], tol)
+        rhs = np.zeros(len(free))
+        rhs[rows] = -p
+        u = preload.copy()
+        u[free] += lu.solve(rhs)
+        uz = u[2::3]
+        missed = np.setdiff1d(surface[uz[surface] > gap[surface] + tol], candidates)
+        if not len(missed):
+            break
+        candidates = np.union1d(candidates, missed)
+    else:
+        raise RuntimeError("the contact zone kept growing past the candidate nodes")
+    pressure = np.zeros(n)
+    pressure[candidates] = p
+    return u.reshape(-1, 3), pressure, iterations
+
+
 def sphere_press(vertices, tets, *, young, poisson, sphere_radius, depth, fixed, order=2, centre_xy=(0.0, 0.0),
                  copies=1) -> PressResult:
     """A rigid frictionless sphere pressed `depth` [m] (from first touch) into the top, along -z.
@@ -206,36 +249,23 @@ def sphere_press(vertices, tets, *, young, poisson, sphere_radius, depth, fixed,
     nodes, elements = (vertices, tets) if order == 1 else p2_nodes(vertices, tets)
     stiff = stiffness(nodes, elements, young, poisson)
     fixed_dofs = np.asarray(fixed(nodes), dtype=bool).ravel()
-    free = np.flatnonzero(~fixed_dofs)
-    position = np.full(3 * len(nodes), -1)
-    position[free] = np.arange(len(free))
-    lu = spla.splu(sp.csc_matrix(stiff[free][:, free]), permc_spec="MMD_AT_PLUS_A")
-    gap = _sphere_gap(nodes, sphere_radius, depth, centre_xy)
+    gap = sphere_gap(nodes, sphere_radius, depth, centre_xy)
     surface = surface_nodes(elements)
     surface = surface[~fixed_dofs[3 * surface + 2]]
-    candidates = surface[gap[surface] < 0.5 * depth]
-    tol = 1e-9 * depth
-    for iteration_total in range(10):
-        rows = position[3 * candidates + 2]
-        p, iterations = _active_set(_compliance(lu, rows, len(free)), gap[candidates], tol)
-        load = np.zeros(len(free))
-        load[rows] = -p
-        u = np.zeros(3 * len(nodes))
-        u[free] = lu.solve(load)
-        uz = u.reshape(-1, 3)[:, 2]
-        missed = np.setdiff1d(surface[uz[surface] > gap[surface] + tol], candidates)
-        if not len(missed):
-            break
-        candidates = np.union1d(candidates, missed)
-    else:
-        raise RuntimeError("the contact zone kept growing past the candidate nodes")
-    touching = candidates[p > 0.0]
+    u, p, iterations = solve_contact(stiff, fixed_dofs, surface, gap, tol=1e-9 * depth,
+                                     first=surface[gap[surface] < 0.5 * depth])
+    return press_result(nodes, u, p, iterations, centre_xy, copies)
+
+
+def press_result(nodes, u, p, iterations, centre_xy=(0.0, 0.0), copies=1) -> PressResult:
+    """PressResult of a contact solve: total force, contact radius about the press axis, contact nodes."""
+    touching = np.flatnonzero(p > 0.0)
     radial = np.hypot(nodes[touching, 0] - centre_xy[0], nodes[touching, 1] - centre_xy[1])
     return PressResult(
         force=float(p.sum()) * copies,
         contact_radius=float(radial.max()) if len(radial) else 0.0,
         contact_nodes=touching,
         nodes=nodes,
-        displacement=u.reshape(-1, 3),
+        displacement=np.asarray(u).reshape(-1, 3),
         iterations=iterations,
     )
