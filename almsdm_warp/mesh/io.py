@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .gmsh_refs import check_gmsh_node_references
 from .gmsh_v1 import is_gmsh_v1, read_gmsh_v1
 from .tissue_mesh import TissueMesh
 from .validate import check_scale
@@ -261,7 +262,9 @@ def _read_legacy_vtk(p: Path, where: str, data: bytes):
 def _read_meshio(p: Path, where: str, data: bytes):
     import meshio
 
-    reader = {".vtu": meshio.vtu.read, ".vtk": meshio.vtk.read, ".msh": meshio.gmsh.read}[p.suffix.lower()]
+    if p.suffix.lower() == ".msh":
+        check_gmsh_node_references(data.removeprefix(b"\xef\xbb\xbf"), where)
+    reader = {".vtu": meshio.vtu.read, ".msh": meshio.gmsh.read}[p.suffix.lower()]
     captured = _stdio.StringIO()
     with contextlib.redirect_stderr(captured):  # meshio prints its warnings to stderr: keep them as notes
         m = reader(os.fspath(p))

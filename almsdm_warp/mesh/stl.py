@@ -31,6 +31,8 @@ def binary_stl_count(data: bytes) -> int | None:
 def read_stl(data: bytes, where: str):
     """(vertices [3m, 3] float64, triangles [m, 3] int64) from the bytes of an STL file."""
     n = binary_stl_count(data)
+    if n is None:  # not binary: text, where a UTF-8 byte-order mark may come first
+        data = data.removeprefix(b"\xef\xbb\xbf")
     if n is not None:
         corners = np.frombuffer(data, dtype=_BINARY, count=n, offset=84)["corners"]
         vertices = corners.reshape(-1, 3).astype(np.float64)
