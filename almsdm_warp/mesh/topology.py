@@ -25,8 +25,21 @@ def unique_edges(triangles: np.ndarray, tetrahedra: np.ndarray | None = None) ->
         pairs = tri[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)
     if len(pairs) == 0:
         return np.zeros((0, 2), dtype=np.int32)
-    pairs = np.sort(pairs, axis=1)
-    return np.unique(pairs, axis=0).astype(np.int32)
+    return unique_pairs(np.sort(pairs, axis=1))[0].astype(np.int32)
+
+
+def unique_pairs(pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unique rows sorted lexicographically [e, 2], count of each [e]) of non-negative int pairs:
+    np.unique(pairs, axis=0, return_counts=True), through one int64 key per row (a 1-D sort
+    instead of a row-wise one, ~10x faster on millions of edges)."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(pairs) == 0:
+        return pairs, np.zeros(0, dtype=np.int64)
+    m = int(pairs[:, 1].max()) + 1
+    if int(pairs[:, 0].max()) >= (np.iinfo(np.int64).max - m) // m:
+        return np.unique(pairs, axis=0, return_counts=True)
+    keys, counts = np.unique(pairs[:, 0] * m + pairs[:, 1], return_counts=True)
+    return np.stack([keys // m, keys % m], axis=1), counts
 
 
 def csr_adjacency(edges: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -343,8 +343,7 @@ def _orient_closed_surface(v, tri, notes):
 # -- findings -------------------------------------------------------------------------------------
 def _edge_counts(tri: np.ndarray):
     """(unique sorted edges [e, 2], number of triangles using each [e])."""
-    pairs = np.sort(tri[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
-    return np.unique(pairs, axis=0, return_counts=True)
+    return topo.unique_pairs(np.sort(tri[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1))
 
 
 def _report_surface_edges(surface, keep, notes, volume):
