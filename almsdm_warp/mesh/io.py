@@ -11,6 +11,7 @@ import io as _stdio
 import os
 import re
 import stat
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -262,12 +263,20 @@ def _read_legacy_vtk(p: Path, where: str, data: bytes):
 def _read_meshio(p: Path, where: str, data: bytes):
     import meshio
 
+    stripped = strip_bom(data, where)
     if p.suffix.lower() == ".msh":
-        check_gmsh_node_references(data.removeprefix(b"\xef\xbb\xbf"), where)
+        check_gmsh_node_references(stripped, where)
     reader = {".vtu": meshio.vtu.read, ".msh": meshio.gmsh.read}[p.suffix.lower()]
     captured = _stdio.StringIO()
-    with contextlib.redirect_stderr(captured):  # meshio prints its warnings to stderr: keep them as notes
-        m = reader(os.fspath(p))
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(contextlib.redirect_stderr(captured))  # meshio's warnings: kept as notes
+        source = os.fspath(p)
+        if stripped is not data:  # meshio reads a path: give it the bytes without the byte-order mark
+            tmp = stack.enter_context(tempfile.TemporaryDirectory())
+            source = os.path.join(tmp, "mesh" + p.suffix.lower())
+            with open(source, "wb") as f:
+                f.write(stripped)
+        m = reader(source)
     notes = [f"meshio: {' '.join(line.split())}" for line in captured.getvalue().splitlines() if line.strip()]
 
     blocks = {"triangle": [], "tetra": []}
