@@ -52,6 +52,11 @@ def converted_files():
         meshio.write(folder / "liver_v22.msh", grid, file_format="gmsh22", binary=False)
         meshio.write(folder / "liver_v41.msh", grid, file_format="gmsh", binary=False)
         meshio.write(folder / "liver_grid.vtk", grid, file_format="vtk", binary=False)
+        meshio.write(folder / "liver_grid_binary.vtk", grid, file_format="vtk", binary=True)
+        cells = np.hstack([np.full((len(t), 1), 3), t]).astype(">i4")
+        (folder / "stomach_polydata_binary.vtk").write_bytes(
+            b"# vtk DataFile Version 3.0\nstomach\nBINARY\nDATASET POLYDATA\n" + f"POINTS {len(v)} double\n".encode()
+            + np.asarray(v, ">f8").tobytes() + f"\nPOLYGONS {len(t)} {cells.size}\n".encode() + cells.tobytes() + b"\n")
         for path in folder.iterdir():
             _converted[path.name] = path.read_bytes()
     return _converted
@@ -114,7 +119,8 @@ def test_corrupted_files_in_every_other_format(data):
             assert_usable(load_mesh(target))
         _loaded_ok.add(name)
     label = {"stomach_polydata.vtk": ".vtk POLYDATA", "liver_v22.msh": ".msh v2.2", "liver_v41.msh": ".msh v4.1",
-             "liver_grid.vtk": ".vtk grid"}.get(name, Path(name).suffix)
+             "liver_grid.vtk": ".vtk grid", "liver_grid_binary.vtk": ".vtk binary grid",
+             "stomach_polydata_binary.vtk": ".vtk binary POLYDATA"}.get(name, Path(name).suffix)
     corrupt_and_load(data, Path(name), files[name], label)
 
 
@@ -330,3 +336,63 @@ def test_obj_face_index_out_of_range_names_the_line(face, message, tmp_path):
     path.write_text("\n".join(lines))
     with pytest.raises(InputError, match=message):
         load_mesh(path)
+
+
+@fuzz_settings(40)
+@given(data=st.data())
+def test_truncated_anywhere_bad_indices_and_boms(data):
+    """Every converted format (binary VTK included) cut at a random byte, given a random BOM, or
+    with one index replaced by a negative or out-of-range number: a usable mesh or one clear line;
+    a cut file never loads fewer elements than the whole one without an error."""
+    files = converted_files()
+    name = data.draw(st.sampled_from(sorted(files)), label="file")
+    content = files[name]
+    kind = data.draw(st.sampled_from(["truncate", "bom", "index"]), label="kind")
+    if kind == "truncate":
+        content = content[: data.draw(st.integers(0, len(content) - 1), label="cut")]
+    elif kind == "bom":
+        content = data.draw(st.sampled_from([b"\xef\xbb\xbf", b"\xff\xfe", b"\xfe\xff"]), label="bom") + content
+    else:
+        content = _replace_an_index(data, name, content)
+    with tempfile.TemporaryDirectory() as tmp:
+        target = Path(tmp) / name
+        target.write_bytes(content)
+        outcome = load_or_error(target, "truncated_bom_index", f"{Path(name).suffix} {kind}")
+        if outcome == "ok" and kind == "truncate":
+            whole = Path(tmp) / ("whole_" + name)
+            whole.write_bytes(files[name])
+            full, cut = load_mesh(whole), load_mesh(target)
+            assert (cut.triangle_count, cut.tet_count) == (full.triangle_count, full.tet_count)
+        if kind == "bom" and content.startswith(b"\xef\xbb\xbf") and not name.endswith(".ply"):
+            assert outcome == "ok" or name.endswith("binary.vtk"), name
+
+
+def _replace_an_index(data, name, content):
+    """One element index in the file replaced by -4, 0 or a number past the last vertex."""
+    bad = data.draw(st.sampled_from([b"-4", b"-1", b"0", b"99999"]), label="index")
+    lines = content.split(b"\n")
+    markers = (b"f ", b"3 ") if not name.endswith(".msh") else (b"",)
+    rows = [i for i, line in enumerate(lines) if line.startswith(markers) and len(line.split()) >= 4
+            and all(w.isdigit() for w in line.split()[1:])]
+    if not rows or name.endswith((".stl", "binary.vtk")):
+        return content
+    i = data.draw(st.sampled_from(rows), label="line")
+    words = lines[i].split()
+    words[-1] = bad
+    lines[i] = b" ".join(words)
+    return b"\n".join(lines)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="no FIFOs here")
+def test_special_files_for_every_suffix(tmp_path):
+    """Each suffix linked to /dev/zero, /dev/urandom and a FIFO: refused at once, never read."""
+    import os
+
+    os.mkfifo(tmp_path / "pipe")
+    targets = [t for t in ("/dev/zero", "/dev/urandom") if os.path.exists(t)] + [str(tmp_path / "pipe")]
+    for suffix in sorted(MESH_SUFFIXES):
+        for k, target in enumerate(targets):
+            link = tmp_path / f"m{k}{suffix}"
+            link.symlink_to(target)
+            with hang_guard(10), pytest.raises(InputError, match=r"not a regular file"):
+                load_mesh(link)

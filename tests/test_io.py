@@ -351,11 +351,15 @@ def test_unreadable_file(tmp_path, monkeypatch):
     path = tmp_path / "locked.obj"
     path.write_text("v 0 0 0\n")
     path.chmod(0)
-    if os.access(path, os.R_OK):  # root reads it anyway: make open() refuse, as the OS would
-        def refuse(*args, **kwargs):
-            raise PermissionError(13, "Permission denied", str(path))
+    if os.access(path, os.R_OK):  # root reads it anyway: make opening it refuse, as the OS would
+        real_open = os.open
 
-        monkeypatch.setattr("almsdm_warp.mesh.io.open", refuse, raising=False)
+        def refuse(name, *args, **kwargs):
+            if os.fspath(name) == os.fspath(path):
+                raise PermissionError(13, "Permission denied", str(path))
+            return real_open(name, *args, **kwargs)
+
+        monkeypatch.setattr(os, "open", refuse)
     with pytest.raises(InputError, match=r"locked\.obj: permission denied"):
         load_mesh(path)
 
@@ -365,10 +369,10 @@ def test_unreadable_file(tmp_path, monkeypatch):
     ("g.off", "OFF\n3 1 0\n0 0 0\n", r"g\.off: cannot read as OFF: "),
     ("g.vtu", "<VTKFile type='UnstructuredGrid'><oops", r"g\.vtu: cannot read as VTU: "),
     ("g.vtk", "# vtk DataFile Version 4.2\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 4 float\n0 0 0\n",
-     r"g\.vtk: cannot read as VTK: "),
+     r"g\.vtk: truncated VTK file: POINTS \(line 5\) announces 12 numbers, but the file ends at line 6"),
     ("g.msh", "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0\n", r"g\.msh: cannot read as Gmsh: "),
     ("b.vtk", "# vtk DataFile Version 3.0\nx\nBINARY\nDATASET POLYDATA\nPOINTS 3 float\n",
-     r"b\.vtk: line 3: BINARY VTK POLYDATA is not supported, only ASCII"),
+     r"b\.vtk: truncated VTK file: POINTS \(line 5\) announces 9 values \(36 bytes\), but the file ends 0 bytes later"),
     ("t.vtk", "# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\nPOINTS 3 float\n0 0 0 1 0 0\n",
      r"t\.vtk: truncated VTK file: POINTS \(line 5\) announces 9 numbers, but the file ends at line 6"),
     ("r.vtk", "# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\n" + PYRAMID_PTS +
@@ -450,3 +454,155 @@ def test_liver2_gmsh_v1_equals_its_vtu_conversion():
     assert (a.vertex_count, a.tet_count) == (b.vertex_count, b.tet_count) == (507, 1493)
     np.testing.assert_allclose(sorted_rows(a.vertices), sorted_rows(b.vertices), rtol=1e-6)
     assert tet_set(a.vertices * 1e3, a.tetrahedra, 5) == tet_set(b.vertices * 1e3, b.tetrahedra, 5)
+
+
+# -- readers that trust nothing: declared imports, strict counts, binary VTK, BOMs, special files --
+def test_two_bodies_oriented_without_networkx(monkeypatch):
+    """Two closed boxes, one wound inward and one with random triangles reversed: each body ends
+    consistent and outward (scipy only: importing networkx fails here)."""
+    monkeypatch.setitem(__import__("sys").modules, "networkx", None)
+    v, f = box_surface()
+    rng = np.random.default_rng(3)
+    other = f.copy()
+    flip = rng.random(len(f)) < 0.5
+    other[flip] = other[flip][:, ::-1]
+    mesh = build_mesh(np.vstack([v, v + [100.0, 0, 0]]), np.vstack([f[:, ::-1], other + len(v)]), path="two.obj")
+    t = trimesh.Trimesh(mesh.vertices, mesh.triangles, process=False)
+    assert t.is_winding_consistent
+    for body in t.split(only_watertight=True):
+        np.testing.assert_allclose(body.volume, np.prod(EXTENT_MM) * 1e-9, rtol=1e-12)
+
+
+def stomach_surface():
+    from conftest import SCENES
+
+    return load_mesh(SCENES / "stomach.obj")
+
+
+def write_binary_vtk_polydata(path, v, tri, strips=None):
+    """Big-endian binary POLYDATA as VTK writes it: POINTS float, POLYGONS and TRIANGLE_STRIPS int."""
+    parts = [b"# vtk DataFile Version 3.0\nslicer\nBINARY\nDATASET POLYDATA\n",
+             f"POINTS {len(v)} float\n".encode(), np.asarray(v, ">f4").tobytes(), b"\n"]
+    cells = np.hstack([np.full((len(tri), 1), 3), tri]).astype(">i4")
+    parts += [f"POLYGONS {len(tri)} {cells.size}\n".encode(), cells.tobytes(), b"\n"]
+    if strips is not None:
+        flat = np.concatenate([[len(s), *s] for s in strips]).astype(">i4")
+        parts += [f"TRIANGLE_STRIPS {len(strips)} {flat.size}\n".encode(), flat.tobytes(), b"\n"]
+    parts.append(b"POINT_DATA 3\nNORMALS Normals float\n")
+    path.write_bytes(b"".join(parts))
+
+
+def test_binary_vtk_polydata_reads_like_the_obj(tmp_path):
+    """3D Slicer's usual output (binary POLYDATA) used to fail with a UnicodeDecodeError."""
+    stomach = stomach_surface()
+    v32 = stomach.vertices_mm.astype(np.float32)
+    write_binary_vtk_polydata(tmp_path / "s.vtk", v32, stomach.triangles)
+    mesh = load_mesh(tmp_path / "s.vtk")
+    np.testing.assert_array_equal(mesh.triangles, stomach.triangles)
+    np.testing.assert_allclose(mesh.vertices, v32.astype(np.float64) * 1e-3)
+
+
+def test_binary_vtk_triangle_strips_and_grid(tmp_path):
+    v = np.array([[0, 0, 0], [0, 1, 0], [1, 0, 0], [1, 1, 0], [2, 0, 0]], float)
+    write_binary_vtk_polydata(tmp_path / "strip.vtk", v, np.zeros((0, 3), int), strips=[[0, 1, 2, 3, 4]])
+    mesh = load_mesh(tmp_path / "strip.vtk")
+    np.testing.assert_array_equal(mesh.triangles, [[0, 1, 2], [2, 1, 3], [2, 3, 4]])  # alternating winding
+    vt, tets = box_tets()
+    meshio.write(tmp_path / "grid.vtk", meshio.Mesh(vt, [("tetra", tets)]), binary=True)
+    assert tet_set(load_mesh(tmp_path / "grid.vtk").vertices_mm, load_mesh(tmp_path / "grid.vtk").tetrahedra) == \
+        tet_set(vt, tets)
+
+
+def test_vtk_grid_cut_inside_cell_types_is_an_error(tmp_path):
+    """meshio loaded the tets whose types it had read and dropped the rest, with no error."""
+    vt, tets = box_tets()
+    meshio.write(tmp_path / "grid.vtk", meshio.Mesh(vt, [("tetra", tets)]), binary=False)
+    text = (tmp_path / "grid.vtk").read_text()
+    cut = text.index("CELL_TYPES") + len(f"CELL_TYPES {len(tets)}\n") + 2 * (len(tets) // 2)
+    (tmp_path / "cut.vtk").write_text(text[:cut])
+    with pytest.raises(InputError, match=rf"cut\.vtk: truncated VTK file: CELL_TYPES \(line \d+\) announces {len(tets)} "
+                                         r"numbers, but the file ends at line \d+$"):
+        load_mesh(tmp_path / "cut.vtk")
+
+
+@pytest.mark.parametrize("bad", ["-4", "0", "99"])
+@pytest.mark.parametrize("fmt", ["gmsh22", "gmsh"])  # 2.2 and 4.1
+def test_gmsh_node_tag_not_defined_is_an_error(tmp_path, fmt, bad):
+    """A node tag of -4 in an element became index -5 in meshio: another vertex, no error."""
+    vt, tets = box_tets()
+    meshio.write(tmp_path / "box.msh", meshio.Mesh(vt, [("tetra", tets)]), file_format=fmt, binary=False)
+    lines = (tmp_path / "box.msh").read_text().split("\n")
+    k = lines.index("$EndElements") - 1  # the last element: its last node tag
+    lines[k] = " ".join(lines[k].split()[:-1] + [bad])
+    (tmp_path / "bad.msh").write_text("\n".join(lines))
+    with pytest.raises(InputError, match=rf"bad\.msh: line {k + 1}: element \d+ references node {bad}, which \$Nodes does not define"):
+        load_mesh(tmp_path / "bad.msh")
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".off", ".ply", ".msh", ".vtk", ".stl"])
+def test_byte_order_mark_accepted(tmp_path, suffix):
+    """An OBJ saved with a UTF-8 BOM (Windows editors) was rejected; every text format accepts one."""
+    stomach = stomach_surface()
+    plain = tmp_path / f"plain{suffix}"
+    if suffix == ".msh":
+        vt, tets = box_tets()
+        write_gmsh_v1(plain, vt, tets)
+    elif suffix == ".vtk":
+        v, t = stomach.vertices_mm, stomach.triangles
+        plain.write_text("# vtk DataFile Version 3.0\ns\nASCII\nDATASET POLYDATA\n"
+                         f"POINTS {len(v)} double\n" + "\n".join(" ".join(f"{x:.17g}" for x in r) for r in v) +
+                         f"\nPOLYGONS {len(t)} {4 * len(t)}\n" + "\n".join("3 " + " ".join(map(str, r)) for r in t) + "\n")
+    else:
+        trimesh.Trimesh(stomach.vertices_mm, stomach.triangles, process=False).export(
+            plain, **({"file_type": "stl_ascii"} if suffix == ".stl" else {"encoding": "ascii"} if suffix == ".ply" else {}))
+    bom = tmp_path / f"bom{suffix}"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    a, b = load_mesh(plain), load_mesh(bom)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.triangles, b.triangles)
+    np.testing.assert_array_equal(a.tetrahedra, b.tetrahedra)
+    if suffix == ".obj":  # UTF-16 with its BOM too
+        utf16 = tmp_path / "utf16.obj"
+        utf16.write_bytes(b"\xff\xfe" + plain.read_bytes().decode("ascii").encode("utf-16-le"))
+        np.testing.assert_array_equal(load_mesh(utf16).triangles, a.triangles)
+
+
+def test_ascii_stl_with_latin1_name_and_truncated_stl(tmp_path):
+    """trimesh needed charset_normalizer (not a dependency) for an ASCII STL that is not UTF-8."""
+    stomach = stomach_surface()
+    path = tmp_path / "s.stl"
+    trimesh.Trimesh(stomach.vertices_mm, stomach.triangles, process=False).export(path, file_type="stl_ascii")
+    data = path.read_bytes().replace(b"solid", "solid estómago".encode("latin-1"), 1)
+    path.write_bytes(data)
+    assert load_mesh(path).triangle_count == stomach.triangle_count
+    cut = data[: data.rindex(b"endfacet")]
+    path.write_bytes(cut)
+    with pytest.raises(InputError, match=r"s\.stl: truncated ASCII STL: it does not end with 'endsolid'"):
+        load_mesh(path)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
+@pytest.mark.parametrize("special", ["/dev/zero", "/dev/urandom", "fifo"])
+def test_special_files_refused_before_reading(tmp_path, special):
+    """A mesh path linked to an endless stream grew memory without bound (and a FIFO blocked)."""
+    if special == "fifo":
+        os.mkfifo(tmp_path / "pipe")
+        target, kind = tmp_path / "pipe", "FIFO"
+    else:
+        if not os.path.exists(special):
+            pytest.skip(f"no {special}")
+        target, kind = special, "character device"
+    link = tmp_path / "mesh.obj"
+    link.symlink_to(target)
+    with pytest.raises(InputError, match=rf"mesh\.obj: is a {kind}.*not a regular file"):
+        load_mesh(link)
+
+
+def test_file_over_the_size_limit_refused(tmp_path, monkeypatch):
+    import almsdm_warp.mesh.io as mesh_io
+
+    path = tmp_path / "big.obj"
+    path.write_bytes(b"v 0 0 0\n" * 200)
+    monkeypatch.setattr(mesh_io, "MAX_FILE_BYTES", 1000)
+    with pytest.raises(InputError, match=r"big\.obj: the file has 1600 bytes, more than the 1000 bytes"):
+        load_mesh(path)

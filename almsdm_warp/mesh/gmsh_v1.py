@@ -40,10 +40,10 @@ def is_gmsh_v1(head: bytes) -> bool:
     return False
 
 
-def read_gmsh_v1(path, where: str):
-    """(vertices [n, 3] float64, triangles [m, 3], tetrahedra [t, 4] int64, notes) from a v1 file."""
-    with open(path, encoding="ascii") as f:
-        lines = f.read().splitlines()
+def read_gmsh_v1(data: bytes, where: str):
+    """(vertices [n, 3] float64, triangles [m, 3], tetrahedra [t, 4] int64, notes) from the bytes
+    of a v1 file (ASCII)."""
+    lines = _ascii_lines(data, where)
     cur = _Cursor(lines, where)
 
     cur.expect("$NOD")
@@ -116,6 +116,15 @@ def read_gmsh_v1(path, where: str):
     if trailing:
         notes.append(f"ignored {len(trailing)} lines after $ENDELM (first: {trailing[0].strip()[:40]!r})")
     return xyz, out[0], out[1], notes
+
+
+def _ascii_lines(data: bytes, where: str) -> list[str]:
+    try:
+        return data.decode("ascii").splitlines()
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise InputError(f"{where}: line {line}: byte {data[exc.start]:#04x} is not ASCII text "
+                         f"(a Gmsh v1 file is ASCII)") from exc
 
 
 class _Cursor:

@@ -9,27 +9,38 @@ from __future__ import annotations
 import contextlib
 import io as _stdio
 import os
+import re
+import stat
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from .gmsh_refs import check_gmsh_node_references
 from .gmsh_v1 import is_gmsh_v1, read_gmsh_v1
 from .tissue_mesh import TissueMesh
 from .validate import check_scale
-from .vtk_polydata import read_vtk_polydata, vtk_dataset
+from .stl import read_stl
+from .vtk_legacy import read_legacy_vtk
 
 KNOWN_FORMATS = {
     ".obj": "Wavefront OBJ surface (trimesh); several objects are concatenated",
-    ".stl": "STL surface, ASCII or binary (trimesh)",
+    ".stl": "STL surface, ASCII or binary",
     ".ply": "PLY surface, ASCII or binary (trimesh)",
     ".off": "OFF surface (trimesh)",
     ".vtu": "VTK XML unstructured grid: tetra and triangle cells (meshio)",
-    ".vtk": "legacy VTK: UNSTRUCTURED_GRID (meshio), or an ASCII POLYDATA surface",
+    ".vtk": "legacy VTK, ASCII or binary: UNSTRUCTURED_GRID (tetra and triangle cells) or a POLYDATA surface",
     ".msh": "Gmsh v2 / v4 (meshio), or Gmsh v1 $NOD/$ELM as SOFA ships it",
 }
 """File suffixes that :func:`load_mesh` reads (any case), with what each holds."""
 
+MAX_FILE_BYTES = 2 * 1024**3
+"""Mesh files larger than this (2 GiB; an ASCII OBJ of about 20 million triangles) are refused
+before anything is read."""
+
+_SPECIAL = ((stat.S_ISFIFO, "FIFO (named pipe)"), (stat.S_ISCHR, "character device"),
+            (stat.S_ISBLK, "block device"), (stat.S_ISSOCK, "socket"))
 _TRIMESH = {".obj": "OBJ", ".stl": "STL", ".ply": "PLY", ".off": "OFF"}
 # meshio cell types that carry no surface or volume: ignored, and reported in the notes.
 _IGNORED_CELLS = ("vertex", "line", "line3", "polyline")
@@ -45,34 +56,18 @@ def load_mesh(path, *, scale: float = 1.0) -> TissueMesh:
     where = str(path)
     check_scale(scale, where)  # before reading, not after
     p = Path(path)
-    if not p.exists():
-        raise InputError(f"{where}: no such file")
-    if p.is_dir():
-        raise InputError(f"{where}: is a directory, not a mesh file")
     suffix = p.suffix.lower()
-    if suffix not in KNOWN_FORMATS:
-        known = ", ".join(KNOWN_FORMATS)
-        raise InputError(f"{where}: unknown mesh format {suffix or '(no suffix)'!r}; known: {known}")
-    try:
-        with open(p, "rb") as f:
-            head = f.read(4096)
-    except PermissionError as exc:
-        raise InputError(f"{where}: permission denied, cannot read the file") from exc
-    except OSError as exc:
-        raise InputError(f"{where}: cannot read: {exc.strerror or exc}") from exc
-    if not head:
-        raise InputError(f"{where}: empty file (0 bytes)")
-
+    data = read_bounded(p, where, before_reading=lambda: _check_suffix(suffix, where))
     if suffix in _TRIMESH:
         fmt, read = _TRIMESH[suffix], _read_trimesh
-    elif suffix == ".msh" and is_gmsh_v1(head):
-        fmt, read = "Gmsh v1", read_gmsh_v1
-    elif suffix == ".vtk" and vtk_dataset(head) == "POLYDATA":
-        fmt, read = "VTK POLYDATA", _read_polydata
+    elif suffix == ".msh" and is_gmsh_v1(data[:4096].removeprefix(b"\xef\xbb\xbf")):
+        fmt, read = "Gmsh v1", _read_gmsh_v1
+    elif suffix == ".vtk":
+        fmt, read = "legacy VTK", _read_legacy_vtk
     else:
-        fmt, read = {".vtu": "VTU", ".vtk": "VTK", ".msh": "Gmsh"}[suffix], _read_meshio
+        fmt, read = {".vtu": "VTU", ".msh": "Gmsh"}[suffix], _read_meshio
     try:
-        vertices, triangles, tetrahedra, notes = read(p, where)
+        vertices, triangles, tetrahedra, notes = read(p, where, data)
     except InputError:
         raise
     except Exception as exc:  # wrapped, never let through: the message says which file and format
@@ -84,40 +79,136 @@ def load_mesh(path, *, scale: float = 1.0) -> TissueMesh:
     return mesh
 
 
-def _read_trimesh(p: Path, where: str):
+def _check_suffix(suffix: str, where: str) -> None:
+    if suffix not in KNOWN_FORMATS:
+        known = ", ".join(KNOWN_FORMATS)
+        raise InputError(f"{where}: unknown mesh format {suffix or '(no suffix)'!r}; known: {known}")
+
+
+def read_bounded(path, where: str, before_reading=None) -> bytes:
+    """The bytes of a regular file of at most MAX_FILE_BYTES, else InputError before reading.
+
+    The file is opened without blocking and checked on the open descriptor (fstat), so a path that
+    names a FIFO, a device (/dev/zero, /dev/urandom) or a socket is refused instead of read without
+    end; `before_reading` runs once the path is known to be a regular file (a check of its name).
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    except FileNotFoundError as exc:
+        raise InputError(f"{where}: no such file") from exc
+    except IsADirectoryError as exc:
+        raise InputError(f"{where}: is a directory, not a mesh file") from exc
+    except PermissionError as exc:
+        raise InputError(f"{where}: permission denied, cannot read the file") from exc
+    except OSError as exc:
+        raise InputError(f"{where}: cannot read: {exc.strerror or exc}") from exc
+    mode = os.fstat(fd)
+    if stat.S_ISDIR(mode.st_mode):
+        os.close(fd)
+        raise InputError(f"{where}: is a directory, not a mesh file")
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(mode.st_mode):
+            kind = next((name for test, name in _SPECIAL if test(mode.st_mode)), "special file")
+            raise InputError(f"{where}: is a {kind}, not a regular file; meshes are read only from regular files "
+                             f"(a device or a pipe may never end)")
+        if mode.st_size > MAX_FILE_BYTES:
+            raise InputError(f"{where}: the file has {mode.st_size} bytes, more than the {MAX_FILE_BYTES} bytes "
+                             f"(MAX_FILE_BYTES) a mesh file may have")
+        if before_reading is not None:
+            before_reading()
+        try:
+            data = f.read(MAX_FILE_BYTES + 1)
+        except OSError as exc:
+            raise InputError(f"{where}: cannot read: {exc.strerror or exc}") from exc
+    if len(data) > MAX_FILE_BYTES:
+        raise InputError(f"{where}: the file grew past the {MAX_FILE_BYTES} bytes a mesh file may have while it was read")
+    if not data:
+        raise InputError(f"{where}: empty file (0 bytes)")
+    return data
+
+
+def _read_trimesh(p: Path, where: str, data: bytes):
+    suffix = p.suffix.lower()
+    if suffix == ".stl":
+        vertices, faces = read_stl(data, where)
+        return vertices, faces, None, []
     import trimesh
 
-    if p.suffix.lower() == ".obj":
-        _check_obj_face_indices(p, where)
-
-    loaded = trimesh.load_mesh(p, file_type=p.suffix.lower()[1:], process=False)
+    data = strip_bom(data, where, text=suffix != ".ply")
+    if suffix == ".obj":
+        check_obj_face_indices(data, where)
+    # OBJ and OFF are text: decoded here (UTF-8, else Latin-1 for stray bytes in comments), so that
+    # trimesh never needs an encoding guesser; PLY's header is ASCII and its body may be binary.
+    source = _stdio.BytesIO(data) if suffix == ".ply" else _stdio.StringIO(_decode_text(data))
+    resolver = trimesh.resolvers.FilePathResolver(os.fspath(p.resolve()))
+    loaded = trimesh.load_mesh(source, file_type=suffix[1:], process=False, resolver=resolver)
     if isinstance(loaded, trimesh.Scene):  # several objects: concatenated, none dropped
         loaded = loaded.to_mesh()
     vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
     faces = getattr(loaded, "faces", None)
     faces = np.zeros((0, 3), dtype=np.int64) if faces is None else np.asarray(faces, dtype=np.int64)
-    _check_announced_counts(p, where, len(vertices), len(faces))
+    _check_announced_counts(suffix, data, where, len(vertices), len(faces))
     return vertices, faces, None, []
 
 
-def _check_obj_face_indices(p: Path, where: str) -> None:
+_BOMS = ((b"\xef\xbb\xbf", "utf-8"), (b"\xff\xfe", "utf-16-le"), (b"\xfe\xff", "utf-16-be"))
+
+
+def strip_bom(data: bytes, where: str, text: bool = True) -> bytes:
+    """The file's bytes without a leading byte-order mark; a UTF-16 text file re-encoded as UTF-8
+    (where `text`; a UTF-16 file with a binary body cannot be read and is an error)."""
+    for bom, codec in _BOMS:
+        if data.startswith(bom):
+            if codec == "utf-8":
+                return data[len(bom):]
+            if not text:
+                raise InputError(f"{where}: the file starts with a {codec.upper()} byte-order mark; "
+                                 f"save it as ASCII or UTF-8")
+            try:
+                return data[len(bom):].decode(codec).encode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise InputError(f"{where}: starts with a {codec.upper()} byte-order mark but is not "
+                                 f"{codec.upper()} text at byte {exc.start + len(bom)}") from exc
+    return data
+
+
+def _decode_text(data: bytes) -> str:
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
+_OBJ_VERTEX = re.compile(rb"^v[ \t]", re.MULTILINE)
+_OBJ_FACE = re.compile(rb"^f[ \t]+([^\n]*)", re.MULTILINE)
+_OBJ_AFTER_SLASH = re.compile(rb"/[^ \t\r]*")
+
+
+def check_obj_face_indices(data: bytes, where: str) -> None:
     """Every OBJ face index names a vertex: trimesh reads an index 0 as the last vertex (0 - 1 =
     -1: a wrong mesh, silently) and fails on one past the end with a bare IndexError. Positive
-    indices count from the file's first vertex, negative ones back from the last vertex so far."""
-    with open(p, "rb") as f:
-        lines = f.read().split(b"\n")
-    total = sum(1 for line in lines if line[:2] in (b"v ", b"v\t"))
+    indices count from the file's first vertex, negative ones back from the last vertex so far.
+    Checked at once with regular expressions and NumPy; the offending line is looked for only when
+    there is one (or when negative indices need the count of the vertices before each face)."""
+    total = len(_OBJ_VERTEX.findall(data))
+    faces = _OBJ_FACE.findall(data)
+    try:
+        index = np.array(_OBJ_AFTER_SLASH.sub(b"", b" ".join(faces)).split(), dtype=np.int64)
+    except (ValueError, OverflowError):
+        return  # not a number: the reader's own error says what it is
+    if len(index) and ((index == 0) | (index > total)).any() | (index < 0).any():
+        _find_bad_obj_face(data, where, total)
+
+
+def _find_bad_obj_face(data: bytes, where: str, total: int) -> None:
     seen = 0
-    for number, line in enumerate(lines, start=1):
+    for number, line in enumerate(data.split(b"\n"), start=1):
         head = line[:2]
         if head in (b"v ", b"v\t"):
             seen += 1
         elif head in (b"f ", b"f\t"):
             for token in line.split()[1:]:
-                try:
-                    index = int(token.split(b"/")[0])
-                except ValueError:
-                    break  # not a number: the reader's own error says what it is
+                index = int(token.split(b"/")[0])
                 if index == 0 or index > total or index < -seen:
                     what = "OBJ indices start at 1" if index == 0 else (
                         f"the file has {total} vertices" if index > 0 else f"only {seen} vertices precede it")
@@ -125,23 +216,12 @@ def _check_obj_face_indices(p: Path, where: str) -> None:
                                      f"references vertex {index}, but {what}")
 
 
-def _announced_counts(p: Path):
-    """(format, vertices, faces) that an OFF or PLY header or a binary STL's size announces, or
-    None where the file announces nothing (OBJ, ASCII STL) or its header is not understood."""
-    suffix = p.suffix.lower()
-    if suffix == ".stl":
-        size = p.stat().st_size
-        with open(p, "rb") as f:
-            head = f.read(84)
-        if len(head) == 84:
-            n = int(np.frombuffer(head[80:84], dtype="<u4")[0])
-            if size == 84 + 50 * n or not head.lstrip().lower().startswith(b"solid"):
-                return ("binary STL", None, n) if size == 84 + 50 * n else ("binary STL", -1, n)
-        return None
+def _announced_counts(suffix: str, data: bytes):
+    """(format, vertices, faces) that an OFF or PLY header announces, or None where the file
+    announces nothing (OBJ) or its header is not understood."""
     if suffix not in (".off", ".ply"):
         return None
-    with open(p, "rb") as f:
-        text = f.read(1 << 16).decode("latin-1")
+    text = data[: 1 << 16].decode("latin-1")
     if suffix == ".off":
         tokens = " ".join(line.split("#", 1)[0] for line in text.splitlines()[:50]).split()
         if len(tokens) >= 3 and tokens[0].upper().endswith("OFF") and tokens[1].isdigit() and tokens[2].isdigit():
@@ -159,37 +239,44 @@ def _announced_counts(p: Path):
     return None
 
 
-def _check_announced_counts(p: Path, where: str, vertex_count: int, face_count: int) -> None:
-    """trimesh stops quietly where a truncated OFF or ASCII PLY ends, and reads a truncated binary
-    STL as empty: half a mesh, which would look like a physics bug later. Compare with what the
-    file announces (polygons may become several triangles: at least that many faces)."""
-    announced = _announced_counts(p)
+def _check_announced_counts(suffix: str, data: bytes, where: str, vertex_count: int, face_count: int) -> None:
+    """trimesh stops quietly where a truncated OFF or ASCII PLY ends: half a mesh, which would look
+    like a physics bug later. Compare with what the file announces (polygons may become several
+    triangles: at least that many faces)."""
+    announced = _announced_counts(suffix, data)
     if announced is None:
         return
     fmt, vertices, faces = announced
-    if fmt == "binary STL":
-        if vertices == -1:
-            size = p.stat().st_size
-            raise InputError(f"{where}: truncated binary STL: its header announces {faces} triangles "
-                             f"({84 + 50 * faces} bytes), but the file has {size} bytes")
-        return
     if vertex_count != vertices or face_count < faces:
         raise InputError(f"{where}: the {fmt} header announces {vertices} vertices and {faces} faces, but the file "
                          f"holds {vertex_count} vertices and {face_count} faces (truncated, or lines missing?)")
 
 
-def _read_polydata(p: Path, where: str):
-    vertices, triangles, notes = read_vtk_polydata(p, where)
-    return vertices, triangles, None, notes
+def _read_gmsh_v1(p: Path, where: str, data: bytes):
+    return read_gmsh_v1(strip_bom(data, where), where)
 
 
-def _read_meshio(p: Path, where: str):
+def _read_legacy_vtk(p: Path, where: str, data: bytes):
+    return read_legacy_vtk(strip_bom(data, where, text=False), where)
+
+
+def _read_meshio(p: Path, where: str, data: bytes):
     import meshio
 
-    reader = {".vtu": meshio.vtu.read, ".vtk": meshio.vtk.read, ".msh": meshio.gmsh.read}[p.suffix.lower()]
+    stripped = strip_bom(data, where)
+    if p.suffix.lower() == ".msh":
+        check_gmsh_node_references(stripped, where)
+    reader = {".vtu": meshio.vtu.read, ".msh": meshio.gmsh.read}[p.suffix.lower()]
     captured = _stdio.StringIO()
-    with contextlib.redirect_stderr(captured):  # meshio prints its warnings to stderr: keep them as notes
-        m = reader(os.fspath(p))
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(contextlib.redirect_stderr(captured))  # meshio's warnings: kept as notes
+        source = os.fspath(p)
+        if stripped is not data:  # meshio reads a path: give it the bytes without the byte-order mark
+            tmp = stack.enter_context(tempfile.TemporaryDirectory())
+            source = os.path.join(tmp, "mesh" + p.suffix.lower())
+            with open(source, "wb") as f:
+                f.write(stripped)
+        m = reader(source)
     notes = [f"meshio: {' '.join(line.split())}" for line in captured.getvalue().splitlines() if line.strip()]
 
     blocks = {"triangle": [], "tetra": []}

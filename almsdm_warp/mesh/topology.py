@@ -25,8 +25,21 @@ def unique_edges(triangles: np.ndarray, tetrahedra: np.ndarray | None = None) ->
         pairs = tri[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)
     if len(pairs) == 0:
         return np.zeros((0, 2), dtype=np.int32)
-    pairs = np.sort(pairs, axis=1)
-    return np.unique(pairs, axis=0).astype(np.int32)
+    return unique_pairs(np.sort(pairs, axis=1))[0].astype(np.int32)
+
+
+def unique_pairs(pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unique rows sorted lexicographically [e, 2], count of each [e]) of non-negative int pairs:
+    np.unique(pairs, axis=0, return_counts=True), through one int64 key per row (a 1-D sort
+    instead of a row-wise one, ~10x faster on millions of edges)."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(pairs) == 0:
+        return pairs, np.zeros(0, dtype=np.int64)
+    m = int(pairs[:, 1].max()) + 1
+    if int(pairs[:, 0].max()) >= (np.iinfo(np.int64).max - m) // m:
+        return np.unique(pairs, axis=0, return_counts=True)
+    keys, counts = np.unique(pairs[:, 0] * m + pairs[:, 1], return_counts=True)
+    return np.stack([keys // m, keys % m], axis=1), counts
 
 
 def csr_adjacency(edges: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -127,3 +140,46 @@ def connected_components(edges: np.ndarray, vertex_count: int) -> tuple[int, np.
     e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(vertex_count, vertex_count))
     return cc(graph, directed=False)
+
+
+def orientation_flips(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Which triangles of a closed manifold surface to reverse so that every body is wound
+    consistently and outward: (flip [m] bool, orientable).
+
+    Two triangles that share an edge agree when they run along it in opposite directions. Each
+    triangle gets two states, as given (f) and reversed (f + m); agreeing neighbours link f-g and
+    f+m - g+m, disagreeing ones f - g+m and f+m - g. A breadth-first labelling of that graph
+    (scipy.sparse.csgraph) puts every state that agrees with a body's first triangle in one
+    component; a triangle is flipped when its as-given state is not in it. A body is reversed as a
+    whole when its signed volume (sum of v0 . (v1 x v2) / 6) is negative. A one-sided surface has
+    a triangle whose two states are linked: orientable is then False and nothing is flipped.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components as cc
+
+    tri = np.asarray(triangles, dtype=np.int64)
+    m = len(tri)
+    start = tri.reshape(-1)
+    end = tri[:, [1, 2, 0]].reshape(-1)
+    owner = np.repeat(np.arange(m, dtype=np.int64), 3)
+    key = np.minimum(start, end) * (int(tri.max(initial=0)) + 1) + np.maximum(start, end)
+    order = np.argsort(key, kind="stable")
+    # a closed manifold surface uses each edge exactly twice: sorted half-edges come in pairs
+    a, b = order[0::2], order[1::2]
+    fa, fb = owner[a], owner[b]
+    agree = start[a] != start[b]  # opposite directions along the shared edge
+    rows = np.concatenate([fa, fa + m])
+    cols = np.concatenate([np.where(agree, fb, fb + m), np.where(agree, fb + m, fb)])
+    graph = coo_matrix((np.ones(len(rows), dtype=np.int8), (rows, cols)), shape=(2 * m, 2 * m))
+    _, state = cc(graph, directed=False)
+    if (state[:m] == state[m:]).any():
+        return np.zeros(m, dtype=bool), False
+    body_count, body = cc(coo_matrix((np.ones(len(fa), dtype=np.int8), (fa, fb)), shape=(m, m)), directed=False)
+    first = np.full(body_count, m, dtype=np.int64)
+    np.minimum.at(first, body, np.arange(m))
+    flip = state[:m] != state[first[body]]
+    p = np.asarray(vertices, dtype=np.float64)[tri]
+    six_vol = np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2]))
+    six_vol = np.where(flip, -six_vol, six_vol)
+    inward = np.bincount(body, weights=six_vol, minlength=body_count) < 0.0
+    return flip ^ inward[body], True

@@ -322,11 +322,13 @@ def _orient_closed_surface(v, tri, notes):
             else f"not a closed manifold surface ({boundary} boundary edges); winding kept as in the file"
         )
         return tri
-    import trimesh
-
-    mesh = trimesh.Trimesh(vertices=v.copy(), faces=tri.copy(), process=False)
-    trimesh.repair.fix_normals(mesh, multibody=True)
-    fixed = np.asarray(mesh.faces, dtype=np.int64)
+    flip, orientable = topo.orientation_flips(v, tri)
+    if not orientable:
+        notes.append("closed surface that cannot be oriented (a one-sided surface, like a Klein bottle); "
+                      "winding kept as in the file")
+        return tri
+    fixed = tri.copy()
+    fixed[flip] = fixed[flip][:, ::-1]
     flipped = np.flatnonzero((fixed != tri).any(axis=1))
     if len(flipped) == len(tri):
         notes.append(f"reversed the winding of all {len(tri)} triangles: the closed surface was wound inward")
@@ -341,8 +343,7 @@ def _orient_closed_surface(v, tri, notes):
 # -- findings -------------------------------------------------------------------------------------
 def _edge_counts(tri: np.ndarray):
     """(unique sorted edges [e, 2], number of triangles using each [e])."""
-    pairs = np.sort(tri[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
-    return np.unique(pairs, axis=0, return_counts=True)
+    return topo.unique_pairs(np.sort(tri[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1))
 
 
 def _report_surface_edges(surface, keep, notes, volume):
