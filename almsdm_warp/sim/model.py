@@ -46,8 +46,9 @@ class Model:
         edge_scale [edge_count] and anchor_scale [vertex_count]: optional multipliers of stiffness
         and damping per spring and per anchor (a stiffer lesion, say), on top of either tissue.
         fixed_below [m]: every vertex with z below it is supported (fixed); support: vertex ids, also
-        fixed. anchors: keep the anchors (True), drop them (False), or None: dropped on a supported tet
-        mesh (the support holds it), kept otherwise.
+        fixed. anchors: keep the anchor springs k_i (True), drop them (False), or None: dropped on a
+        supported tet mesh (the support holds it), kept otherwise; the vertex dampers d_i stay (with
+        a material they hold the mass-proportional Rayleigh damping).
         """
         self.dmesh = dm = as_device_mesh(mesh, device)
         self.mesh = dm.mesh
@@ -66,8 +67,8 @@ class Model:
             bad = int(np.flatnonzero(mass <= 0)[0])
             raise ValueError(f"vertex {bad} has mass {mass[bad]:.3g} kg: it belongs to no element with area or volume")
         es = np.ones(e) if edge_scale is None else np.asarray(edge_scale, dtype=np.float64)
-        an = (np.ones(n) if anchor_scale is None else np.asarray(anchor_scale, dtype=np.float64)) * float(bool(anchors))
-        ke, kd, ka, da = ke * es, kd * es, ka * an, da * an
+        an = np.ones(n) if anchor_scale is None else np.asarray(anchor_scale, dtype=np.float64)
+        ke, kd, ka, da = ke * es, kd * es, ka * an * float(bool(anchors)), da * an
         d = self.device
         self.particle_mass_host = mass
         self.particle_mass = wp.array(mass, dtype=wp.float32, device=d)
