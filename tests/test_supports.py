@@ -2,13 +2,20 @@
 and global), and a pressed, supported tet ball settles where SciPy's linear static solve of the same
 network (supported vertices and the driven vertex as Dirichlet conditions) puts it."""
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
+from fuzzing import run_main
 from helpers import spring_stiffness_matrix
+
+from almsdm_warp.errors import InputError
 
 from almsdm_warp.mesh.primitives import icosphere, tet_ball
 from almsdm_warp.protocol.palpation import Palpation
+from almsdm_warp.scene.loader import load_scene
 from almsdm_warp.sim.model import PROBE_DISPLACEMENT, Model
 from almsdm_warp.solvers import make_solver
 from almsdm_warp.tissue.material import Material
@@ -110,3 +117,64 @@ def test_surface_with_supports_keeps_its_foundation(device):
     assert pal.model.anchor_ke.numpy().min() > 0  # anchors stay on a surface
     _, q = hold(pal, top(sphere), 5e-3, 50)
     assert np.abs(q - pal.model.particle_q_rest.numpy())[pal.model.support_mask].max() == 0.0
+
+
+# -- scenes and the command line ---------------------------------------------------------------
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def liver_scene(tmp_path, extra):
+    path = tmp_path / "scene.toml"
+    path.write_text(f'[mesh]\npath = "{(SCENES / "liver.vtu").as_posix()}"\n{extra}')
+    return path
+
+
+def test_scene_support_section(tmp_path):
+    scene = load_scene(liver_scene(tmp_path, "[support]\nfixed_below_mm = -5.0\n"))
+    assert scene.fixed_below == pytest.approx(-5e-3)
+    assert scene.as_dict()["support"] == {"fixed_below_mm": pytest.approx(-5.0)}
+    assert load_scene(SCENES / "liver.toml").fixed_below is None
+    for text, message in (("[support]\nfixed_below = 1.0\n", r"unknown key 'fixed_below' in \[support\]"),
+                          ("[support]\nfixed_below_mm = nan\n", r"\[support\] fixed_below_mm must be finite"),
+                          ('[support]\nfixed_below_mm = "low"\n', r"\[support\] fixed_below_mm must be a number")):
+        path = liver_scene(tmp_path, text)
+        with pytest.raises(InputError, match=rf"^{path}: {message}"):
+            load_scene(path)
+
+
+def test_cli_palpate_with_a_material_and_supports_writes_them(tmp_path):
+    out = tmp_path / "out.json"
+    z_mm = float(np.percentile(load_scene(SCENES / "liver.toml").load_mesh().vertices[:, 2], 20)) * 1e3
+    code, stdout, err = run_main(["palpate", str(SCENES / "liver.vtu"), "--youngs-modulus-kpa", "10", "--poisson-ratio", "0.45",
+                                  "--fixed-below-mm", f"{z_mm}", "--rayleigh-alpha-per-s", "50", "--ramp-s", "0.02",
+                                  "--hold-s", "0", "--settle-s", "0.02", "--rings", "global", "--integrator", "implicit", "--json", str(out)])
+    assert code == 0, err
+    record = json.loads(out.read_text())
+    assert record["tissue"]["model"] == "material"
+    assert record["tissue"]["youngs_modulus_kPa"] == pytest.approx(10.0) and record["tissue"]["poisson_ratio"] == 0.45
+    assert record["support"]["fixed_below_mm"] == pytest.approx(z_mm)
+    mesh = load_scene(SCENES / "liver.toml").load_mesh()
+    assert record["model"]["free_vertices"] == int((mesh.vertices[:, 2] >= z_mm * 1e-3).sum())
+    assert record["presses"][0]["peak_force_N"] > 0
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--youngs-modulus-kpa", "10", "--poisson-ratio", "0.5"], "--poisson-ratio: Material.poisson_ratio = 0.5: must be in (-1, 0.5)"),
+        (["--density-kg-m3", "1000"], "--density-kg-m3 make the tissue a material, which needs --youngs-modulus-kpa"),
+        (["--fixed-below-mm", "1000"], "--fixed-below-mm 1000 is above every vertex of liver.vtu"),
+        (["--youngs-modulus-kpa", "0"], "argument --youngs-modulus-kpa: must be > 0"),
+        (["--fixed-below-mm", "inf"], "argument --fixed-below-mm: must be finite"),
+    ],
+)
+def test_cli_impossible_material_or_support_is_one_line_exit_2(args, message, tmp_path):
+    out = tmp_path / "out.json"
+    code, stdout, err = run_main(["palpate", str(SCENES / "liver.vtu"), *args, "--json", str(out)])
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_cli_surface_material_needs_a_thickness(tmp_path):
+    code, _stdout, err = run_main(["palpate", "--youngs-modulus-kpa", "10"])
+    assert code == 2 and "surface mesh: the material model needs a membrane --thickness-mm > 0" in err

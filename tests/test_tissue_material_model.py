@@ -1,13 +1,18 @@
 """Model built from a Material: its device arrays are the derived springs, anchors, dampers and masses,
 and the network it holds has the modulus docs/calibration.md measures (a static solve in SciPy)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from helpers import load_script
 
+from almsdm_warp.errors import InputError
+
 from almsdm_warp.mesh.primitives import icosphere, tet_ball
 from almsdm_warp.mesh.tissue_mesh import TissueMesh
 from almsdm_warp.mesh.topology import tet_signed_volumes, triangle_areas
+from almsdm_warp.scene.loader import load_scene
 from almsdm_warp.sim.model import Model
 from almsdm_warp.tissue.lesion import Lesion
 from almsdm_warp.tissue.material import Material, springs_for_mesh
@@ -93,3 +98,54 @@ def test_network_of_the_model_has_the_documented_modulus(nu):
     assert e_eff / material.youngs_modulus == pytest.approx(1.114 * law, rel=0.01)
     indentation = (e_eff / (1.0 - nu_eff**2)) / (material.youngs_modulus / (1.0 - nu * nu))
     assert indentation == pytest.approx(1.0, abs=0.2)
+
+
+# -- scene files: [tissue] model = "material" --------------------------------------------------
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def write_scene(tmp_path, tissue: str, extra: str = "") -> Path:
+    path = tmp_path / "scene.toml"
+    path.write_text(f'[mesh]\npath = "{(SCENES / "liver.vtu").as_posix()}"\n\n[tissue]\n{tissue}\n{extra}')
+    return path
+
+
+def test_material_scene_is_read_in_si_and_written_back_in_its_units(tmp_path):
+    path = write_scene(tmp_path, 'model = "material"\nyoungs_modulus_kPa = 12.5\npoisson_ratio = 0.4\n'
+                                 "density_kg_per_m3 = 1060.0\nfoundation_kPa_per_mm = 0.5\nrayleigh_alpha_per_s = 20.0\n")
+    scene = load_scene(path)
+    assert scene.tissue == Material(youngs_modulus=12.5e3, poisson_ratio=0.4, density=1060.0, foundation=0.5e6,
+                                    rayleigh_alpha=20.0)
+    tissue = scene.as_dict()["tissue"]
+    assert tissue["model"] == "material"
+    assert tissue["youngs_modulus_kPa"] == pytest.approx(12.5) and tissue["foundation_kPa_per_mm"] == pytest.approx(0.5)
+    assert "edge_stiffness_N_per_m" not in tissue
+    model = Model(scene.load_mesh(), scene.tissue, "cpu")
+    np.testing.assert_allclose(model.spring_ke.numpy(), springs_for_mesh(model.mesh, scene.tissue).edge_stiffness, rtol=1e-6)
+
+
+def test_paper_is_the_default_model(tmp_path):
+    scene = load_scene(write_scene(tmp_path, "edge_stiffness_N_per_m = 50.0\n"))
+    assert isinstance(scene.tissue, TissueParams) and scene.tissue.edge_stiffness == 50.0
+    assert scene.as_dict()["tissue"]["model"] == "paper"
+    assert load_scene(SCENES / "stomach.toml").tissue == TissueParams()  # the shipped scenes stay on the preset
+
+
+@pytest.mark.parametrize(
+    "tissue, message",
+    [
+        ("youngs_modulus_kPa = 10.0\n", r"\[tissue\] youngs_modulus_kPa is a key of another tissue model, not of model = 'paper' \(the default\)"),
+        ('model = "material"\nyoungs_modulus_kPa = 10.0\nedge_stiffness_N_per_m = 5.0\n',
+         r"\[tissue\] edge_stiffness_N_per_m is a key of another tissue model, not of model = 'material'"),
+        ('model = "fem"\n', r"\[tissue\] model = 'fem' is not one of 'paper', 'material'"),
+        ('model = "material"\nyoungs_modulus_kPa = 10.0\npoisson_ratio = 0.5\n', r"Material.poisson_ratio = 0.5: must be in \(-1, 0.5\)"),
+        ('model = "material"\npoisson_ratio = 0.3\n', r"\[tissue\] model = 'material' needs youngs_modulus_kPa"),
+        ('model = "material"\nyoungs_modulus_kPa = 10.0\ndamping_ratio = 0.1\nrayleigh_beta_s = 0.01\n', r"give one or the other"),
+        ('model = "material"\nyoungs_modulus_kPa = -1.0\n', r"\[tissue\] youngs_modulus_kPa must be > 0"),
+        ('model = "material"\nyoung_modulus_kPa = 10.0\n', r"unknown key 'young_modulus_kPa' in \[tissue\] \(did you mean youngs_modulus_kPa\?\)"),
+    ],
+)
+def test_material_scene_errors_name_the_file_and_key(tmp_path, tissue, message):
+    path = write_scene(tmp_path, tissue)
+    with pytest.raises(InputError, match=rf"^{path}: .*{message}"):
+        load_scene(path)

@@ -244,6 +244,8 @@ def _report_model(args, run: _Run, pal):
     free = pal.region.vertices()[: pal.region.free_count] if pal.region is not None else None
     if free is not None:
         free = free[~pal.model.support_mask[free]]  # supported vertices are fixed too
+    elif pal.model.support_count:
+        free = np.flatnonzero(~pal.model.support_mask)
     critical = pal.model.critical_dt(free, anchors=anchored)
     free_count = len(free) if free is not None else pal.region_vertices
     if tol is not None:
@@ -255,7 +257,7 @@ def _report_model(args, run: _Run, pal):
         what = f"{rings} rings around vertex {run.vertex}, {pal.region_vertices} vertices ({free_count} free)"
     else:
         kind = "anchored" if anchored else "free, no anchors"
-        what = f"{rings} ({kind}), all {pal.region_vertices} vertices free"
+        what = f"{rings} ({kind}), {free_count} of {pal.region_vertices} vertices free"
     beyond = ", at the start" if tol is not None else ""
     beyond += ", dt exceeds it" if args.integrator == "explicit" and dt > critical else ""
     print(

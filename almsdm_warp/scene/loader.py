@@ -203,6 +203,8 @@ def _tissue(table: dict, values: dict, where: str) -> TissueParams | Material:
             default = " (the default)" if "model" not in table else ""
             raise InputError(f"{where}: [tissue] {key} is a key of another tissue model, not of model = {model!r}{default}; "
                              f"allowed with it: model, {', '.join(keys)}")
+    if model == "material" and "youngs_modulus" not in values:
+        raise InputError(f"{where}: [tissue] model = 'material' needs youngs_modulus_kPa (Young's modulus [kPa])")
     try:
         return Material(**values) if model == "material" else TissueParams(**values)
     except (TypeError, ValueError) as exc:  # Material's own checks (nu in range, one kind of damping)
