@@ -178,3 +178,12 @@ def test_cli_impossible_material_or_support_is_one_line_exit_2(args, message, tm
 def test_cli_surface_material_needs_a_thickness(tmp_path):
     code, _stdout, err = run_main(["palpate", "--youngs-modulus-kpa", "10"])
     assert code == 2 and "surface mesh: the material model needs a membrane --thickness-mm > 0" in err
+
+
+def test_sweep_refuses_supports_it_cannot_hold(tmp_path):
+    """The batched kernels fix only each region's outer ring: a supported scene is an error, not a
+    sweep that silently moves the supported vertices."""
+    out = tmp_path / "map.csv"
+    code, _stdout, err = run_main(["sweep", str(liver_scene(tmp_path, "[support]\nfixed_below_mm = -5.0\n")), "--points", "2",
+                                   "--out", str(out)])
+    assert code == 2 and "does not hold yet" in err and not out.exists()
