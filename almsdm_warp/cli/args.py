@@ -173,3 +173,66 @@ def print_notes(mesh):
     """The mesh's validation notes, one line each on stderr."""
     for note in mesh.notes:
         print(f"note: {note}", file=sys.stderr)
+
+
+MATERIAL_FLAGS = {
+    "youngs_modulus_kpa": ("--youngs-modulus-kpa", "youngs_modulus", 1.0e-3, "> 0", "KPA", "Young's modulus E [kPa]"),
+    "poisson_ratio": ("--poisson-ratio", "poisson_ratio", 1.0, "number", "NU", "Poisson ratio nu, in (-1, 0.5) (default 0.45)"),
+    "density_kg_m3": ("--density-kg-m3", "density", 1.0, "> 0", "RHO", "density [kg/m^3] (default 1000)"),
+    "thickness_mm": ("--thickness-mm", "thickness", 1.0e3, ">= 0", "MM", "membrane thickness of a surface mesh [mm] (needed there)"),
+    "foundation_kpa_per_mm": ("--foundation-kpa-per-mm", "foundation", 1.0e-6, ">= 0", "K",
+                              "Winkler foundation of a surface mesh [kPa/mm]: anchors k_i = K x area (default 0)"),
+    "damping_ratio": ("--damping-ratio", "damping_ratio", 1.0, ">= 0", "ZETA", "each damper as a fraction of its spring's critical damping"),
+    "rayleigh_alpha_per_s": ("--rayleigh-alpha-per-s", "rayleigh_alpha", 1.0, ">= 0", "A", "mass-proportional Rayleigh damping [1/s]"),
+    "rayleigh_beta_s": ("--rayleigh-beta-s", "rayleigh_beta", 1.0, ">= 0", "B", "stiffness-proportional Rayleigh damping [s]"),
+}
+"""The tissue-as-a-material flags: dest -> (flag, Material attribute, flag units per SI unit, rule, metavar, help).
+Any of them switches the run to the material model (tissue/material.py) with the scene's values as defaults."""
+
+
+def add_tissue_args(parser, supports: bool = True) -> None:
+    """The material flags and (with `supports`) --fixed-below-mm, in their own group."""
+    group = parser.add_argument_group("tissue as a material (any of these replaces the scene's per-spring constants)")
+    for dest, (flag, _attr, _factor, rule, metavar, text) in MATERIAL_FLAGS.items():
+        group.add_argument(flag, dest=dest, type=number_arg(rule), default=None, metavar=metavar, help=text)
+    if supports:
+        group.add_argument("--fixed-below-mm", type=number_arg("number"), default=None, metavar="Z",
+                           help="support: every vertex with z below Z [mm] is fixed (an organ on a plate, +z up; default: the scene's)")
+
+
+def scene_with_tissue_args(args, scene, mesh):
+    """The scene with the material flags and --fixed-below-mm applied; InputError for a material that
+    cannot be (no E to start from, a surface with no thickness, nu out of range) or a support that
+    holds every vertex."""
+    from dataclasses import asdict, replace
+
+    from ..tissue.material import Material
+
+    given = {attr: getattr(args, dest) / factor for dest, (_f, attr, factor, *_rest) in MATERIAL_FLAGS.items()
+             if getattr(args, dest, None) is not None}
+    tissue = scene.tissue
+    if given:
+        base = asdict(tissue) if isinstance(tissue, Material) else {}
+        if "youngs_modulus" not in given and not base:
+            flags = ", ".join(MATERIAL_FLAGS[d][0] for d in MATERIAL_FLAGS if getattr(args, d, None) is not None)
+            raise InputError(f"{flags} make the tissue a material, which needs --youngs-modulus-kpa "
+                             f"(the scene {scene.name!r} gives per-spring constants, not a material)")
+        if "damping_ratio" in given:  # one kind of damping: the flag replaces the scene's
+            base.update(rayleigh_alpha=0.0, rayleigh_beta=0.0)
+        elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
+            base.update(damping_ratio=0.0)
+        base.update(given)
+        if not mesh.is_volume and not base.get("thickness", 0.0) > 0.0:
+            raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0")
+        try:
+            tissue = Material(**base)
+        except (TypeError, ValueError) as exc:
+            flag = next((f"{f}: " for f, attr, *_r in MATERIAL_FLAGS.values() if f"Material.{attr} " in str(exc)), "")
+            raise InputError(f"{flag}{exc}") from None
+    flag_z = getattr(args, "fixed_below_mm", None)
+    fixed_below = scene.fixed_below if flag_z is None else flag_z * 1e-3
+    if fixed_below is not None and not (mesh.vertices[:, 2] >= fixed_below).any():
+        where = f"--fixed-below-mm {flag_z:g}" if flag_z is not None else "the scene's [support] fixed_below_mm"
+        raise InputError(f"{where} is above every vertex of {mesh.name} (highest z {mesh.vertices[:, 2].max() * 1e3:.4g} mm): "
+                         f"nothing could move")
+    return replace(scene, tissue=tissue, fixed_below=fixed_below)

@@ -13,6 +13,7 @@ from ..solvers import INTEGRATORS
 from .args import (
     AUTO_TOL_MM,
     GLOBAL_RINGS,
+    add_tissue_args,
     auto_tol,
     check_contact,
     count_arg,
@@ -26,6 +27,7 @@ from .args import (
     probe_position,
     quiet_warp,
     rings_arg,
+    scene_with_tissue_args,
 )
 
 __all__ = ["AUTO_TOL_MM", "GLOBAL_RINGS", "MAX_STEPS", "add_parser", "check_protocol", "cmd_palpate"]
@@ -63,6 +65,7 @@ def add_parser(sub) -> None:
     palpate.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
     palpate.add_argument("--json", default=None, type=path_arg, metavar="PATH", help="write the result as JSON here")
     palpate.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal, for runs over ~2 s)")
+    add_tissue_args(palpate)
     add_record_args(palpate)
     palpate.set_defaults(func=cmd_palpate)
 
@@ -180,6 +183,7 @@ def _resolve(args) -> _Run:
         raise InputError(f"--scale-mm is for a mesh file; the scene {scene.name!r} sets its own ([mesh] scale_mm)")
     mesh = scene.load_mesh()
     print_notes(mesh)
+    scene = scene_with_tissue_args(args, scene, mesh)
 
     rings = scene.rings if args.rings is None else args.rings
     if isinstance(rings, int) and rings > mesh.vertex_count:  # (not "global", "global-free")
@@ -195,6 +199,9 @@ def _resolve(args) -> _Run:
     dt = args.dt_ms * 1e-3
     check_protocol(depth, dt, ramp, hold, settle, args.presses, mesh)
     vertex, point, contact_extra = _contact(args, mesh, device)
+    if scene.fixed_below is not None and mesh.vertices[vertex, 2] < scene.fixed_below:
+        raise InputError(f"the contact vertex {vertex} (z {mesh.vertices[vertex, 2] * 1e3:.4g} mm) is supported: it lies below "
+                         f"the support plane z = {scene.fixed_below * 1e3:g} mm and cannot be pressed")
     tol = auto_tol(args, rings, scene)
     return _Run(scene, mesh, device, rings, tol, depth, ramp, hold, settle, dt, vertex, point, contact_extra)
 
@@ -205,6 +212,8 @@ def _build(args, run: _Run):
 
     mesh, scene = run.mesh, run.scene
     print(mesh.summary())
+    support = f"; fixed below z = {scene.fixed_below * 1e3:g} mm" if scene.fixed_below is not None else ""
+    print(f"tissue: {scene.tissue_model} ({scene.tissue_text()}){support}")
     if scene.lesion is not None:
         les = scene.lesion.as_dict()
         print(f"lesion: {les['stiffness_factor']:g}x stiffer within {les['radius_mm']:g} mm of {[round(c, 2) for c in les['center_mm']]} mm")
@@ -213,7 +222,7 @@ def _build(args, run: _Run):
         f"(ramp {run.ramp:g} s, hold {run.hold:g} s, settle {run.settle:g} s) x {args.presses}"
     )
     scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
-    lesion = dict(zip(("edge_scale", "anchor_scale"), scales))
+    lesion = dict(zip(("edge_scale", "anchor_scale"), scales), fixed_below=scene.fixed_below)
     try:
         if run.tol is not None:
             from ..protocol.adaptive import AdaptivePalpation
@@ -233,6 +242,10 @@ def _report_model(args, run: _Run, pal):
     rings, tol, dt = run.rings, run.tol, run.dt
     anchored = rings != "global-free"
     free = pal.region.vertices()[: pal.region.free_count] if pal.region is not None else None
+    if free is not None:
+        free = free[~pal.model.support_mask[free]]  # supported vertices are fixed too
+    elif pal.model.support_count:
+        free = np.flatnonzero(~pal.model.support_mask)
     critical = pal.model.critical_dt(free, anchors=anchored)
     free_count = len(free) if free is not None else pal.region_vertices
     if tol is not None:
@@ -244,7 +257,7 @@ def _report_model(args, run: _Run, pal):
         what = f"{rings} rings around vertex {run.vertex}, {pal.region_vertices} vertices ({free_count} free)"
     else:
         kind = "anchored" if anchored else "free, no anchors"
-        what = f"{rings} ({kind}), all {pal.region_vertices} vertices free"
+        what = f"{rings} ({kind}), {free_count} of {pal.region_vertices} vertices free"
     beyond = ", at the start" if tol is not None else ""
     beyond += ", dt exceeds it" if args.integrator == "explicit" and dt > critical else ""
     print(
@@ -308,6 +321,7 @@ def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:
         "mesh": mesh_json(run.mesh),
         "device": str(run.device),
         "contact": {"vertex": int(run.vertex), "point_mm": (np.asarray(run.point) * 1e3).tolist(), **run.contact_extra},
+        **{key: run.scene.as_dict()[key] for key in ("tissue", "support")},
         "press": {"depth_mm": run.depth * 1e3, "ramp_s": run.ramp, "hold_s": run.hold, "settle_s": run.settle},
         "model": {
             "rings": run.rings,

@@ -11,7 +11,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..solvers import INTEGRATORS
-from .args import auto_tol, count_arg, get_device, number_arg, press_steps, print_notes, quiet_warp, rings_arg
+from .args import (auto_tol, add_tissue_args, count_arg, get_device, number_arg, press_steps, print_notes, quiet_warp, rings_arg,
+                   scene_with_tissue_args)
 
 
 def add_parser(sub) -> None:
@@ -40,6 +41,7 @@ def add_parser(sub) -> None:
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks as Ray tasks (one GPU each with a CUDA --device, else one CPU); ADDRESS of a cluster, or a local one")
     p.add_argument("--png", default=None, metavar="PATH", help="also draw the organ coloured by stiffness (matplotlib)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
+    add_tissue_args(p, supports=False)
     p.set_defaults(func=cmd_sweep)
 
 
@@ -104,6 +106,10 @@ def _plan(args, devices):
 
     scene = resolve_scene_or_mesh(args.scene, scale_mm=args.scale_mm or 1.0)
     mesh = scene.load_mesh()
+    scene = scene_with_tissue_args(args, scene, mesh)
+    if scene.fixed_below is not None:  # the batched kernels step every region vertex but its outer ring
+        raise InputError(f"the scene {scene.name!r} has supports ([support] fixed_below_mm), which the batched sweep "
+                         f"does not hold yet; press points one at a time with almsdm palpate")
     print_notes(mesh)
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings

@@ -114,17 +114,18 @@ class Palpation:
     free, no anchors: the paper's global surface model). dt [s]. edge_scale [edge_count] and
     anchor_scale [vertex_count]: per-spring and per-anchor multipliers of stiffness and damping
     (a scene's lesion, `Lesion.scales`), fixed for the model's life.
+    fixed_below [m]: vertices with z below it are supported (fixed), as Model's.
     """
 
     def __init__(self, mesh, tissue=None, *, rings=4, integrator="explicit", dt=1e-3, device=None, capture=True,
-                 edge_scale=None, anchor_scale=None, **solver_kw):
+                 edge_scale=None, anchor_scale=None, fixed_below=None, **solver_kw):
         if not (isinstance(rings, (int, np.integer)) and not isinstance(rings, bool)) and rings not in GLOBAL_MODELS:
             raise ValueError(f"rings must be an int >= 1 or one of {GLOBAL_MODELS}, got {rings!r}")
         if isinstance(rings, (int, np.integer)) and rings < 1:
             raise ValueError(f"rings must be >= 1 (ring 0 is the contact vertex alone), got {rings}")
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
-        self.model = Model(mesh, tissue, device, edge_scale=edge_scale, anchor_scale=anchor_scale)
+        self.model = Model(mesh, tissue, device, edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below)
         self.device = self.model.device
         self.mesh = self.model.mesh
         self.rings = rings

@@ -19,8 +19,9 @@ from typing import TYPE_CHECKING
 from ..errors import InputError
 from ..checks import AUTO, check_rings, check_value, describe
 from ..protocol.schedule import PressParams
+from ..tissue.material import Material, material_as_dict
 from ..tissue.params import TissueParams
-from .schema import SCHEMA
+from .schema import DEFAULT_TISSUE_MODEL, SCHEMA, TISSUE_MODELS
 
 try:
     import tomllib
@@ -46,8 +47,9 @@ class Scene:
     """The mesh file (absolute)."""
     scale_mm: float = 1.0
     """Millimetres per mesh file unit (1.0 for a file in mm, 10.0 for cm, 1000.0 for m)."""
-    tissue: TissueParams = field(default_factory=TissueParams)
-    """Mass, spring and damper parameters."""
+    tissue: TissueParams | Material = field(default_factory=TissueParams)
+    """The paper's per-spring constants (TissueParams, [tissue] model = "paper") or a material whose
+    springs, anchors, masses and dampers are derived per edge and vertex (Material, model = "material")."""
     rings: int | str = 4
     """Rings grown from the contact vertex along mesh edges (the outermost ring fixed), or "auto":
     the region sized during each press to `tol` (AdaptivePalpation, ``--rings auto``)."""
@@ -58,6 +60,9 @@ class Scene:
     tol: float | None = None
     """With rings = "auto": the displacement tolerance [m] the region is sized to (None: the
     command line's default, almsdm_warp.cli.args.AUTO_TOL_MM); None otherwise."""
+    fixed_below: float | None = None
+    """[support] fixed_below_mm: every vertex with z below this height [m] is fixed (an organ on a
+    plate, pressed from above, +z up); None: no supports."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
@@ -65,11 +70,20 @@ class Scene:
             object.__setattr__(self, "path", Path(self.path))
         object.__setattr__(self, "scale_mm", check_value(self.scale_mm, float, "> 0", "Scene.scale_mm"))
         check_rings(self.rings, "Scene.rings")
+        if not isinstance(self.tissue, (TissueParams, Material)):
+            raise TypeError(f"Scene.tissue must be a TissueParams or a Material, got {type(self.tissue).__name__}")
+        if self.fixed_below is not None:
+            object.__setattr__(self, "fixed_below", check_value(self.fixed_below, float, "number", "Scene.fixed_below"))
         if self.tol is not None:
             object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
                 raise InputError(f"Scene.tol is for rings = {AUTO!r} (the region sized to a tolerance), "
                                  f"but rings = {self.rings!r}")
+
+    @property
+    def tissue_model(self) -> str:
+        """"paper" or "material": the [tissue] model of this scene."""
+        return "material" if isinstance(self.tissue, Material) else "paper"
 
     @property
     def name(self) -> str:
@@ -93,6 +107,9 @@ class Scene:
         out: dict = {"scene": str(self.path) if self.path else None}
         for section, keys in SCHEMA.items():
             out[section] = {}
+            if section == "tissue":
+                out[section] = {"model": self.tissue_model, **self._tissue_dict()}
+                continue
             for key, (attr, _kind, factor, _rule) in keys.items():
                 value = _get(self, section, attr)
                 if section == "mesh" and attr == "path":
@@ -104,12 +121,25 @@ class Scene:
             out["lesion"] = self.lesion.as_dict()
         return out
 
+    def _tissue_dict(self) -> dict:
+        if isinstance(self.tissue, Material):
+            return material_as_dict(self.tissue)
+        keys = TISSUE_MODELS["paper"]
+        return {key: getattr(self.tissue, attr) * factor for key, (attr, _kind, factor, _rule) in keys.items()}
+
+    def tissue_text(self) -> str:
+        """The tissue in a few words: the paper's k_ij and k_i, or the material's E and nu."""
+        t = self.tissue
+        if isinstance(t, Material):
+            return f"E {t.youngs_modulus * 1e-3:g} kPa, nu {t.poisson_ratio:g}, rho {t.density:g} kg/m^3"
+        return f"k_ij {t.edge_stiffness:g} N/m, k_i {t.anchor_stiffness:g} N/m"
+
     def summary(self) -> str:
         """One line: the scene, its mesh and the parameters people ask about first."""
-        t, p = self.tissue, self.press
+        support = f", fixed below z = {self.fixed_below * 1e3:g} mm" if self.fixed_below is not None else ""
         return (
             f"scene {self.name}: mesh {self.mesh_path.name} (x{self.scale_mm:g} mm), {self.rings_text()}, "
-            f"k_ij {t.edge_stiffness:g} N/m, k_i {t.anchor_stiffness:g} N/m, press {p.depth * 1e3:g} mm"
+            f"{self.tissue_text()}{support}, press {self.press.depth * 1e3:g} mm"
         )
 
 
@@ -144,19 +174,40 @@ def load_scene(path) -> Scene:
         rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
         raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
     mesh_path = _mesh_path(values["mesh"].get("path"), p, where)
+    tissue = _tissue(data.get("tissue", {}), values["tissue"], where)
 
     try:  # the SI values are checked again: say which file they came from
         return Scene(
             path=Path(os.path.abspath(p)),
             mesh_path=mesh_path,
             scale_mm=values["mesh"].get("scale_mm", 1.0),
-            tissue=TissueParams(**values["tissue"]),
+            tissue=tissue,
             rings=region.get("rings", Scene.rings),
             tol=region.get("tol"),
             press=PressParams(**values["press"]),
             lesion=lesion,
+            fixed_below=values["support"].get("fixed_below"),
         )
     except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+
+
+def _tissue(table: dict, values: dict, where: str) -> TissueParams | Material:
+    """The [tissue] table as its model's parameters; a key of the other model is an error."""
+    model = values.pop("model", DEFAULT_TISSUE_MODEL)
+    if model not in TISSUE_MODELS:
+        raise InputError(f"{where}: [tissue] model = {model!r} is not one of {', '.join(map(repr, TISSUE_MODELS))}")
+    keys = TISSUE_MODELS[model]
+    for key in table:
+        if key != "model" and key not in keys:
+            default = " (the default)" if "model" not in table else ""
+            raise InputError(f"{where}: [tissue] {key} is a key of another tissue model, not of model = {model!r}{default}; "
+                             f"allowed with it: model, {', '.join(keys)}")
+    if model == "material" and "youngs_modulus" not in values:
+        raise InputError(f"{where}: [tissue] model = 'material' needs youngs_modulus_kPa (Young's modulus [kPa])")
+    try:
+        return Material(**values) if model == "material" else TissueParams(**values)
+    except (TypeError, ValueError) as exc:  # Material's own checks (nu in range, one kind of damping)
         raise InputError(f"{where}: {exc}") from None
 
 

@@ -6,23 +6,32 @@ Every problem is an InputError with one line; almsdm_warp.scene adds the file's 
 from __future__ import annotations
 
 from ..protocol.schedule import PRESS_KEYS
+from ..tissue.material import MATERIAL_KEYS
 from ..tissue.params import TISSUE_KEYS
+
+TISSUE_MODELS: dict[str, dict[str, tuple[str, type, float, str]]] = {"paper": TISSUE_KEYS, "material": MATERIAL_KEYS}
+"""[tissue] model -> the keys it takes: the paper's per-spring constants (TissueParams, the default)
+or a material whose springs are derived per edge (Material)."""
+DEFAULT_TISSUE_MODEL = "paper"
 
 
 # -- the schema ------------------------------------------------------------------------------
 # section -> key -> (attribute, type, file units per SI unit (1000 for mm), rule)
-# rules: "path", "> 0", ">= 0", ">= 1" (integers)
+# rules: "path" (or any non-empty string), "> 0", ">= 0", ">= 1" (integers), "number" (any finite)
 SCHEMA: dict[str, dict[str, tuple[str, type, float, str]]] = {
     "mesh": {
         "path": ("path", str, 1.0, "path"),
         "scale_mm": ("scale_mm", float, 1.0, "> 0"),
     },
-    "tissue": TISSUE_KEYS,
+    "tissue": {"model": ("model", str, 1.0, "path"), **TISSUE_KEYS, **MATERIAL_KEYS},  # per model: TISSUE_MODELS
     "region": {
         "rings": ("rings", int, 1.0, ">= 1"),  # or the string "auto"
         "tol_mm": ("tol", float, 1000.0, "> 0"),  # only with rings = "auto"
     },
     "press": PRESS_KEYS,
+    "support": {
+        "fixed_below_mm": ("fixed_below", float, 1000.0, "number"),  # vertices with z below it are fixed
+    },
 }
 """Every section and key a scene file may hold: attribute, type, file units per SI unit, rule."""
 

@@ -11,6 +11,7 @@ import warp as wp
 
 from ..kernels.arrays import ProbeArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
+from ..tissue.material import Material, springs_for_mesh
 from ..tissue.params import TissueParams
 
 PROBE_OFF = 0
@@ -36,45 +37,56 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 class Model:
     """The static tissue model on one device: rest shape, topology, masses, springs, anchors."""
 
-    def __init__(self, mesh, tissue=None, device=None, *, edge_scale=None, anchor_scale=None):
-        """mesh: TissueMesh or DeviceMesh. tissue: TissueParams (SI; default: the stomach scene's).
+    def __init__(self, mesh, tissue=None, device=None, *, edge_scale=None, anchor_scale=None, fixed_below=None,
+                 support=None, anchors=None):
+        """mesh: TissueMesh or DeviceMesh. tissue: TissueParams (the paper's per-spring constants, SI;
+        default: the stomach scene's) or Material (every spring, anchor, damper and mass derived per
+        edge and vertex by tissue.material.springs_for_mesh).
 
         edge_scale [edge_count] and anchor_scale [vertex_count]: optional multipliers of stiffness
-        and damping per spring and per anchor (a stiffer lesion, say).
+        and damping per spring and per anchor (a stiffer lesion, say), on top of either tissue.
+        fixed_below [m]: every vertex with z below it is supported (fixed); support: vertex ids, also
+        fixed. anchors: keep the anchor springs k_i (True), drop them (False), or None: dropped on a
+        supported tet mesh (the support holds it), kept otherwise; the vertex dampers d_i stay (with
+        a material they hold the mass-proportional Rayleigh damping).
         """
         self.dmesh = dm = as_device_mesh(mesh, device)
         self.mesh = dm.mesh
         self.device = dm.device
         self.tissue = t = tissue if tissue is not None else TissueParams()
-        if not isinstance(t, TissueParams):
-            raise TypeError(f"tissue must be a TissueParams, got {type(t).__name__}")
+        if not isinstance(t, (TissueParams, Material)):
+            raise TypeError(f"tissue must be a TissueParams or a Material, got {type(t).__name__}")
         n, e = dm.vertex_count, dm.edge_count
         self.particle_count = n
         self.spring_count = e
-        mass = self.mesh.vertex_masses(t.density, t.thickness)
+        self._set_support(fixed_below, support)
+        if anchors is None:
+            anchors = not (self.support_count and self.mesh.tet_count)
+        ke, kd, ka, da, mass = self._tissue_constants(t)
         if np.any(mass <= 0):
             bad = int(np.flatnonzero(mass <= 0)[0])
             raise ValueError(f"vertex {bad} has mass {mass[bad]:.3g} kg: it belongs to no element with area or volume")
         es = np.ones(e) if edge_scale is None else np.asarray(edge_scale, dtype=np.float64)
         an = np.ones(n) if anchor_scale is None else np.asarray(anchor_scale, dtype=np.float64)
+        ke, kd, ka, da = ke * es, kd * es, ka * an * float(bool(anchors)), da * an
         d = self.device
         self.particle_mass_host = mass
         self.particle_mass = wp.array(mass, dtype=wp.float32, device=d)
         """Lumped vertex mass [kg], shape [particle_count], float32."""
         self.particle_q_rest = dm.rest_position
         """Rest positions [m], shape [particle_count], vec3."""
-        self.anchor_ke = wp.array(t.anchor_stiffness * an, dtype=wp.float32, device=d)
+        self.anchor_ke = wp.array(ka, dtype=wp.float32, device=d)
         """Anchor stiffness k_i [N/m], shape [particle_count], float32, eq. (3)."""
-        self.anchor_kd = wp.array(t.anchor_damping * an, dtype=wp.float32, device=d)
+        self.anchor_kd = wp.array(da, dtype=wp.float32, device=d)
         """Anchor damping d_i [N s/m], shape [particle_count], float32, eq. (3)."""
-        self.spring_ke = wp.array(t.edge_stiffness * es, dtype=wp.float32, device=d)
+        self.spring_ke = wp.array(ke, dtype=wp.float32, device=d)
         """Spring stiffness k_ij [N/m], shape [spring_count], float32, eqs. (4)-(5)."""
-        self.spring_kd = wp.array(t.edge_damping * es, dtype=wp.float32, device=d)
+        self.spring_kd = wp.array(kd, dtype=wp.float32, device=d)
         """Spring damping d_ij [N s/m], shape [spring_count], float32, eq. (6)."""
         self.spring_rest_length = dm.edge_rest_length
         """Spring rest length [m], shape [spring_count], float32."""
         _, _, adj_edge = self.mesh.adjacency
-        per_entry = np.stack([t.edge_stiffness * es, t.edge_damping * es, self.mesh.edge_rest_length], axis=1)[adj_edge]
+        per_entry = np.stack([ke, kd, self.mesh.edge_rest_length], axis=1)[adj_edge]
         self.adj_spring = wp.array(per_entry, dtype=wp.vec3, device=d)
         """(k_ij [N/m], d_ij [N s/m], rest length [m]) of the spring of each CSR adjacency entry, shape
         [2 * spring_count], vec3: the step reads one vector per neighbour, not three arrays by edge id."""
@@ -84,10 +96,38 @@ class Model:
             TissueArrays, self, q_rest=dm.rest_position, adj_offsets=dm.adj_offsets, adj_vertex=dm.adj_vertex, adj_edge=dm.adj_edge
         )
         """The arrays above as one kernel argument (kernels/arrays.py)."""
-        self._ke_host = t.edge_stiffness * es
-        self._kd_host = t.edge_damping * es
-        self._ka_host = t.anchor_stiffness * an
-        self._da_host = t.anchor_damping * an
+        self._ke_host, self._kd_host, self._ka_host, self._da_host = ke, kd, ka, da
+
+    def _tissue_constants(self, t):
+        """(k_ij, d_ij per edge; k_i, d_i, m_i per vertex), float64 host arrays, from either tissue."""
+        n, e = self.particle_count, self.spring_count
+        if isinstance(t, Material):
+            s = springs_for_mesh(self.mesh, t)
+            return s.edge_stiffness, s.edge_damping, s.anchor_stiffness, s.anchor_damping, s.vertex_mass
+        mass = self.mesh.vertex_masses(t.density, t.thickness)
+        return (np.full(e, t.edge_stiffness), np.full(e, t.edge_damping), np.full(n, t.anchor_stiffness),
+                np.full(n, t.anchor_damping), mass)
+
+    def _set_support(self, fixed_below, support) -> None:
+        n = self.particle_count
+        mask = np.zeros(n, dtype=bool)
+        if fixed_below is not None:
+            z = float(fixed_below)
+            if not np.isfinite(z):
+                raise ValueError(f"fixed_below must be a finite height [m], got {fixed_below!r}")
+            mask |= self.mesh.vertices[:, 2] < z
+        if support is not None:
+            ids = np.asarray(support).reshape(-1)
+            if ids.size and (not np.issubdtype(ids.dtype, np.integer) or ids.min() < 0 or ids.max() >= n):
+                raise ValueError(f"support must be vertex ids in 0..{n - 1}, got {ids[:5].tolist()}...")
+            mask[ids.astype(np.int64)] = True
+        if mask.all():
+            raise ValueError(f"every vertex is supported (fixed_below = {fixed_below!r} m is above the whole mesh): nothing can move")
+        self.fixed_below = None if fixed_below is None else float(fixed_below)
+        """The support plane's height [m] (vertices with z below it are fixed), or None."""
+        self.support_mask = mask
+        """Host: True for each supported (fixed) vertex, shape [particle_count], bool; solvers never move them."""
+        self.support_count = int(mask.sum())
 
     def state(self) -> "State":
         """A State at rest."""

@@ -10,7 +10,9 @@ class SolverBase:
     """Steps the free vertices of a region (or of the whole mesh) under the ALMSDM's forces.
 
     The free set comes from :meth:`set_region` (a Region: all but its fixed outer ring) or
-    :meth:`set_global` (every vertex; with or without anchors). A subclass names itself
+    :meth:`set_global` (every vertex; with or without anchors), less the model's supported vertices
+    (`Model.support_mask`): those are listed after the free ones, so that their local index is >=
+    `free_count` and every step treats them as it treats the fixed outer ring. A subclass names itself
     (`integrator`, its key in solvers.INTEGRATORS) and implements :meth:`integrate`.
     """
 
@@ -30,19 +32,36 @@ class SolverBase:
 
     def set_region(self, region) -> None:
         """Integrate the region's vertices but its fixed outer ring (local order: ring after ring)."""
-        self.free_vertex = region.region_vertex
-        self.free_count = region.free_count
-        self.vertex_local = region.vertex_local
+        self.free_vertex, self.free_count, self.vertex_local = self.without_supports(
+            region.region_vertex, region.free_count, region.vertex_local)
         self.anchor_scale = 1.0
         self.reset_warm_start()
 
     def set_global(self, anchors: bool = True) -> None:
         """Integrate every vertex: the global anchored model, or without anchors the paper's free surface."""
-        self.free_vertex = self._identity
-        self.free_count = self.model.particle_count
-        self.vertex_local = self._identity
+        self.free_vertex, self.free_count, self.vertex_local = self.without_supports(
+            self._identity, self.model.particle_count, self._identity)
         self.anchor_scale = 1.0 if anchors else 0.0
         self.reset_warm_start()
+
+    def without_supports(self, free_vertex, free_count: int, vertex_local):
+        """(free_vertex, free_count, vertex_local) with the supported vertices moved from the free set to
+        just after it (the others keep their order); unchanged, with no copy, where none is free.
+
+        Host work once per region (a copy of the region's arrays), never per step.
+        """
+        mask = getattr(self.model, "support_mask", None)
+        if mask is None or not self.model.support_count or free_count == 0:
+            return free_vertex, free_count, vertex_local
+        verts = free_vertex.numpy()[:free_count]
+        held = mask[verts]
+        if not held.any():
+            return free_vertex, free_count, vertex_local
+        order = np.concatenate([verts[~held], verts[held]]).astype(np.int32)
+        local = vertex_local.numpy().copy()
+        local[order] = np.arange(len(order), dtype=np.int32)
+        d = self.model.device
+        return wp.array(order, dtype=wp.int32, device=d), int(len(order) - held.sum()), wp.array(local, dtype=wp.int32, device=d)
 
     def reset_warm_start(self) -> None:
         """Forget what the last steps left to start the next from (the free set changed)."""

@@ -35,6 +35,19 @@ import numpy as np
 
 from ..mesh.topology import TET_EDGES, lumped_masses, tet_signed_volumes, triangle_areas, unique_edges
 
+MATERIAL_KEYS: dict[str, tuple[str, type, float, str]] = {
+    "youngs_modulus_kPa": ("youngs_modulus", float, 1.0e-3, "> 0"),
+    "poisson_ratio": ("poisson_ratio", float, 1.0, "number"),
+    "density_kg_per_m3": ("density", float, 1.0, "> 0"),
+    "thickness_mm": ("thickness", float, 1000.0, ">= 0"),
+    "foundation_kPa_per_mm": ("foundation", float, 1.0e-6, ">= 0"),
+    "damping_ratio": ("damping_ratio", float, 1.0, ">= 0"),
+    "rayleigh_alpha_per_s": ("rayleigh_alpha", float, 1.0, ">= 0"),
+    "rayleigh_beta_s": ("rayleigh_beta", float, 1.0, ">= 0"),
+}
+"""The [tissue] keys of ``model = "material"`` in a scene file: key -> (Material attribute, type, file
+units per SI unit, rule). Material checks the ranges (nu in (-1, 0.5), one kind of damping)."""
+
 POISSON_LAWS = {
     "indentation": lambda nu: (1.0 - 1.0 / 16.0) / (1.0 - nu * nu),
     "young": lambda nu: 1.0,
@@ -241,3 +254,8 @@ def springs_for_mesh(mesh, source, **options) -> TissueSprings:
     if isinstance(source, UniformSprings):
         return springs_uniform(source, mesh.vertices, mesh.triangles, mesh.tetrahedra, mesh.edges)
     return springs_from_material(source, mesh.vertices, mesh.triangles, mesh.tetrahedra, mesh.edges, **options)
+
+
+def material_as_dict(material: Material) -> dict:
+    """The material in a scene file's keys and units (kPa, mm, kPa/mm), for JSON records."""
+    return {key: getattr(material, attr) * factor for key, (attr, _kind, factor, _rule) in MATERIAL_KEYS.items()}

@@ -1,0 +1,151 @@
+"""Model built from a Material: its device arrays are the derived springs, anchors, dampers and masses,
+and the network it holds has the modulus docs/calibration.md measures (a static solve in SciPy)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import load_script
+
+from almsdm_warp.errors import InputError
+
+from almsdm_warp.mesh.primitives import icosphere, tet_ball
+from almsdm_warp.mesh.tissue_mesh import TissueMesh
+from almsdm_warp.mesh.topology import tet_signed_volumes, triangle_areas
+from almsdm_warp.scene.loader import load_scene
+from almsdm_warp.sim.model import Model
+from almsdm_warp.tissue.lesion import Lesion
+from almsdm_warp.tissue.material import Material, springs_for_mesh
+from almsdm_warp.tissue.params import TissueParams
+
+check = load_script("material_check")
+
+LIVER = Material(youngs_modulus=10.0e3, poisson_ratio=0.45, density=1060.0, rayleigh_alpha=20.0, rayleigh_beta=1e-3)
+WALL = Material(youngs_modulus=20.0e3, poisson_ratio=0.45, density=1040.0, thickness=3e-3, foundation=2.0e6, damping_ratio=0.3)
+
+
+@pytest.mark.parametrize("mesh_kind", ["tets", "surface"])
+def test_model_arrays_are_the_material_springs(mesh_kind, device):
+    mesh = tet_ball(20.0, 8.0) if mesh_kind == "tets" else icosphere(20.0, 2)
+    material = LIVER if mesh_kind == "tets" else WALL
+    model = Model(mesh, material, device)
+    s = springs_for_mesh(mesh, material)
+    f32 = lambda a: np.asarray(a, dtype=np.float32)  # noqa: E731
+    np.testing.assert_array_equal(model.spring_ke.numpy(), f32(s.edge_stiffness))
+    np.testing.assert_array_equal(model.spring_kd.numpy(), f32(s.edge_damping))
+    np.testing.assert_array_equal(model.anchor_ke.numpy(), f32(s.anchor_stiffness))
+    np.testing.assert_array_equal(model.anchor_kd.numpy(), f32(s.anchor_damping))
+    np.testing.assert_array_equal(model.particle_mass.numpy(), f32(s.vertex_mass))
+    per_entry = model.adj_spring.numpy()
+    _, _, edge = model.mesh.adjacency
+    np.testing.assert_array_equal(per_entry[:, 0], f32(s.edge_stiffness[edge]))
+    np.testing.assert_array_equal(per_entry[:, 1], f32(s.edge_damping[edge]))
+    assert model.tissue is material
+    assert np.ptp(s.edge_stiffness) > 0  # per edge, not one constant
+
+
+def test_masses_sum_to_density_times_volume_or_shell():
+    ball = tet_ball(20.0, 8.0)
+    volume = np.abs(tet_signed_volumes(ball.vertices, ball.tetrahedra)).sum()
+    assert Model(ball, LIVER, "cpu").particle_mass_host.sum() == pytest.approx(1060.0 * volume, rel=1e-12)
+    sphere = icosphere(20.0, 2)
+    area = triangle_areas(sphere.vertices, sphere.triangles).sum()
+    assert Model(sphere, WALL, "cpu").particle_mass_host.sum() == pytest.approx(1040.0 * 3e-3 * area, rel=1e-12)
+    # the foundation: sum k_i = kappa x area (Winkler), and a tet mesh gets no anchors from a material
+    assert Model(sphere, WALL, "cpu").anchor_ke.numpy().astype(np.float64).sum() == pytest.approx(2.0e6 * area, rel=1e-5)
+    assert not Model(ball, LIVER, "cpu").anchor_ke.numpy().any()
+
+
+def test_lesion_multipliers_apply_on_top_of_the_material():
+    mesh = tet_ball(20.0, 8.0)
+    lesion = Lesion(center=mesh.vertices[0], radius=0.01, stiffness_factor=4.0)
+    edge_scale, anchor_scale = lesion.scales(mesh)
+    assert edge_scale.max() == 4.0 and edge_scale.min() == 1.0
+    model = Model(mesh, LIVER, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale)
+    s = springs_for_mesh(mesh, LIVER)
+    np.testing.assert_allclose(model.spring_ke.numpy(), s.edge_stiffness * edge_scale, rtol=1e-6)
+    np.testing.assert_allclose(model.spring_kd.numpy(), s.edge_damping * edge_scale, rtol=1e-6)
+
+
+def test_paper_preset_keeps_one_constant_per_spring():
+    model = Model(icosphere(20.0, 2), TissueParams(), "cpu")
+    assert set(model.spring_ke.numpy().tolist()) == {62.0}
+    assert set(model.anchor_ke.numpy().tolist()) == {124.0}
+    with pytest.raises(TypeError, match="TissueParams or a Material"):
+        Model(icosphere(20.0, 1), {"youngs_modulus": 1e4}, "cpu")
+
+
+def test_surface_material_without_thickness_is_an_error():
+    with pytest.raises(ValueError, match="thickness"):
+        Model(icosphere(20.0, 1), Material(youngs_modulus=1e4), "cpu")
+
+
+@pytest.mark.parametrize("nu", [0.25, 0.45])
+def test_network_of_the_model_has_the_documented_modulus(nu):
+    """Uniaxial stress on a jittered box of 4 cells (docs/calibration.md, table (a)), assembled from the
+    Model's float32 device arrays, solved in SciPy: E_net / E is the documented 1.114 at nu = 1/4 (where
+    the indentation law is the young law) times the law's factor (15/16) / (1 - nu^2); the network's
+    indentation modulus E_net / (1 - nu_net^2) is the material's E / (1 - nu^2) within the +-20% the
+    calibration states for any mesh kind."""
+    points, tets = check.tet_box(4, size=(0.04, 0.04, 0.04), kind="jittered")
+    mesh = TissueMesh.from_arrays(points * 1e3, tetrahedra=tets)
+    material = Material(youngs_modulus=10.0e3, poisson_ratio=nu)
+    model = Model(mesh, material, "cpu")
+    x = mesh.vertices - mesh.vertices.min(axis=0)
+    K = check.spring_matrix(x, mesh.edges.astype(np.int64), model.spring_ke.numpy().astype(np.float64))
+    e_eff, nu_eff = check.uniaxial(x, K)
+    law = (1.0 - 1.0 / 16.0) / (1.0 - nu * nu)
+    assert e_eff / material.youngs_modulus == pytest.approx(1.114 * law, rel=0.01)
+    indentation = (e_eff / (1.0 - nu_eff**2)) / (material.youngs_modulus / (1.0 - nu * nu))
+    assert indentation == pytest.approx(1.0, abs=0.2)
+
+
+# -- scene files: [tissue] model = "material" --------------------------------------------------
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def write_scene(tmp_path, tissue: str, extra: str = "") -> Path:
+    path = tmp_path / "scene.toml"
+    path.write_text(f'[mesh]\npath = "{(SCENES / "liver.vtu").as_posix()}"\n\n[tissue]\n{tissue}\n{extra}')
+    return path
+
+
+def test_material_scene_is_read_in_si_and_written_back_in_its_units(tmp_path):
+    path = write_scene(tmp_path, 'model = "material"\nyoungs_modulus_kPa = 12.5\npoisson_ratio = 0.4\n'
+                                 "density_kg_per_m3 = 1060.0\nfoundation_kPa_per_mm = 0.5\nrayleigh_alpha_per_s = 20.0\n")
+    scene = load_scene(path)
+    assert scene.tissue == Material(youngs_modulus=12.5e3, poisson_ratio=0.4, density=1060.0, foundation=0.5e6,
+                                    rayleigh_alpha=20.0)
+    tissue = scene.as_dict()["tissue"]
+    assert tissue["model"] == "material"
+    assert tissue["youngs_modulus_kPa"] == pytest.approx(12.5) and tissue["foundation_kPa_per_mm"] == pytest.approx(0.5)
+    assert "edge_stiffness_N_per_m" not in tissue
+    model = Model(scene.load_mesh(), scene.tissue, "cpu")
+    np.testing.assert_allclose(model.spring_ke.numpy(), springs_for_mesh(model.mesh, scene.tissue).edge_stiffness, rtol=1e-6)
+
+
+def test_paper_is_the_default_model(tmp_path):
+    scene = load_scene(write_scene(tmp_path, "edge_stiffness_N_per_m = 50.0\n"))
+    assert isinstance(scene.tissue, TissueParams) and scene.tissue.edge_stiffness == 50.0
+    assert scene.as_dict()["tissue"]["model"] == "paper"
+    assert load_scene(SCENES / "stomach.toml").tissue == TissueParams()  # the shipped scenes stay on the preset
+
+
+@pytest.mark.parametrize(
+    "tissue, message",
+    [
+        ("youngs_modulus_kPa = 10.0\n", r"\[tissue\] youngs_modulus_kPa is a key of another tissue model, not of model = 'paper' \(the default\)"),
+        ('model = "material"\nyoungs_modulus_kPa = 10.0\nedge_stiffness_N_per_m = 5.0\n',
+         r"\[tissue\] edge_stiffness_N_per_m is a key of another tissue model, not of model = 'material'"),
+        ('model = "fem"\n', r"\[tissue\] model = 'fem' is not one of 'paper', 'material'"),
+        ('model = "material"\nyoungs_modulus_kPa = 10.0\npoisson_ratio = 0.5\n', r"Material.poisson_ratio = 0.5: must be in \(-1, 0.5\)"),
+        ('model = "material"\npoisson_ratio = 0.3\n', r"\[tissue\] model = 'material' needs youngs_modulus_kPa"),
+        ('model = "material"\nyoungs_modulus_kPa = 10.0\ndamping_ratio = 0.1\nrayleigh_beta_s = 0.01\n', r"give one or the other"),
+        ('model = "material"\nyoungs_modulus_kPa = -1.0\n', r"\[tissue\] youngs_modulus_kPa must be > 0"),
+        ('model = "material"\nyoung_modulus_kPa = 10.0\n', r"unknown key 'young_modulus_kPa' in \[tissue\] \(did you mean youngs_modulus_kPa\?\)"),
+    ],
+)
+def test_material_scene_errors_name_the_file_and_key(tmp_path, tissue, message):
+    path = write_scene(tmp_path, tissue)
+    with pytest.raises(InputError, match=rf"^{path}: .*{message}"):
+        load_scene(path)
