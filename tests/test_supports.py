@@ -187,3 +187,19 @@ def test_sweep_refuses_supports_it_cannot_hold(tmp_path):
     code, _stdout, err = run_main(["sweep", str(liver_scene(tmp_path, "[support]\nfixed_below_mm = -5.0\n")), "--points", "2",
                                    "--out", str(out)])
     assert code == 2 and "does not hold yet" in err and not out.exists()
+
+
+def test_api_refuses_what_it_cannot_hold():
+    """A batch cannot hold supports yet, and a probe on a supported vertex would read zero force:
+    both are errors, not silent answers."""
+    from almsdm_warp.batch import BatchPalpation
+    from almsdm_warp.mesh.primitives import tet_ball
+    from almsdm_warp.protocol import Palpation
+
+    mesh = tet_ball(50.0, 20.0)
+    z = mesh.vertices[:, 2]
+    with pytest.raises(ValueError, match="does not hold supports"):
+        BatchPalpation(mesh, rings=2, device="cpu", fixed_below=-0.04)
+    pal = Palpation(mesh, rings=2, device="cpu", fixed_below=-0.04)
+    with pytest.raises(ValueError, match="held by the support"):
+        pal.touch(int(np.argmin(z)))

@@ -119,6 +119,10 @@ class BatchPalpation:
         cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
     ):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
+        if self.model.support_count:
+            # the batch kernels integrate every region vertex but the outer ring: a support would move
+            raise ValueError(f"BatchPalpation does not hold supports yet: the model fixes {self.model.support_count} "
+                             f"vertices below a plane; press them one at a time with Palpation")
         self.device = self.model.device
         self.mesh = self.model.mesh
         self.rings = check_rings(rings)

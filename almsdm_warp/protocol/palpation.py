@@ -174,6 +174,8 @@ class Palpation:
 
     def touch(self, vertex: int) -> None:
         """Put the probe on `vertex`; the local model builds its region there (relocating it)."""
+        if self.model.support_count and 0 <= vertex < self.model.particle_count and self.model.support_mask[vertex]:
+            raise ValueError(f"vertex {vertex} is held by the support (below the fixed plane): the probe cannot move it")
         if self.region is not None:
             old = self.region
             old_count = old.vertex_count
