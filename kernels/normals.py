@@ -59,31 +59,25 @@ def gather_vertex_normals(mesh: MeshArrays, face_normal: wp.array(dtype=wp.vec3)
 
 
 @wp.kernel
-def search_vertex_normals(
-    q: wp.array(dtype=wp.vec3), mesh: MeshArrays, vertices: wp.array(dtype=wp.int32), vertex_normal: wp.array(dtype=wp.vec3)
+def eval_listed_normals(
+    q: wp.array(dtype=wp.vec3), mesh: MeshArrays, vertices: wp.array(dtype=wp.int32), by_search: int, vertex_normal: wp.array(dtype=wp.vec3)
 ):
-    # local by search: one thread per listed vertex scans every triangle for the ones it is on
+    # one thread per listed vertex; its faces in id order either way, so both give the same bits
     i = vertices[wp.tid()]
     n = wp.vec3(0.0)
-    for f in range(mesh.triangles.shape[0]):
-        a = mesh.triangles[f, 0]
-        b = mesh.triangles[f, 1]
-        c = mesh.triangles[f, 2]
-        if a == i or b == i or c == i:
-            n += face_area_normal(q, a, b, c)
-    vertex_normal[i] = normalize_or_zero(n)
-
-
-@wp.kernel
-def gather_incident_normals(
-    q: wp.array(dtype=wp.vec3), mesh: MeshArrays, vertices: wp.array(dtype=wp.int32), vertex_normal: wp.array(dtype=wp.vec3)
-):
-    # local precomputed: one thread per listed vertex reads its faces from the incidence CSR
-    i = vertices[wp.tid()]
-    n = wp.vec3(0.0)
-    for k in range(mesh.vertex_face_offsets[i], mesh.vertex_face_offsets[i + 1]):
-        f = mesh.vertex_face[k]
-        n += face_area_normal(q, mesh.triangles[f, 0], mesh.triangles[f, 1], mesh.triangles[f, 2])
+    if by_search:
+        # local by search: scan every triangle for the ones it is on
+        for f in range(mesh.triangles.shape[0]):
+            a = mesh.triangles[f, 0]
+            b = mesh.triangles[f, 1]
+            c = mesh.triangles[f, 2]
+            if a == i or b == i or c == i:
+                n += face_area_normal(q, a, b, c)
+    else:
+        # local precomputed: read its faces from the incidence CSR
+        for k in range(mesh.vertex_face_offsets[i], mesh.vertex_face_offsets[i + 1]):
+            f = mesh.vertex_face[k]
+            n += face_area_normal(q, mesh.triangles[f, 0], mesh.triangles[f, 1], mesh.triangles[f, 2])
     vertex_normal[i] = normalize_or_zero(n)
 
 
@@ -99,7 +93,7 @@ def eval_vertex_normals_search(dmesh, q, vertices, count, vertex_normal):
     """The normals of `vertices[:count]`, each found by scanning every triangle."""
     if count:
         wp.launch(
-            search_vertex_normals, dim=count, inputs=[q, dmesh.arrays, vertices], outputs=[vertex_normal], device=dmesh.device
+            eval_listed_normals, dim=count, inputs=[q, dmesh.arrays, vertices, 1], outputs=[vertex_normal], device=dmesh.device
         )
 
 
@@ -107,5 +101,5 @@ def eval_vertex_normals_incident(dmesh, q, vertices, count, vertex_normal):
     """The normals of `vertices[:count]` from their incident faces (the precomputed CSR)."""
     if count:
         wp.launch(
-            gather_incident_normals, dim=count, inputs=[q, dmesh.arrays, vertices], outputs=[vertex_normal], device=dmesh.device
+            eval_listed_normals, dim=count, inputs=[q, dmesh.arrays, vertices, 0], outputs=[vertex_normal], device=dmesh.device
         )

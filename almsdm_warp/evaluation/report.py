@@ -169,7 +169,7 @@ def _accuracy(r) -> list[str]:
     a = r["accuracy"]
     lines = _section_head(
         "5. Speed against accuracy",
-        f"Error against the global anchored model (same integrator, same dt) at the end of the hold, median over "
+        "Error against the global anchored model (same integrator, same dt) at the end of the hold, median over "
         f"{a['contacts']} contact vertices spread over the surface (max in brackets); the step timed at the first (the top "
         "vertex) with the probe held 5 mm in.",
         ("mesh", "integrator", "rings", "region vertices", "step [us]", "peak-force error [N]", "largest displacement error [mm]"),
