@@ -67,14 +67,46 @@ CG_FIELDS = (
 (per unknown, per CSR entry, or the solve's (iterations, relative residual))."""
 
 
+def struct_of(name: str, doc: str, members: dict):
+    """A Warp struct named `name` with `members` (member name -> Warp type) in that order."""
+    return wp.struct(type(name, (), {"__annotations__": dict(members), "__doc__": doc, "__module__": __name__}))
+
+
 def _cg_struct(name: str, array_type, doc: str):
     # one member list for the one-palpation scratch (1-d) and the batch's (a row per palpation)
-    annotations = {field: array_type(dtype=dtype) for field, dtype, _ in CG_FIELDS}
-    return wp.struct(type(name, (), {"__annotations__": annotations, "__doc__": doc, "__module__": __name__}))
+    return struct_of(name, doc, {field: array_type(dtype=dtype) for field, dtype, _ in CG_FIELDS})
 
 
 CGArrays = _cg_struct("CGArrays", wp.array, "The one-palpation implicit step's conjugate-gradient scratch.")
 BatchCGArrays = _cg_struct("BatchCGArrays", wp.array2d, "The implicit batch's conjugate-gradient scratch, a row per palpation.")
+
+
+_INT = wp.array(dtype=wp.int32)
+
+MeshArrays = struct_of(
+    "MeshArrays",
+    """A DeviceMesh's topology and rest geometry (almsdm_warp.mesh.device_mesh.DeviceMesh.arrays).
+
+    adj_offsets, adj_vertex, adj_edge: the CSR vertex adjacency (vertex v's entries are
+    adj_offsets[v]..adj_offsets[v + 1]; each entry's neighbour and mesh edge id); triangles
+    [triangle_count, 3]; vertex_face_offsets, vertex_face: the vertex-to-triangle incidence CSR;
+    rest_position [m]; bvh_vertex: the vertex id of each item of the surface-vertex BVH.
+    """,
+    {"adj_offsets": _INT, "adj_vertex": _INT, "adj_edge": _INT, "triangles": wp.array2d(dtype=wp.int32)}
+    | {"vertex_face_offsets": _INT, "vertex_face": _INT, "rest_position": wp.array(dtype=wp.vec3), "bvh_vertex": _INT},
+)
+
+RegionArrays = struct_of(
+    "RegionArrays",
+    """One Region's device arrays (almsdm_warp.region.region.Region.arrays documents each).
+
+    Per mesh vertex: vertex_ring, vertex_local (-1 outside). In local order: region_vertex,
+    region_ring, region_boundary; per region spring: region_edge, region_edge_local; region_count:
+    the vertices placed so far (one entry, the ring growth's counter).
+    """,
+    {"vertex_ring": _INT, "vertex_local": _INT, "region_vertex": _INT, "region_ring": _INT, "region_boundary": _INT}
+    | {"region_edge": _INT, "region_edge_local": wp.array(dtype=wp.vec2i), "region_count": _INT},
+)
 
 
 @wp.struct

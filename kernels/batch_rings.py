@@ -11,7 +11,7 @@ needed per palpation (memory stays proportional to B x region, not B x mesh).
 
 import warp as wp
 
-from .arrays import BatchPress, BatchRegionArrays, TissueArrays
+from .arrays import BatchPress, BatchRegionArrays, MeshArrays, TissueArrays
 from .rings import sort_ring
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
@@ -33,14 +33,7 @@ def find_local(region_vertex: wp.array2d(dtype=wp.int32), b: int, count: int, u:
 
 
 @wp.kernel
-def build_batch_regions(
-    adj_offsets: wp.array(dtype=wp.int32),
-    adj_vertex: wp.array(dtype=wp.int32),
-    adj_edge: wp.array(dtype=wp.int32),
-    seeds: wp.array(dtype=wp.int32),
-    rings: int,
-    regions: BatchRegionArrays,
-):
+def build_batch_regions(mesh: MeshArrays, seeds: wp.array(dtype=wp.int32), rings: int, regions: BatchRegionArrays):
     b = wp.tid()
     capacity = regions.region_vertex.shape[1]
     entry_capacity = regions.local_neighbour.shape[1]
@@ -58,8 +51,8 @@ def build_batch_regions(
         # ring r: the neighbours of ring r - 1 not yet inside (breadth-first)
         for i in range(begin, end):
             v = regions.region_vertex[b, i]
-            for k in range(adj_offsets[v], adj_offsets[v + 1]):
-                u = adj_vertex[k]
+            for k in range(mesh.adj_offsets[v], mesh.adj_offsets[v + 1]):
+                u = mesh.adj_vertex[k]
                 if find_local(regions.region_vertex, b, count, u) < 0:
                     if count < capacity:
                         regions.region_vertex[b, count] = u
@@ -84,10 +77,10 @@ def build_batch_regions(
     regions.local_offsets[b, 0] = 0
     for i in range(nf):
         v = regions.region_vertex[b, i]
-        for k in range(adj_offsets[v], adj_offsets[v + 1]):
+        for k in range(mesh.adj_offsets[v], mesh.adj_offsets[v + 1]):
             if slot < entry_capacity:
-                regions.local_neighbour[b, slot] = find_local(regions.region_vertex, b, count, adj_vertex[k])
-                regions.local_edge[b, slot] = adj_edge[k]
+                regions.local_neighbour[b, slot] = find_local(regions.region_vertex, b, count, mesh.adj_vertex[k])
+                regions.local_edge[b, slot] = mesh.adj_edge[k]
                 regions.local_owner[b, slot] = i
             else:
                 flags = flags | 2
@@ -115,12 +108,7 @@ def build_batch_regions(
 
 def build_regions(dmesh, seeds, rings, arrays):
     """Build every palpation's region around `seeds` (one launch; `arrays` holds the outputs)."""
-    wp.launch(
-        build_batch_regions,
-        dim=len(seeds),
-        inputs=[dmesh.adj_offsets, dmesh.adj_vertex, dmesh.adj_edge, seeds, rings, arrays.arrays],
-        device=dmesh.device,
-    )
+    wp.launch(build_batch_regions, dim=len(seeds), inputs=[dmesh.arrays, seeds, rings, arrays.arrays], device=dmesh.device)
 
 
 @wp.kernel
@@ -128,8 +116,7 @@ def rest_batch_state(
     regions: BatchRegionArrays,
     tissue: TissueArrays,
     press: BatchPress,
-    q_state: wp.array2d(dtype=wp.vec3),
-    qd_state: wp.array2d(dtype=wp.vec3),
+    q_state: wp.array2d(dtype=wp.vec3), qd_state: wp.array2d(dtype=wp.vec3),
 ):
     # every region vertex at rest, the probe's records cleared
     b = wp.tid()

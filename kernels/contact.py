@@ -8,6 +8,8 @@ it. Ties go to the lower vertex id, as a brute-force argmin would.
 
 import warp as wp
 
+from .arrays import MeshArrays
+
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
@@ -38,12 +40,7 @@ def closer(d2: float, v: int, best_d2: float, best_v: int):
 
 @wp.kernel
 def query_nearest_vertices(
-    vertex_bvh: wp.uint64,
-    point: wp.array(dtype=wp.vec3),
-    face: wp.array(dtype=wp.int32),
-    triangles: wp.array(dtype=wp.int32, ndim=2),
-    positions: wp.array(dtype=wp.vec3),
-    bvh_vertex: wp.array(dtype=wp.int32),
+    vertex_bvh: wp.uint64, mesh: MeshArrays, point: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
     nearest_vertex: wp.array(dtype=wp.int32),
 ):
     tid = wp.tid()
@@ -53,11 +50,11 @@ def query_nearest_vertices(
         nearest_vertex[tid] = -1
         return
     # upper bound from the closest face's corners
-    best_v = int(triangles[f, 0])
-    best_d2 = wp.length_sq(positions[best_v] - p)
+    best_v = int(mesh.triangles[f, 0])
+    best_d2 = wp.length_sq(mesh.rest_position[best_v] - p)
     for c in range(1, 3):
-        v = int(triangles[f, c])
-        d2 = wp.length_sq(positions[v] - p)
+        v = int(mesh.triangles[f, c])
+        d2 = wp.length_sq(mesh.rest_position[v] - p)
         if closer(d2, v, best_d2, best_v):
             best_v = v
             best_d2 = d2
@@ -68,8 +65,8 @@ def query_nearest_vertices(
     query = wp.bvh_query_aabb(vertex_bvh, lo, hi)
     item = int(0)
     while wp.bvh_query_next(query, item):
-        v = bvh_vertex[item]
-        d2 = wp.length_sq(positions[v] - p)
+        v = mesh.bvh_vertex[item]
+        d2 = wp.length_sq(mesh.rest_position[v] - p)
         if closer(d2, v, best_d2, best_v):
             best_v = v
             best_d2 = d2
@@ -88,7 +85,7 @@ def eval_contacts(dmesh, probe, contact_point, contact_face, nearest_vertex, max
     wp.launch(
         query_nearest_vertices,
         dim=len(probe),
-        inputs=[dmesh.vertex_bvh.id, contact_point, contact_face, dmesh.triangles, dmesh.rest_position, dmesh.bvh_vertex],
+        inputs=[dmesh.vertex_bvh.id, dmesh.arrays, contact_point, contact_face],
         outputs=[nearest_vertex],
         device=dmesh.device,
     )

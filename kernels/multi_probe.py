@@ -21,14 +21,9 @@ PROBE_DISPLACEMENT = wp.constant(1)
 
 @wp.kernel
 def drive_probes(
-    patch_probe: wp.array(dtype=wp.int32),
-    probes: ProbeArrays,
-    tissue: TissueArrays,
-    dt: float,
-    q_in: wp.array(dtype=wp.vec3),
-    qd_in: wp.array(dtype=wp.vec3),
-    q_out: wp.array(dtype=wp.vec3),
-    qd_out: wp.array(dtype=wp.vec3),
+    patch_probe: wp.array(dtype=wp.int32), probes: ProbeArrays, tissue: TissueArrays, dt: float,
+    q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3),
+    q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
 ):
     p = patch_probe[wp.tid()]
     v = probes.probe_vertex[p]

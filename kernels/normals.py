@@ -17,6 +17,8 @@ sums are gathers per vertex, never float atomics.
 
 import warp as wp
 
+from .arrays import MeshArrays
+
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
@@ -40,66 +42,42 @@ def face_area_normal(q: wp.array(dtype=wp.vec3), a: int, b: int, c: int):
 
 
 @wp.kernel
-def eval_face_normals(
-    q: wp.array(dtype=wp.vec3),
-    triangles: wp.array2d(dtype=wp.int32),
-    face_normal: wp.array(dtype=wp.vec3),
-):
+def eval_face_normals(q: wp.array(dtype=wp.vec3), mesh: MeshArrays, face_normal: wp.array(dtype=wp.vec3)):
     # global, pass 1: one thread per triangle
     f = wp.tid()
-    face_normal[f] = face_area_normal(q, triangles[f, 0], triangles[f, 1], triangles[f, 2])
+    face_normal[f] = face_area_normal(q, mesh.triangles[f, 0], mesh.triangles[f, 1], mesh.triangles[f, 2])
 
 
 @wp.kernel
-def gather_vertex_normals(
-    face_offsets: wp.array(dtype=wp.int32),
-    vertex_face: wp.array(dtype=wp.int32),
-    face_normal: wp.array(dtype=wp.vec3),
-    vertex_normal: wp.array(dtype=wp.vec3),
-):
+def gather_vertex_normals(mesh: MeshArrays, face_normal: wp.array(dtype=wp.vec3), vertex_normal: wp.array(dtype=wp.vec3)):
     # global, pass 2: one thread per vertex sums its faces' normals (a gather, no atomics)
     i = wp.tid()
     n = wp.vec3(0.0)
-    for k in range(face_offsets[i], face_offsets[i + 1]):
-        n += face_normal[vertex_face[k]]
+    for k in range(mesh.vertex_face_offsets[i], mesh.vertex_face_offsets[i + 1]):
+        n += face_normal[mesh.vertex_face[k]]
     vertex_normal[i] = normalize_or_zero(n)
 
 
 @wp.kernel
-def search_vertex_normals(
-    q: wp.array(dtype=wp.vec3),
-    triangles: wp.array2d(dtype=wp.int32),
-    triangle_count: int,
-    vertices: wp.array(dtype=wp.int32),
-    vertex_normal: wp.array(dtype=wp.vec3),
+def eval_listed_normals(
+    q: wp.array(dtype=wp.vec3), mesh: MeshArrays, vertices: wp.array(dtype=wp.int32), by_search: int, vertex_normal: wp.array(dtype=wp.vec3)
 ):
-    # local by search: one thread per listed vertex scans every triangle for the ones it is on
+    # one thread per listed vertex; its faces in id order either way, so both give the same bits
     i = vertices[wp.tid()]
     n = wp.vec3(0.0)
-    for f in range(triangle_count):
-        a = triangles[f, 0]
-        b = triangles[f, 1]
-        c = triangles[f, 2]
-        if a == i or b == i or c == i:
-            n += face_area_normal(q, a, b, c)
-    vertex_normal[i] = normalize_or_zero(n)
-
-
-@wp.kernel
-def gather_incident_normals(
-    q: wp.array(dtype=wp.vec3),
-    triangles: wp.array2d(dtype=wp.int32),
-    face_offsets: wp.array(dtype=wp.int32),
-    vertex_face: wp.array(dtype=wp.int32),
-    vertices: wp.array(dtype=wp.int32),
-    vertex_normal: wp.array(dtype=wp.vec3),
-):
-    # local precomputed: one thread per listed vertex reads its faces from the incidence CSR
-    i = vertices[wp.tid()]
-    n = wp.vec3(0.0)
-    for k in range(face_offsets[i], face_offsets[i + 1]):
-        f = vertex_face[k]
-        n += face_area_normal(q, triangles[f, 0], triangles[f, 1], triangles[f, 2])
+    if by_search:
+        # local by search: scan every triangle for the ones it is on
+        for f in range(mesh.triangles.shape[0]):
+            a = mesh.triangles[f, 0]
+            b = mesh.triangles[f, 1]
+            c = mesh.triangles[f, 2]
+            if a == i or b == i or c == i:
+                n += face_area_normal(q, a, b, c)
+    else:
+        # local precomputed: read its faces from the incidence CSR
+        for k in range(mesh.vertex_face_offsets[i], mesh.vertex_face_offsets[i + 1]):
+            f = mesh.vertex_face[k]
+            n += face_area_normal(q, mesh.triangles[f, 0], mesh.triangles[f, 1], mesh.triangles[f, 2])
     vertex_normal[i] = normalize_or_zero(n)
 
 
@@ -107,25 +85,15 @@ def eval_vertex_normals_global(dmesh, q, face_normal, vertex_normal):
     """Every vertex's normal from every face's: two launches (faces, then a gather per vertex)."""
     d = dmesh.device
     if dmesh.triangles.shape[0]:
-        wp.launch(eval_face_normals, dim=dmesh.triangles.shape[0], inputs=[q, dmesh.triangles], outputs=[face_normal], device=d)
-    wp.launch(
-        gather_vertex_normals,
-        dim=dmesh.vertex_count,
-        inputs=[dmesh.vertex_face_offsets, dmesh.vertex_face, face_normal],
-        outputs=[vertex_normal],
-        device=d,
-    )
+        wp.launch(eval_face_normals, dim=dmesh.triangles.shape[0], inputs=[q, dmesh.arrays], outputs=[face_normal], device=d)
+    wp.launch(gather_vertex_normals, dim=dmesh.vertex_count, inputs=[dmesh.arrays, face_normal], outputs=[vertex_normal], device=d)
 
 
 def eval_vertex_normals_search(dmesh, q, vertices, count, vertex_normal):
     """The normals of `vertices[:count]`, each found by scanning every triangle."""
     if count:
         wp.launch(
-            search_vertex_normals,
-            dim=count,
-            inputs=[q, dmesh.triangles, dmesh.triangles.shape[0], vertices],
-            outputs=[vertex_normal],
-            device=dmesh.device,
+            eval_listed_normals, dim=count, inputs=[q, dmesh.arrays, vertices, 1], outputs=[vertex_normal], device=dmesh.device
         )
 
 
@@ -133,9 +101,5 @@ def eval_vertex_normals_incident(dmesh, q, vertices, count, vertex_normal):
     """The normals of `vertices[:count]` from their incident faces (the precomputed CSR)."""
     if count:
         wp.launch(
-            gather_incident_normals,
-            dim=count,
-            inputs=[q, dmesh.triangles, dmesh.vertex_face_offsets, dmesh.vertex_face, vertices],
-            outputs=[vertex_normal],
-            device=dmesh.device,
+            eval_listed_normals, dim=count, inputs=[q, dmesh.arrays, vertices, 0], outputs=[vertex_normal], device=dmesh.device
         )

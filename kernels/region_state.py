@@ -2,43 +2,36 @@
 
 import warp as wp
 
+from .arrays import RegionArrays, TissueArrays
+
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
 
 @wp.kernel
 def reset_left_behind(
-    old_vertex: wp.array(dtype=wp.int32),
-    vertex_local: wp.array(dtype=wp.int32),
-    free_count: int,
-    q_rest: wp.array(dtype=wp.vec3),
-    q_a: wp.array(dtype=wp.vec3),
-    qd_a: wp.array(dtype=wp.vec3),
-    q_b: wp.array(dtype=wp.vec3),
-    qd_b: wp.array(dtype=wp.vec3),
+    old_vertex: wp.array(dtype=wp.int32), region: RegionArrays, free_count: int, tissue: TissueArrays,
+    q: wp.array(dtype=wp.vec3), qd: wp.array(dtype=wp.vec3),
 ):
-    # a vertex of the old region that the new one does not integrate: at rest in both states
+    # a vertex of the old region that the new one does not integrate: at rest
     v = old_vertex[wp.tid()]
-    lv = vertex_local[v]
+    lv = region.vertex_local[v]
     if lv < 0 or lv >= free_count:
-        q_a[v] = q_rest[v]
-        qd_a[v] = wp.vec3(0.0)
-        q_b[v] = q_rest[v]
-        qd_b[v] = wp.vec3(0.0)
+        q[v] = tissue.q_rest[v]
+        qd[v] = wp.vec3(0.0)
 
 
 def reset_vertices_left_behind(model, old_vertex, old_count, region, states):
     """Put the old region's vertices that are not free in `region` back at rest in both `states`."""
     if old_count == 0:
         return
-    a, b = states
-    wp.launch(
-        reset_left_behind,
-        dim=old_count,
-        inputs=[old_vertex, region.vertex_local, region.free_count, model.particle_q_rest],
-        outputs=[a.particle_q, a.particle_qd, b.particle_q, b.particle_qd],
-        device=model.device,
-    )
+    for state in states:
+        wp.launch(
+            reset_left_behind,
+            dim=old_count,
+            inputs=[old_vertex, region.arrays, region.free_count, model.arrays, state.particle_q, state.particle_qd],
+            device=model.device,
+        )
 
 
 def clear_region(model, region, states):

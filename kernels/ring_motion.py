@@ -7,7 +7,7 @@ vertices at most between checks), so the maxima need no atomics and the launch n
 
 import warp as wp
 
-from .arrays import TissueArrays
+from .arrays import RegionArrays, TissueArrays
 from .forces import add_spring_force, anchor_force, edge_direction
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
@@ -16,24 +16,17 @@ wp.set_module_options({"enable_backward": False})
 
 @wp.kernel
 def eval_ring_motion(
-    region_vertex: wp.array(dtype=wp.int32),
-    region_ring: wp.array(dtype=wp.int32),
-    region_boundary: wp.array(dtype=wp.int32),
-    count: int,
-    slots: int,
-    tissue: TissueArrays,
-    q: wp.array(dtype=wp.vec3),
-    motion: wp.array(dtype=wp.float32),
+    region: RegionArrays, count: int, slots: int, tissue: TissueArrays, q: wp.array(dtype=wp.vec3), motion: wp.array(dtype=wp.float32)
 ):
     # motion[0]: the largest displacement a fixed-ring vertex would take if it alone were freed;
     # motion[1 + r]: the largest displacement |q - q_rest| on ring r (free rings; 0 on the fixed one)
     for s in range(slots):
         motion[s] = 0.0
     for i in range(count):
-        v = region_vertex[i]
+        v = region.region_vertex[i]
         x = q[v]
-        if region_boundary[i] == 0:
-            slot = wp.min(1 + region_ring[i], slots - 1)  # rings past the array share its last entry
+        if region.region_boundary[i] == 0:
+            slot = wp.min(1 + region.region_ring[i], slots - 1)  # rings past the array share its last entry
             motion[slot] = wp.max(motion[slot], wp.length(x - tissue.q_rest[v]))
         else:
             # one Jacobi step of the static equilibrium K u = f at v: anchor and springs, eqs. (3)-(5),
@@ -58,10 +51,7 @@ def eval_region_motion(model, region, state, motion):
     wp.launch(
         eval_ring_motion,
         dim=1,
-        inputs=[
-            region.region_vertex, region.region_ring, region.region_boundary, region.vertex_count, motion.shape[0],
-            model.arrays, state.particle_q,
-        ],
+        inputs=[region.arrays, region.vertex_count, motion.shape[0], model.arrays, state.particle_q],
         outputs=[motion],
         device=model.device,
     )

@@ -10,47 +10,37 @@ the new ring in the array is then made deterministic by a radix sort on vertex i
 
 import warp as wp
 
+from .arrays import MeshArrays, RegionArrays
+
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
 
 @wp.kernel
-def seed_ring(
-    seed: int,
-    vertex_ring: wp.array(dtype=wp.int32),
-    region_vertex: wp.array(dtype=wp.int32),
-):
+def seed_ring(seed: int, region: RegionArrays):
     # ring 0 is the contact vertex itself
-    vertex_ring[seed] = 0
-    region_vertex[0] = seed
+    region.vertex_ring[seed] = 0
+    region.region_vertex[0] = seed
 
 
 @wp.kernel
-def seed_rings(seeds: wp.array(dtype=wp.int32), vertex_ring: wp.array(dtype=wp.int32), region_vertex: wp.array(dtype=wp.int32)):
+def seed_rings(seeds: wp.array(dtype=wp.int32), region: RegionArrays):
     # ring 0 of a region of several probes: every probe's contact vertex (sorted, distinct: the host checks)
     i = wp.tid()
-    vertex_ring[seeds[i]] = 0
-    region_vertex[i] = seeds[i]
+    region.vertex_ring[seeds[i]] = 0
+    region.region_vertex[i] = seeds[i]
 
 
 @wp.kernel
-def grow_ring(
-    adj_offsets: wp.array(dtype=wp.int32),
-    adj_vertex: wp.array(dtype=wp.int32),
-    frontier_begin: int,
-    ring: int,
-    vertex_ring: wp.array(dtype=wp.int32),
-    region_vertex: wp.array(dtype=wp.int32),
-    region_count: wp.array(dtype=wp.int32),
-):
+def grow_ring(mesh: MeshArrays, region: RegionArrays, frontier_begin: int, ring: int):
     # one thread per vertex of ring (ring - 1): claim each unvisited neighbour for `ring`
-    v = region_vertex[frontier_begin + wp.tid()]
-    for k in range(adj_offsets[v], adj_offsets[v + 1]):
-        u = adj_vertex[k]
-        if vertex_ring[u] < 0:
-            if wp.atomic_cas(vertex_ring, u, -1, ring) == -1:
-                slot = wp.atomic_add(region_count, 0, 1)
-                region_vertex[slot] = u
+    v = region.region_vertex[frontier_begin + wp.tid()]
+    for k in range(mesh.adj_offsets[v], mesh.adj_offsets[v + 1]):
+        u = mesh.adj_vertex[k]
+        if region.vertex_ring[u] < 0:
+            if wp.atomic_cas(region.vertex_ring, u, -1, ring) == -1:
+                slot = wp.atomic_add(region.region_count, 0, 1)
+                region.region_vertex[slot] = u
 
 
 @wp.func
@@ -73,93 +63,77 @@ def sort_ring_small(region_vertex: wp.array(dtype=wp.int32), begin: int, count: 
 
 
 @wp.kernel
-def clear_region(
-    region_vertex: wp.array(dtype=wp.int32),
-    vertex_ring: wp.array(dtype=wp.int32),
-    vertex_local: wp.array(dtype=wp.int32),
-):
+def clear_region(region: RegionArrays):
     # forget the old region: only its own vertices are touched
-    v = region_vertex[wp.tid()]
-    vertex_ring[v] = -1
-    vertex_local[v] = -1
+    v = region.region_vertex[wp.tid()]
+    region.vertex_ring[v] = -1
+    region.vertex_local[v] = -1
 
 
 @wp.kernel
-def index_region(
-    region_vertex: wp.array(dtype=wp.int32),
-    vertex_ring: wp.array(dtype=wp.int32),
-    outer_ring: int,
-    vertex_local: wp.array(dtype=wp.int32),
-    region_ring: wp.array(dtype=wp.int32),
-    region_boundary: wp.array(dtype=wp.int32),
-):
+def index_region(region: RegionArrays, outer_ring: int):
     # local index of each region vertex, its ring, and the boundary flag on the outermost ring
     i = wp.tid()
-    v = region_vertex[i]
-    r = vertex_ring[v]
-    vertex_local[v] = i
-    region_ring[i] = r
-    region_boundary[i] = wp.where(r == outer_ring and outer_ring > 0, 1, 0)
+    v = region.region_vertex[i]
+    r = region.vertex_ring[v]
+    region.vertex_local[v] = i
+    region.region_ring[i] = r
+    region.region_boundary[i] = wp.where(r == outer_ring and outer_ring > 0, 1, 0)
 
 
 @wp.kernel
-def count_region_edges(
-    adj_offsets: wp.array(dtype=wp.int32),
-    adj_vertex: wp.array(dtype=wp.int32),
-    region_vertex: wp.array(dtype=wp.int32),
-    vertex_ring: wp.array(dtype=wp.int32),
-    edge_count: wp.array(dtype=wp.int32),
-):
+def count_region_edges(mesh: MeshArrays, region: RegionArrays, edge_count: wp.array(dtype=wp.int32)):
     # each edge with both ends inside is owned by its lower-id end, so it is counted once
-    v = region_vertex[wp.tid()]
+    v = region.region_vertex[wp.tid()]
     c = int(0)
-    for k in range(adj_offsets[v], adj_offsets[v + 1]):
-        u = adj_vertex[k]
-        if u > v and vertex_ring[u] >= 0:
+    for k in range(mesh.adj_offsets[v], mesh.adj_offsets[v + 1]):
+        u = mesh.adj_vertex[k]
+        if u > v and region.vertex_ring[u] >= 0:
             c += 1
     edge_count[wp.tid()] = c
 
 
 @wp.kernel
 def write_region_edges(
-    adj_offsets: wp.array(dtype=wp.int32),
-    adj_vertex: wp.array(dtype=wp.int32),
-    adj_edge: wp.array(dtype=wp.int32),
-    region_vertex: wp.array(dtype=wp.int32),
-    vertex_ring: wp.array(dtype=wp.int32),
-    vertex_local: wp.array(dtype=wp.int32),
-    edge_count: wp.array(dtype=wp.int32),
-    edge_end: wp.array(dtype=wp.int32),
-    region_edge: wp.array(dtype=wp.int32),
-    region_edge_local: wp.array(dtype=wp.vec2i),
+    mesh: MeshArrays, region: RegionArrays, edge_count: wp.array(dtype=wp.int32), edge_end: wp.array(dtype=wp.int32)
 ):
     # the region's springs: mesh edge id and local end points, in owner order then CSR order
     i = wp.tid()
-    v = region_vertex[i]
+    v = region.region_vertex[i]
     slot = edge_end[i] - edge_count[i]
-    for k in range(adj_offsets[v], adj_offsets[v + 1]):
-        u = adj_vertex[k]
-        if u > v and vertex_ring[u] >= 0:
-            region_edge[slot] = adj_edge[k]
-            region_edge_local[slot] = wp.vec2i(i, vertex_local[u])
+    for k in range(mesh.adj_offsets[v], mesh.adj_offsets[v + 1]):
+        u = mesh.adj_vertex[k]
+        if u > v and region.vertex_ring[u] >= 0:
+            region.region_edge[slot] = mesh.adj_edge[k]
+            region.region_edge_local[slot] = wp.vec2i(i, region.vertex_local[u])
             slot += 1
+
+
+def seed_region_ring(region, seed):
+    """Put `seed` alone on ring 0 of a cleared region."""
+    wp.launch(seed_ring, dim=1, inputs=[seed, region.arrays], device=region.device)
 
 
 def seed_region_rings(region, seeds):
     """Put the sorted, distinct `seeds` (device int32) on ring 0 of a cleared region."""
-    wp.launch(seed_rings, dim=seeds.shape[0], inputs=[seeds], outputs=[region.vertex_ring, region.region_vertex], device=region.device)
+    wp.launch(seed_rings, dim=seeds.shape[0], inputs=[seeds, region.arrays], device=region.device)
 
 
-def grow_region_ring(adjacency, region, frontier_begin, frontier_end, ring):
+def grow_region_ring(dmesh, region, frontier_begin, frontier_end, ring):
     """Append ring `ring` (the unvisited neighbours of region_vertex[frontier_begin:frontier_end])."""
-    offsets, neighbours = adjacency
     wp.launch(
-        grow_ring,
-        dim=frontier_end - frontier_begin,
-        inputs=[offsets, neighbours, frontier_begin, ring],
-        outputs=[region.vertex_ring, region.region_vertex, region.region_count],
-        device=region.device,
+        grow_ring, dim=frontier_end - frontier_begin, inputs=[dmesh.arrays, region.arrays, frontier_begin, ring], device=region.device
     )
+
+
+def forget_region(region, count):
+    """Mark the first `count` region vertices as outside again (vertex_ring and vertex_local -1)."""
+    wp.launch(clear_region, dim=count, inputs=[region.arrays], device=region.device)
+
+
+def index_region_vertices(region, count, outer_ring):
+    """Local index, ring and boundary flag of the first `count` region vertices."""
+    wp.launch(index_region, dim=count, inputs=[region.arrays, outer_ring], device=region.device)
 
 
 SMALL_RING = 512
@@ -180,25 +154,11 @@ def sort_region_ring(region, begin, end):
     wp.copy(region.region_vertex, keys, begin, 0, count)
 
 
-def eval_region_edges(adjacency_with_edges, region, count, edge_count, edge_end):
+def eval_region_edges(dmesh, region, count, edge_count, edge_end):
     """Count, scan and write the region's edges (each once, both ends inside).
 
     `edge_end` receives the inclusive scan of the counts: its entry count-1 is the total.
     """
-    offsets, neighbours, edge_ids = adjacency_with_edges
-    device = region.device
-    wp.launch(
-        count_region_edges,
-        dim=count,
-        inputs=[offsets, neighbours, region.region_vertex, region.vertex_ring],
-        outputs=[edge_count],
-        device=device,
-    )
+    wp.launch(count_region_edges, dim=count, inputs=[dmesh.arrays, region.arrays, edge_count], device=region.device)
     wp.utils.array_scan(edge_count[:count], edge_end[:count], inclusive=True)
-    wp.launch(
-        write_region_edges,
-        dim=count,
-        inputs=[offsets, neighbours, edge_ids, region.region_vertex, region.vertex_ring, region.vertex_local, edge_count, edge_end],
-        outputs=[region.region_edge, region.region_edge_local],
-        device=device,
-    )
+    wp.launch(write_region_edges, dim=count, inputs=[dmesh.arrays, region.arrays, edge_count, edge_end], device=region.device)

@@ -6,28 +6,20 @@ With the exact kernel every point agrees (tests/test_batch.py asserts it); the f
 default) reports how far its approximate reciprocal square root takes it from the exact step.
 """
 
-import argparse
 from pathlib import Path
 
 import numpy as np
+from batch_args import batch_parser, load_batch_mesh
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mesh", nargs="?", type=Path, default=Path(__file__).resolve().parents[1] / "scenes" / "stomach.obj")
-    ap.add_argument("--device", default="cpu")
-    ap.add_argument("--points", type=int, default=32)
-    ap.add_argument("--rings", type=int, default=4)
-    ap.add_argument("--kernel", default=None, help="fast or exact (default: the device's)")
+    ap = batch_parser(__doc__, "--points", 32, device="cpu", mesh_default=Path(__file__).resolve().parents[1] / "scenes" / "stomach.obj")
     args = ap.parse_args(argv)
-    from almsdm_warp import load_mesh
+    mesh = load_batch_mesh(args.mesh)
     from almsdm_warp.batch.batch_palpation import BatchPalpation
-    from almsdm_warp.protocol.palpation import Palpation
     from almsdm_warp.batch.sweep import sample_points
-    from almsdm_warp.warp_init import init_warp
+    from almsdm_warp.protocol.palpation import Palpation
 
-    init_warp()
-    mesh = load_mesh(args.mesh)
     _, vertices = sample_points(mesh, args.points)
     bp = BatchPalpation(mesh, rings=args.rings, device=args.device, kernel=args.kernel).touch(vertices)
     res = bp.press()

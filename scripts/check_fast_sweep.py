@@ -9,31 +9,23 @@ relative difference of peak and hold forces, recovery errors (relative and absol
 whether two CUDA runs gave the same bits.
 """
 
-import argparse
 import time
-from pathlib import Path
 
 import numpy as np
+from batch_args import batch_parser, load_batch_mesh
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mesh", type=Path)
-    ap.add_argument("--device", default="cuda:0")
-    ap.add_argument("--points", type=int, default=10000)
-    ap.add_argument("--rings", type=int, default=4)
+    ap = batch_parser(__doc__, "--points", 10000, kernel=False)
     ap.add_argument("--kernels", nargs="*", default=["fast", "exact"])
     args = ap.parse_args(argv)
     import warp as wp
 
-    from almsdm_warp import load_mesh
     from almsdm_warp.batch.batch_palpation import BatchPalpation
-    from almsdm_warp.sim.model import Model
     from almsdm_warp.batch.sweep import auto_dt, sample_points
-    from almsdm_warp.warp_init import init_warp
+    from almsdm_warp.sim.model import Model
 
-    init_warp()
-    mesh = load_mesh(args.mesh)
+    mesh = load_batch_mesh(args.mesh)
     dt = auto_dt(Model(mesh, None, "cpu"))
     _, vertices = sample_points(mesh, args.points)
     press = (0.01, 0.1, 0.2, 1.0)

@@ -1,11 +1,14 @@
-"""What several test files share: independent float64 answers (NumPy and SciPy, no Warp) and the
-project's scripts loaded as modules."""
+"""What several test files share: independent float64 answers (NumPy and SciPy, no Warp), the
+project's scripts loaded as modules, and the fuzz tests' check of a loader's error."""
 
 import importlib.util
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
+from fuzzing import hang_guard, record
+
+from almsdm_warp.errors import InputError
 
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 
@@ -16,6 +19,20 @@ def load_script(name: str):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def load_or_record_error(load, path, test, case):
+    """`load(path)` (under the hang guard), or None when it raises an InputError: then the message
+    must be one line that names the file and says more, and it is recorded as the case's outcome."""
+    try:
+        with hang_guard(60):
+            return load(path)
+    except InputError as exc:
+        message = str(exc)
+        assert "\n" not in message and message.startswith(str(path)), message
+        assert len(message) > len(str(path)) + 5
+        record(test, case, "error", message[len(str(path)):])
+        return None
 
 
 def spring_stiffness_matrix(x, edges, ke, rest_length, anchor_ke):

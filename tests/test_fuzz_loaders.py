@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from conftest import MESH_SUFFIXES, scene_mesh_paths, shared_mesh_paths
 from fuzzing import corruptions, fuzz_settings, hang_guard, record
+from helpers import load_or_record_error
 from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -83,14 +84,8 @@ def assert_usable(mesh: TissueMesh):
 
 def load_or_error(path, test, case):
     """load_mesh(path): a usable mesh or a one-line InputError naming the file; the outcome."""
-    try:
-        with hang_guard(60):
-            mesh = load_mesh(path)
-    except InputError as exc:
-        message = str(exc)
-        assert "\n" not in message and message.startswith(str(path)), message
-        assert len(message) > len(str(path)) + 5
-        record(test, case, "error", message[len(str(path)):])
+    mesh = load_or_record_error(load_mesh, path, test, case)
+    if mesh is None:
         return "error"
     assert_usable(mesh)
     record(test, case, "ok", "; ".join(mesh.notes))

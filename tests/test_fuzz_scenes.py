@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 from conftest import SCENES
-from fuzzing import check_outcome, corruptions, fuzz_settings, hang_guard, record, run_main
+from fuzzing import check_outcome, corruptions, fuzz_settings, record, run_main
+from helpers import load_or_record_error
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -88,13 +89,9 @@ def write_scene(folder: Path, name: str, text) -> Path:
 
 
 def load_or_error(path, test, case):
-    try:
-        with hang_guard(60):
-            scene = load_scene(path)
-    except InputError as exc:
-        message = str(exc)
-        assert "\n" not in message and message.startswith(str(path)), message
-        record(test, case, "error", message[len(str(path)):])
+    """load_scene(path): a scene with sane values or a one-line InputError naming the file."""
+    scene = load_or_record_error(load_scene, path, test, case)
+    if scene is None:
         return None
     assert isinstance(scene, Scene)
     t, p = scene.tissue, scene.press

@@ -24,6 +24,13 @@ class Parser(argparse.ArgumentParser):
         raise InputError(f"{self.prog}: {message}")
 
 
+def add_command(sub, name: str, summary: str, description: str):
+    """A subcommand's parser (`summary` in `almsdm --help`, `description` in its own) with --device."""
+    p = sub.add_parser(name, help=summary, description=description)
+    p.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ... (default cpu)")
+    return p
+
+
 def path_arg(text):
     """A path argument: any text but one the operating system cannot take as a path."""
     if "\0" in text:
@@ -42,13 +49,7 @@ def rings_arg(words=("auto", *GLOBAL_RINGS)):
     def parse(text):
         if text in words:
             return text
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"unknown value {text!r} (allowed: {allowed})") from None
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"must be >= 1 (ring 0 is the contact vertex alone; allowed: {allowed}), got {value}")
-        return value
+        return count_arg(text, allowed=allowed, note="ring 0 is the contact vertex alone")
 
     return parse
 
@@ -71,14 +72,16 @@ def number_arg(rule):
     return parse
 
 
-def count_arg(text):
-    """An argparse type: an integer >= 1."""
+def count_arg(text, allowed=None, note=None):
+    """An argparse type: an integer >= 1. `allowed` (the values a caller accepts, words too) and
+    `note` go into the messages."""
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        raise argparse.ArgumentTypeError(f"unknown value {text!r} (allowed: {allowed})" if allowed else f"not an integer: {text!r}") from None
     if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+        why = "; ".join(x for x in (note, allowed and f"allowed: {allowed}") if x)
+        raise argparse.ArgumentTypeError(f"must be >= 1{f' ({why})' if why else ''}, got {value}")
     return value
 
 

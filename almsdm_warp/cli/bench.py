@@ -4,18 +4,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .args import count_arg, get_device, int_list, quiet_warp
+from .args import add_command, count_arg, get_device, int_list, quiet_warp
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser(
+    p = add_command(
+        sub,
         "bench",
-        help="benchmark: one palpation (rings 1..4, both integrators), batches, the global model; JSON",
-        description="One-palpation steps/s (rings 1..4, explicit and implicit, the force read every step), batch "
-        "region-steps/s for several batch sizes, the global model's steps/s, and newton's spring solver when installed.",
+        "benchmark: one palpation (rings 1..4, both integrators), batches, the global model; JSON",
+        "One-palpation steps/s (rings 1..4, explicit and implicit, the force read every step), batch region-steps/s "
+        "for several batch sizes, the global model's steps/s, and newton's spring solver when installed.",
     )
     p.add_argument("mesh", nargs="?", default=None, metavar="MESH", help="mesh file or scene (default: the stomach scene)")
-    p.add_argument("--device", default="cpu", help="Warp device (default cpu)")
     p.add_argument("--json", default=None, metavar="PATH", help="write the results as JSON here")
     p.add_argument("--rings", type=count_arg, default=4, metavar="K", help="rings of the batch benchmark (default 4)")
     p.add_argument("--batch", type=int_list, default=None, metavar="B1,B2,...", help="batch sizes (default 16,64 on the CPU; 1000,10000,100000 on CUDA)")

@@ -8,19 +8,19 @@ import os
 from pathlib import Path
 
 from ..errors import InputError
-from .args import get_device, quiet_warp
+from .args import add_command, get_device, quiet_warp
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser(
+    p = add_command(
+        sub,
         "evaluate",
-        help="run the evaluation and write results.md and its figures",
-        description="Run the paper's experiments (recovery, Table 1, force against displacement, Table 2), speed "
-        "against accuracy, the stability map and the real-anatomy runs; write OUT/results.md, OUT/results.json and "
+        "run the evaluation and write results.md and its figures",
+        "Run the paper's experiments (recovery, Table 1, force against displacement, Table 2), speed against "
+        "accuracy, the stability map and the real-anatomy runs; write OUT/results.md, OUT/results.json and "
         "OUT/figures/*.png (nothing is written until every experiment has run).",
     )
     p.add_argument("--quick", action="store_true", help="reduced versions of every part (under 2 minutes on 2 CPU cores)")
-    p.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ... (default cpu)")
     p.add_argument("--out", default="docs", metavar="DIR", help="folder for results.md and figures/ (default docs)")
     p.add_argument("--extra-json", default=None, metavar="PATH", help="step times measured elsewhere (e.g. `almsdm bench` on a GPU) to add to the speed-accuracy figure")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")

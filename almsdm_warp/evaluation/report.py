@@ -21,18 +21,26 @@ def _rings_label(rings) -> str:
     return f"{rings} ring{'s' if rings != 1 else ''}"
 
 
+def _section_head(title: str, intro: str, columns, figure=None) -> list[str]:
+    """A section's opening: heading, intro paragraph, optional figure (alt text, path), table header and rule."""
+    figure_lines = [f"![{figure[0]}]({figure[1]})", ""] if figure else []
+    return [f"## {title}", "", intro, "", *figure_lines, "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+
+
+def _paragraphs(*texts: str) -> list[str]:
+    """A section's closing text: a blank line, the paragraphs (one line each), a blank line."""
+    return ["", *texts, ""]
+
+
 def _recovery(r) -> list[str]:
     rec = r["recovery"]
     n = len(rec["rows"][0]["residual_mm"])
-    lines = [
-        "## 1. Recovery after repeated presses (paper Fig. 9)",
-        "",
+    lines = _section_head(
+        "1. Recovery after repeated presses (paper Fig. 9)",
         f"{n} presses at vertex {rec['vertex']} of the stomach, explicit; residual = distance of the contact vertex "
         f"from rest {rec['settle_s']:g} s after each release.",
-        "",
-        "| model | region vertices / springs | paper (vertices / springs) | residual after each press [mm] | paper |",
-        "|---|---|---|---|---|",
-    ]
+        ("model", "region vertices / springs", "paper (vertices / springs)", "residual after each press [mm]", "paper"),
+    )
     for row in rec["rows"]:
         rings = row["rings"]
         paper_size = PAPER["regions"].get(rings)
@@ -45,8 +53,7 @@ def _recovery(r) -> list[str]:
     free_row = next(row for row in rec["rows"] if row["rings"] == "global-free")
     free = [x for x in free_row["residual_mm"] if math.isfinite(x)]
     away = free_row.get("ran_away_at_press")
-    lines += [
-        "",
+    return lines + _paragraphs(
         f"![recovery]({r['figures']['recovery']})",
         "",
         f"The local models come back to within {fmt(max(local), 3)} mm of rest after every press (measured in float32 "
@@ -68,23 +75,18 @@ def _recovery(r) -> list[str]:
             if away
             else ""
         ),
-        "",
-    ]
-    return lines
+    )
 
 
 def _table1(r) -> list[str]:
     t = r["table1"]
-    lines = [
-        "## 2. Table 1 at 10 mm",
-        "",
+    lines = _section_head(
+        "2. Table 1 at 10 mm",
         f"One press at the top vertex; recovery error = residual {t['settle_s']:g} s after release, recovery time = until it "
         "stays under 1% of the depth (0.1 mm). Stomach explicit, liver implicit (its explicit critical step, 0.24 ms, "
         "is below 1 ms).",
-        "",
-        "| model | integrator | recovery error [mm] | paper | recovery time [s] | paper | peak force [N] | paper |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
+        ("model", "integrator", "recovery error [mm]", "paper", "recovery time [s]", "paper", "peak force [N]", "paper"),
+    )
     for row in t["rows"]:
         p = PAPER["table1"].get(row["paper"]) if row["paper"] else None
         pe, pt, pf = (fmt(x, 3) for x in p) if p else ("-", "-", "-")
@@ -98,8 +100,7 @@ def _table1(r) -> list[str]:
     rows = {row["label"]: row for row in t["rows"]}
     s4, sg = rows["stomach, 4 rings"], rows["stomach, global anchored"]
     l4 = rows["liver, 4 rings"]
-    lines += [
-        "",
+    return lines + _paragraphs(
         f"Forces: the 4-ring models give {s4['peak_force_N']:.2f} N (stomach) and {l4['peak_force_N']:.2f} N (liver), within "
         f"{100 * abs(s4['peak_force_N'] / 2.402 - 1):.0f}% and {100 * abs(l4['peak_force_N'] / 2.312 - 1):.0f}% of the paper's "
         "2.402 and 2.312 N (the scenes are calibrated to them at 4 rings, over a median of contact vertices). "
@@ -109,9 +110,7 @@ def _table1(r) -> list[str]:
         "because our damping is set for explicit stability at 1 ms, not to match the paper's (unstated) units; the "
         "paper's global volume model recovers, and we could only match that with anchors (our unanchored liver drifts away). "
         "The unanchored models' peak force is that of a mesh pushed as a whole, not of tissue (no anchors resist the probe).",
-        "",
-    ]
-    return lines
+    )
 
 
 def _fig10(r) -> list[str]:
@@ -154,8 +153,7 @@ def _table2(r) -> list[str]:
             "Normals strategies not available: almsdm_warp.normals (issue 4) is not in this build, so the frames-per-second "
             "columns with each normals strategy are missing; the hook is `evaluate_paper.find_normals_strategies()`."
         )
-    lines += [
-        "",
+    return lines + _paragraphs(
         "The paper's frame rates include rendering and are capped by the display (~120 Hz); ours are the simulation alone "
         "(one graph-replayed step and the force read back), so the comparison says only whether the physics is still the "
         + (
@@ -164,25 +162,19 @@ def _table2(r) -> list[str]:
             if slowest["steps_per_s"] > 1000
             else f"limit: {slowest['label']} runs at {slowest['steps_per_s']:,.0f} steps/s, below the 1 kHz haptic rate."
         ),
-        "",
-    ]
-    return lines
+    )
 
 
 def _accuracy(r) -> list[str]:
     a = r["accuracy"]
-    lines = [
-        "## 5. Speed against accuracy",
-        "",
-        f"Error against the global anchored model (same integrator, same dt) at the end of the hold, median over "
+    lines = _section_head(
+        "5. Speed against accuracy",
+        "Error against the global anchored model (same integrator, same dt) at the end of the hold, median over "
         f"{a['contacts']} contact vertices spread over the surface (max in brackets); the step timed at the first (the top "
         "vertex) with the probe held 5 mm in.",
-        "",
-        f"![speed against accuracy]({r['figures']['speed_accuracy']})",
-        "",
-        "| mesh | integrator | rings | region vertices | step [us] | peak-force error [N] | largest displacement error [mm] |",
-        "|---|---|---|---|---|---|---|",
-    ]
+        ("mesh", "integrator", "rings", "region vertices", "step [us]", "peak-force error [N]", "largest displacement error [mm]"),
+        ("speed against accuracy", r["figures"]["speed_accuracy"]),
+    )
     for row in a["rows"] + a.get("extra", []):
         dev = "" if row["device"] == "cpu" else f" ({row['device']})"
         lines.append(
@@ -206,30 +198,23 @@ def _accuracy(r) -> list[str]:
             )
         elif glob:
             lines.append(f"- {scene}, {integrator}: no ring count up to {max(x['rings'] for x in rows if isinstance(x['rings'], int))} is within 0.1 mm of the global model.")
-    lines += [
-        "",
+    return lines + _paragraphs(
         "The paper has no accuracy measure against a reference; its operating points are drawn as frame times "
         "(4 rings at >= 120 frames/s, the global surface model at 34.5), which include rendering.",
-        "",
-    ]
-    return lines
+    )
 
 
 def _stability(r) -> list[str]:
     s = r["stability"]
-    lines = [
-        "## 6. Stability map",
-        "",
+    lines = _section_head(
+        "6. Stability map",
         f"A 10 mm press (ramp {s['press']['ramp_s']:g} s, hold {s['press']['hold_s']:g} s, settle {s['press']['settle_s']:g} s) "
         f"at vertex {s['vertex']} of the stomach, 4 rings; every stiffness (k_ij and k_i) scaled, masses and dampers kept. "
         "Stable: the contact vertex comes back within 1% of the depth and stays; oscillating: it still swings by more than "
         "that at the end of the window; not recovered: it settles away from rest; diverged: non-finite or running away.",
-        "",
-        f"![stability map]({r['figures']['stability']})",
-        "",
-        "| stiffness scale | critical dt [ms] | explicit: largest stable dt / smallest diverged dt [ms] | implicit: states over dt |",
-        "|---|---|---|---|",
-    ]
+        ("stiffness scale", "critical dt [ms]", "explicit: largest stable dt / smallest diverged dt [ms]", "implicit: states over dt"),
+        ("stability map", r["figures"]["stability"]),
+    )
     bound = explicit_boundary(s)
     for scale, (stable, diverged) in bound.items():
         crit = s["critical_dt_ms"][str(scale)]

@@ -7,6 +7,7 @@ import weakref
 import numpy as np
 import warp as wp
 
+from ..kernels.arrays import MeshArrays, struct_from
 from .tissue_mesh import TissueMesh
 
 _cache: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -52,6 +53,8 @@ class DeviceMesh:
         pts = wp.array(mesh.vertices[surface_vertices], dtype=wp.vec3, device=d)
         self._bvh_points = pts  # the BVH keeps pointers to its bounds
         self.vertex_bvh = wp.Bvh(pts, pts)
+        self.arrays = struct_from(MeshArrays, self)
+        """The topology above as one struct, the argument of the ring, contact and normals kernels."""
 
     @classmethod
     def of(cls, mesh: TissueMesh, device=None) -> "DeviceMesh":

@@ -7,6 +7,7 @@ import warp as wp
 
 from ..mesh.device_mesh import as_device_mesh, check_vertex
 from ..kernels import rings as rk
+from ..kernels.arrays import RegionArrays, struct_from
 
 
 def check_rings(rings) -> int:
@@ -46,6 +47,8 @@ class Region:
         self.region_edge_local = wp.zeros(max(e, 1), dtype=wp.vec2i, device=d)
         """Local end points (i, j) of each region spring."""
         self.region_count = wp.zeros(1, dtype=wp.int32, device=d)
+        self.arrays = struct_from(RegionArrays, self)
+        """The arrays above as one struct, the argument of the ring kernels (allocated once, never replaced)."""
         # scratch: per-vertex edge counts and their scan; sort buffers (radix sort needs 2x)
         self._edge_count = wp.zeros(n, dtype=wp.int32, device=d)
         self._edge_end = wp.zeros(n, dtype=wp.int32, device=d)
@@ -92,7 +95,7 @@ class Region:
         seed = check_vertex(self.dmesh.mesh, seed_vertex)
         rings = check_rings(rings)
         self.clear()
-        wp.launch(rk.seed_ring, dim=1, inputs=[seed], outputs=[self.vertex_ring, self.region_vertex], device=self.device)
+        rk.seed_region_ring(self, seed)
         self.region_count.fill_(1)
         self.seed = seed
         self.rings = 0
@@ -111,13 +114,7 @@ class Region:
         """Remove the region: its vertices are forgotten, its springs and boundary gone."""
         count = self.vertex_count
         if count:
-            wp.launch(
-                rk.clear_region,
-                dim=count,
-                inputs=[self.region_vertex],
-                outputs=[self.vertex_ring, self.vertex_local],
-                device=self.device,
-            )
+            rk.forget_region(self, count)
         self.seed = -1
         self.rings = 0
         self.ring_offsets = np.zeros(1, dtype=np.int64)
@@ -134,7 +131,7 @@ class Region:
                 self.rings += rings - done
                 break
             self.rings += 1
-            rk.grow_region_ring((dm.adj_offsets, dm.adj_vertex), self, begin, end, self.rings)
+            rk.grow_region_ring(dm, self, begin, end, self.rings)
             new_end = int(self.region_count.numpy()[0])
             rk.sort_region_ring(self, end, new_end)
             offsets.append(new_end)
@@ -145,14 +142,8 @@ class Region:
         # local indices, ring and boundary flags, then the springs (each edge once)
         dm = self.dmesh
         count = self.vertex_count
-        wp.launch(
-            rk.index_region,
-            dim=count,
-            inputs=[self.region_vertex, self.vertex_ring, self.outer_ring],
-            outputs=[self.vertex_local, self.region_ring, self.region_boundary],
-            device=self.device,
-        )
-        rk.eval_region_edges((dm.adj_offsets, dm.adj_vertex, dm.adj_edge), self, count, self._edge_count, self._edge_end)
+        rk.index_region_vertices(self, count, self.outer_ring)
+        rk.eval_region_edges(dm, self, count, self._edge_count, self._edge_end)
         self.spring_count = int(self._edge_end[count - 1 : count].numpy()[0])
 
     # -- reading back --------------------------------------------------------------------------
