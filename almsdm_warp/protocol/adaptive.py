@@ -165,9 +165,11 @@ class AdaptivePalpation(Palpation):
             force = self._step_setup()
         else:  # Palpation.step written out: one Python call less per step
             replay = replays[self._cur]
-            self._cur ^= 1
+            self._cur ^= self._parity
             replay()
             force = self._force_view
+            if not math.hypot(*self._force_words) < self._bound:  # as Palpation.step
+                self.diverged()
         self._countdown -= 1
         if self._countdown <= 0:
             self._countdown = self.check_steps
