@@ -83,7 +83,7 @@ LIMITS = {
     "steps": 10_000_000,
     "substeps": 64,
     "points": 10_000_000,
-    "batch": 10_000_000,
+    "batch": 1_000_000,
     "region_steps": 2.0e9,
     "lesion_factor": 1.0e6,
 }
@@ -97,11 +97,15 @@ lesion_factor: how much stiffer a lesion may be (past it float32 stiffness and t
 lose their meaning)."""
 
 
+_LIMIT_WORDS = {"duration_s": "duration [s]", "lesion_factor": "lesion stiffness factor", "region_steps": "region-steps"}
+
+
 def check_limit(value, key: str, flag: str) -> None:
     """InputError('<flag> <value> is more than the largest <key> (<limit>)') past LIMITS[key]."""
     limit = LIMITS[key]
     if not value <= limit:
-        raise InputError(f"{flag} {value:g} is more than the largest {key.replace('_', ' ')} a run takes ({limit:,g}); "
+        what = _LIMIT_WORDS.get(key, key)
+        raise InputError(f"{flag} {value:g} is more than the largest {what} a run takes ({limit:,g}); "
                          f"it is most likely a typo or a unit mix-up")
 
 
@@ -144,3 +148,13 @@ def substeps_for(dt: float, critical: float, safety: float = 0.9) -> int:
         return LIMITS["substeps"] + 1
     n = dt / (safety * critical)
     return max(1, math.ceil(n)) if n <= LIMITS["substeps"] else LIMITS["substeps"] + 1
+
+
+def check_region_steps(points: int, frames: int, substeps: int, limit: float, flag: str = "--max-region-steps") -> float:
+    """A sweep's cost, points x frames x substeps region-steps [-], or InputError past `limit`."""
+    cost = float(points) * frames * substeps
+    if not cost <= limit:
+        raise InputError(f"the sweep would take {cost:.3g} region-steps ({points} points x {frames} frames x {substeps} "
+                         f"substep(s)), more than the {limit:.3g} allowed; give {flag} {cost:.2g} to run it anyway, "
+                         f"or fewer points, shorter times or a larger --dt-ms")
+    return cost

@@ -23,6 +23,8 @@ from ..kernels.block_cg import CGScratch
 from ..kernels import batch_press_fast as bkf
 from ..kernels import batch_press_implicit as bki
 from ..kernels import batch_rings as br
+from ..checks import LIMITS, substeps_for
+from ..protocol.palpation import SimulationDiverged, force_bound
 from ..sim.model import Model
 from ..region.region import check_rings
 
@@ -100,7 +102,12 @@ class BatchPalpation:
     "implicit" (backward Euler with CG, as SolverImplicit's: one thread per palpation, one launch a
     step; cg_max_iterations and cg_tolerance as the solver's).
 
-    rings: the local model's rings (the outermost fixed). dt [s].
+    rings: the local model's rings (the outermost fixed). dt [s]: the frame. The explicit
+    integrator steps dt / substeps, with substeps chosen at each touch() to keep that step under
+    0.9 x the critical step of the batch's free vertices together (Model.critical_dt of their union,
+    which no single region's exceeds); past LIMITS["substeps"] the batch runs the implicit
+    integrator and says so in `notes`. substeps: "auto" (that) or a fixed int >= 1.
+    The press raises SimulationDiverged where a result is not finite or beyond force_bound.
     kernel (explicit): "fast" (CUDA's default where the regions fit: one block per palpation, its
     threads sharing the springs, each computed once, with an approximate reciprocal square root
     and no division in the step: forces within 5e-6 relative of the exact kernel's) or "exact" (a
@@ -116,7 +123,7 @@ class BatchPalpation:
     def __init__(
         self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
         kernel=None, threads=None, capacity=None,
-        cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
+        cg_max_iterations=200, cg_tolerance=1e-6, substeps="auto", **model_kw,
     ):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
         self.device = self.model.device
@@ -129,7 +136,18 @@ class BatchPalpation:
         self.dt = float(dt)
         if integrator not in BATCH_INTEGRATORS:
             raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(BATCH_INTEGRATORS)})")
-        self.integrator = integrator
+        self.integrator = self.requested_integrator = integrator
+        if substeps != "auto" and not (isinstance(substeps, (int, np.integer)) and not isinstance(substeps, bool) and substeps >= 1):
+            raise ValueError(f"substeps must be 'auto' or an int >= 1, got {substeps!r}")
+        self._fixed_substeps = None if substeps == "auto" else int(substeps)
+        self.substeps = 1
+        """Explicit steps in each frame of dt (1 for the implicit integrator)."""
+        self.critical_dt = math.inf
+        """Critical step [s] of the explicit integrator over the batch's free vertices (inf: not asked)."""
+        self.notes = []
+        """What the batch changed on its own (a fall-back to the implicit integrator), one line each."""
+        self._critical_cache = {}
+        self._bound = force_bound(self.model)
         self.cg_max_iterations = int(cg_max_iterations)
         self.cg_tolerance = float(cg_tolerance)
         if kernel is not None and kernel not in KERNELS:
@@ -150,9 +168,35 @@ class BatchPalpation:
         self.batch_size = len(self.vertices)
         self.regions = self._build_regions(self.vertices)
         self._choose_kernel()
+        self.plan_substeps()
         self._allocate_states()
         br.rest_states(self)
         return self
+
+    @property
+    def step_dt(self) -> float:
+        """The integrator's step [s]: the frame dt over its substeps."""
+        return self.dt / self.substeps
+
+    def plan_substeps(self) -> None:
+        """Substeps of the explicit integrator for the batch's regions (or the implicit fall-back)."""
+        self.integrator, self.substeps = self.requested_integrator, 1
+        if self.integrator != "explicit":
+            return
+        rv = self.regions.region_vertex.numpy()
+        free = rv[np.arange(rv.shape[1])[None, :] < self.free_vertex_counts[:, None]]
+        key = np.unique(free).tobytes()
+        if key not in self._critical_cache:
+            self._critical_cache[key] = self.model.critical_dt(np.unique(free))
+        self.critical_dt = crit = self._critical_cache[key]
+        n = self._fixed_substeps or substeps_for(self.dt, crit)
+        if n > LIMITS["substeps"]:
+            note = (f"the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {self.dt * 1e3:g} ms "
+                    f"(critical step {crit * 1e3:.3g} ms): the batch runs the implicit integrator instead")
+            if note not in self.notes:
+                self.notes.append(note)
+            self.integrator, n = "implicit", 1
+        self.substeps = n
 
     def _checked_vertices(self, vertices) -> np.ndarray:
         verts = np.asarray(vertices)
@@ -259,7 +303,7 @@ class BatchPalpation:
         from ..protocol.schedule import PressSchedule, check_press
 
         check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
-        schedule = PressSchedule.from_times(self.dt, ramp, hold, settle)
+        schedule = PressSchedule.from_times(self.step_dt, ramp, hold, settle)
         return schedule.ramp_n, schedule.release_step, schedule.total
 
     def start_press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, steps_per_launch=None, on_launch=None):
@@ -272,7 +316,7 @@ class BatchPalpation:
         ramp_n, press_n, total = self.schedule(depth, ramp, hold, settle)
         self.depth = float(depth)
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
-        self.press_arrays = struct_from(BatchPress, self)
+        self.press_arrays = struct_from(BatchPress, self, dt=self.step_dt)
         br.rest_states(self)
         if self.integrator == "implicit":
             self._implicit_press(total, on_launch)
@@ -318,6 +362,7 @@ class BatchPalpation:
         h64 = hold.astype(np.float64)
         hold_n = np.sqrt(h64[:, 0] ** 2 + h64[:, 1] ** 2 + h64[:, 2] ** 2)
         recovery = np.linalg.norm(q0 - rest, axis=1)
+        self._check_results(peak_n, hold_n, recovery)
         return BatchResult(
             vertex=self.vertices.copy(),
             depth=self.depth,
@@ -327,6 +372,19 @@ class BatchPalpation:
             region_vertices=self.region_vertex_counts.copy(),
             free_vertices=self.free_vertex_counts.copy(),
         )
+
+    def _check_results(self, peak, hold, recovery) -> None:
+        """SimulationDiverged naming the first palpation whose force or recovery is not finite or runs away."""
+        size = float(np.ptp(self.mesh.vertices, axis=0).max())
+        bad = ~(np.isfinite(peak) & np.isfinite(hold) & np.isfinite(recovery))
+        bad |= (peak > self._bound) | (recovery > 2.0 * size)
+        if np.any(bad):
+            b = int(np.flatnonzero(bad)[0])
+            raise SimulationDiverged(
+                f"the batch's {self.integrator} integrator diverged at {int(bad.sum())} of {self.batch_size} contacts, the "
+                f"first at vertex {int(self.vertices[b])} (peak force {peak[b]:.3g} N, recovery {recovery[b] * 1e3:.3g} mm; "
+                f"dt {self.dt * 1e3:g} ms in {self.substeps} substep(s), critical step {self.critical_dt * 1e3:.3g} ms)"
+            )
 
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, **kw) -> BatchResult:
         """Press every contact: ramp to `depth` [m] along the inward normal over `ramp` [s], hold
