@@ -8,6 +8,7 @@ Rules: "path" (a non-empty string), "> 0", ">= 0", ">= 1" (integers).
 from __future__ import annotations
 
 import math
+import numbers
 
 from .errors import InputError
 
@@ -158,3 +159,12 @@ def check_region_steps(points: int, frames: int, substeps: int, limit: float, fl
                          f"substep(s)), more than the {limit:.3g} allowed; give {flag} {cost:.2g} to run it anyway, "
                          f"or fewer points, shorter times or a larger --dt-ms")
     return cost
+
+
+def fixed_substeps(substeps):
+    """`substeps` of Palpation and BatchPalpation: None for "auto", else an int >= 1 (ValueError otherwise)."""
+    if substeps == AUTO:
+        return None
+    if isinstance(substeps, bool) or not isinstance(substeps, numbers.Integral) or substeps < 1:
+        raise ValueError(f"substeps must be {AUTO!r} or an int >= 1, got {substeps!r}")
+    return int(substeps)

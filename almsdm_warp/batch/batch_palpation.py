@@ -23,7 +23,7 @@ from ..kernels.block_cg import CGScratch
 from ..kernels import batch_press_fast as bkf
 from ..kernels import batch_press_implicit as bki
 from ..kernels import batch_rings as br
-from ..checks import LIMITS, substeps_for
+from ..checks import LIMITS, fixed_substeps, substeps_for
 from ..protocol.palpation import SimulationDiverged, force_bound
 from ..sim.model import Model
 from ..region.region import check_rings
@@ -137,17 +137,11 @@ class BatchPalpation:
         if integrator not in BATCH_INTEGRATORS:
             raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(BATCH_INTEGRATORS)})")
         self.integrator = self.requested_integrator = integrator
-        if substeps != "auto" and not (isinstance(substeps, (int, np.integer)) and not isinstance(substeps, bool) and substeps >= 1):
-            raise ValueError(f"substeps must be 'auto' or an int >= 1, got {substeps!r}")
-        self._fixed_substeps = None if substeps == "auto" else int(substeps)
-        self.substeps = 1
-        """Explicit steps in each frame of dt (1 for the implicit integrator)."""
-        self.critical_dt = math.inf
-        """Critical step [s] of the explicit integrator over the batch's free vertices (inf: not asked)."""
-        self.notes = []
-        """What the batch changed on its own (a fall-back to the implicit integrator), one line each."""
-        self._critical_cache = {}
-        self._bound = force_bound(self.model)
+        self._fixed_substeps = fixed_substeps(substeps)
+        # substeps (explicit steps a frame), critical_dt [s] of the batch's free vertices and notes (what
+        # the batch changed on its own): as Palpation's, set by plan_substeps at each touch()
+        self.substeps, self.critical_dt, self.notes = 1, math.inf, []
+        self._critical_cache, self._bound = {}, force_bound(self.model)
         self.cg_max_iterations = int(cg_max_iterations)
         self.cg_tolerance = float(cg_tolerance)
         if kernel is not None and kernel not in KERNELS:

@@ -18,7 +18,7 @@ from ..kernels.region_state import reset_vertices_left_behind
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, Model
 from ..region.region import Region
 from ..solvers import make_solver
-from ..checks import LIMITS, substeps_for
+from ..checks import LIMITS, fixed_substeps, substeps_for
 from .schedule import PressSchedule, check_press
 
 GLOBAL_MODELS = ("global", "global-free")
@@ -159,9 +159,7 @@ class Palpation:
         self.dt = float(dt)
         self.solver = make_solver(self.model, integrator, **solver_kw)
         self._solver_kw = solver_kw
-        if substeps != "auto" and not (isinstance(substeps, (int, np.integer)) and not isinstance(substeps, bool) and substeps >= 1):
-            raise ValueError(f"substeps must be 'auto' or an int >= 1, got {substeps!r}")
-        self._fixed_substeps = None if substeps == "auto" else int(substeps)
+        self._fixed_substeps = fixed_substeps(substeps)
         self.substeps = 1
         """Explicit steps in each frame of dt (1 for the implicit integrator)."""
         self.critical_dt = math.inf
