@@ -136,8 +136,9 @@ class Model:
         dof = (3 * free[:, None] + np.arange(3)).ravel()
         w = np.repeat(1.0 / np.sqrt(self.particle_mass_host), 3)[dof]
         Winv = sp.diags(w)
-        K = Winv @ assemble(self._ke_host, self._ka_host)[dof][:, dof] @ Winv
-        C = Winv @ assemble(self._kd_host, self._da_host)[dof][:, dof] @ Winv
+        with np.errstate(all="ignore"):  # an overflow is reported below, in words
+            K = Winv @ assemble(self._ke_host, self._ka_host)[dof][:, dof] @ Winv
+            C = Winv @ assemble(self._kd_host, self._da_host)[dof][:, dof] @ Winv
         if not (np.all(np.isfinite(K.data)) and np.all(np.isfinite(C.data))):
             raise InputError(
                 f"the model's stiffness or damping over mass is not finite (largest spring {self._ke_host.max():.3g} N/m, "
