@@ -168,7 +168,8 @@ class AdaptivePalpation(Palpation):
             self._cur ^= self._parity
             replay()
             force = self._force_view
-            if not math.hypot(*self._force_words) < self._bound:  # as Palpation.step
+            w = self._force_words  # as Palpation.step
+            if not -self._bound < w[0] + w[1] + w[2] < self._bound:
                 self.diverged()
         self._countdown -= 1
         if self._countdown <= 0:
