@@ -48,7 +48,7 @@ def add_parser(sub) -> None:
     palpate.add_argument("--rings", type=rings_arg(), default=None, metavar="{N,auto,global,global-free}", help="rings of the local region (outermost fixed), auto (sized to --tol-mm), or a global model (default: the scene's)")
     palpate.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: grow the region until its fixed ring would move less than this [mm] (default 0.1)")
     palpate.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
-    palpate.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="time step [ms] (default 1)")
+    palpate.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="frame [ms], at which the force is reported (default 1); the explicit integrator takes it in substeps under 0.9 x its critical step")
     palpate.add_argument("--depth-mm", "--depth", dest="depth_mm", type=number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
     palpate.add_argument("--ramp-s", type=number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
     palpate.add_argument("--hold-s", type=number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
