@@ -173,3 +173,34 @@ def test_a_mesh_that_diverged_with_the_defaults_now_presses(tmp_path):
     assert model["dt_s"] > model["critical_dt_s"] and model["substeps"] >= 2
     f = [runs[k]["presses"][0]["peak_force_N"] for k in ("explicit", "implicit")]
     assert all(math.isfinite(x) for x in f) and math.isclose(*f, rel_tol=0.02)
+
+
+def test_sweep_past_the_critical_step_writes_a_finite_table(tmp_path, capsys):
+    """`sweep --dt-ms 2` wrote inf into its table; it now substeps, says its cost first, and every
+    number it writes is finite."""
+    from almsdm_warp.batch.sweep import read_table
+
+    out = tmp_path / "t.csv"
+    assert main(["sweep", "--out", str(out), "--points", "4", "--dt-ms", "2", "--settle-s", "0.1"]) == 0
+    stdout = capsys.readouterr().out
+    assert "cost: " in stdout and "x at most 2 substep(s)" in stdout, stdout
+    table = read_table(out)
+    assert all(np.all(np.isfinite(table[c])) for c in table) and np.all(table["peak_force_N"] > 0.5)
+
+
+def test_a_sweep_that_diverges_writes_nothing(tmp_path, monkeypatch, capsys):
+    """A chunk with a non-finite number raises before it is written: one line, exit 2, no table
+    and no parts folder (a rerun of the same plan would diverge again)."""
+    finish = BatchPalpation.finish_press
+
+    def one_inf(self):
+        result = finish(self)
+        result.peak_force[0] = np.inf
+        return result
+
+    monkeypatch.setattr(BatchPalpation, "finish_press", one_inf)
+    out = tmp_path / "t.csv"
+    assert main(["sweep", "--out", str(out), "--points", "4", "--settle-s", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "peak_force_N is not finite" in err and "nothing is written" in err, err
+    assert list(tmp_path.iterdir()) == []
