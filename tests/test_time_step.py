@@ -204,3 +204,23 @@ def test_a_sweep_that_diverges_writes_nothing(tmp_path, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "peak_force_N is not finite" in err and "nothing is written" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_multi_probe_substeps_under_the_patches_critical_step(stomach):
+    """Two probes, 4 rings each, dt 5 ms: the frame is taken in substeps under 0.9 x the critical
+    step of the patches' free vertices together, and each probe's peak force is within 3% of the
+    implicit integrator's at 0.5 ms."""
+    from almsdm_warp.protocol.multi import MultiPalpation
+
+    scene, mesh = stomach
+    vertices = [top_vertex(mesh), 0]
+    results = {}
+    for integrator, dt in (("explicit", 5e-3), ("implicit", 5e-4)):
+        multi = MultiPalpation(mesh, scene.tissue, rings=4, integrator=integrator, dt=dt, device="cpu", retire=False)
+        multi.touch(vertices)
+        results[integrator] = multi.press(DEPTH, ramp=0.1, hold=0.2, settle=0.05)
+        if integrator == "explicit":
+            union = np.unique(np.concatenate([p.region.vertices()[: p.region.free_count] for p in multi.patches]))
+            assert multi.substeps == math.ceil(dt / (0.9 * multi.model.critical_dt(union))) >= 3
+    for a, b in zip(results["explicit"], results["implicit"]):
+        assert np.all(np.isfinite(a.force)) and math.isclose(a.peak_force_N, b.peak_force_N, rel_tol=0.03)
