@@ -133,7 +133,8 @@ class BatchPalpation:
             raise ValueError(f"rings must be >= 1, got {rings}")
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
-        self.dt = float(dt)
+        self.frame_dt = float(dt)
+        """The frame [s]: the dt asked for; the kernels step `dt`, the frame over its substeps."""
         if integrator not in BATCH_INTEGRATORS:
             raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(BATCH_INTEGRATORS)})")
         self.integrator = self.requested_integrator = integrator
@@ -168,9 +169,11 @@ class BatchPalpation:
         return self
 
     @property
-    def step_dt(self) -> float:
-        """The integrator's step [s]: the frame dt over its substeps."""
-        return self.dt / self.substeps
+    def dt(self) -> float:
+        """The integrator's step [s]: the frame over its substeps (what every batch kernel reads)."""
+        return self.frame_dt / self.substeps
+
+    step_dt = dt
 
     def plan_substeps(self) -> None:
         """Substeps of the explicit integrator for the batch's regions (or the implicit fall-back)."""
@@ -183,9 +186,9 @@ class BatchPalpation:
         if key not in self._critical_cache:
             self._critical_cache[key] = self.model.critical_dt(np.unique(free))
         self.critical_dt = crit = self._critical_cache[key]
-        n = self._fixed_substeps or substeps_for(self.dt, crit)
+        n = self._fixed_substeps or substeps_for(self.frame_dt, crit)
         if n > LIMITS["substeps"]:
-            note = (f"the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {self.dt * 1e3:g} ms "
+            note = (f"the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {self.frame_dt * 1e3:g} ms "
                     f"(critical step {crit * 1e3:.3g} ms): the batch runs the implicit integrator instead")
             if note not in self.notes:
                 self.notes.append(note)
@@ -310,7 +313,7 @@ class BatchPalpation:
         ramp_n, press_n, total = self.schedule(depth, ramp, hold, settle)
         self.depth = float(depth)
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
-        self.press_arrays = struct_from(BatchPress, self, dt=self.step_dt)
+        self.press_arrays = struct_from(BatchPress, self)
         br.rest_states(self)
         if self.integrator == "implicit":
             self._implicit_press(total, on_launch)
@@ -377,7 +380,7 @@ class BatchPalpation:
             raise SimulationDiverged(
                 f"the batch's {self.integrator} integrator diverged at {int(bad.sum())} of {self.batch_size} contacts, the "
                 f"first at vertex {int(self.vertices[b])} (peak force {peak[b]:.3g} N, recovery {recovery[b] * 1e3:.3g} mm; "
-                f"dt {self.dt * 1e3:g} ms in {self.substeps} substep(s), critical step {self.critical_dt * 1e3:.3g} ms)"
+                f"dt {self.frame_dt * 1e3:g} ms in {self.substeps} substep(s), critical step {self.critical_dt * 1e3:.3g} ms)"
             )
 
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, **kw) -> BatchResult:
