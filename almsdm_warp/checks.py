@@ -8,6 +8,7 @@ Rules: "path" (a non-empty string), "> 0", ">= 0", ">= 1" (integers).
 from __future__ import annotations
 
 import math
+import numbers
 
 from .errors import InputError
 
@@ -75,3 +76,95 @@ def check_value(value, kind: type, rule: str, name: str):
     if rule == ">= 1" and not value >= 1:
         raise InputError(f"{name} must be >= 1, got {value!r}")
     return value
+
+
+# -- the limits of a run: one validator for palpate, sweep and bench -------------------------------
+LIMITS = {
+    "duration_s": 1.0e6,
+    "steps": 10_000_000,
+    "substeps": 64,
+    "points": 10_000_000,
+    "batch": 1_000_000,
+    "region_steps": 2.0e9,
+    "lesion_factor": 1.0e6,
+}
+"""The largest value each part of a run may take; beyond it the input is a typo, not a run to wait for.
+
+duration_s: a ramp, hold or settle window [s]. steps: the frames of one run (every press together:
+a hundred minutes at a few us a step). substeps: explicit steps in one frame before the run falls
+back to the implicit integrator. points: a sweep's contacts. batch: palpations in one batch.
+region_steps: a sweep's points x frames x substeps, unless the user raises it (--max-region-steps).
+lesion_factor: how much stiffer a lesion may be (past it float32 stiffness and the critical step
+lose their meaning)."""
+
+
+_LIMIT_WORDS = {"duration_s": "duration [s]", "lesion_factor": "lesion stiffness factor", "region_steps": "region-steps"}
+
+
+def check_limit(value, key: str, flag: str) -> None:
+    """InputError('<flag> <value> is more than the largest <key> (<limit>)') past LIMITS[key]."""
+    limit = LIMITS[key]
+    if not value <= limit:
+        what = _LIMIT_WORDS.get(key, key)
+        raise InputError(f"{flag} {value:g} is more than the largest {what} a run takes ({limit:,g}); "
+                         f"it is most likely a typo or a unit mix-up")
+
+
+def check_ring_count(rings, vertex_count: int, flag: str) -> None:
+    """An integer ring count no larger than the mesh's vertex count (a larger region is the whole mesh)."""
+    if isinstance(rings, int) and rings > vertex_count:
+        raise InputError(f"{flag} {rings} is more than the mesh's {vertex_count} vertices; "
+                         f"a region that large is the whole mesh: use --rings global")
+
+
+def check_protocol(depth, dt, ramp, hold, settle, presses, extent) -> int:
+    """A press the simulator can run: depth within the organ's `extent` [m], each duration within
+    LIMITS, dt no longer than the ramp or the settle window, and no more than LIMITS["steps"] frames
+    in all (floats first: 1e300 / 1e-300 is inf). Returns the frames of one press."""
+    if not dt > 0:
+        raise InputError(f"dt must be > 0, got {dt!r} s (--dt-ms underflows)")
+    for name, value, flag in (("ramp", ramp, "--ramp-s"), ("hold", hold, "--hold-s"), ("settle window", settle, "--settle-s")):
+        check_limit(value, "duration_s", flag)
+    if depth > extent:
+        raise InputError(f"press depth {depth * 1e3:g} mm is more than the mesh's extent ({extent * 1e3:.4g} mm): "
+                         f"the probe would go through the organ")
+    for name, value, flag in (("ramp", ramp, "--ramp-s"), ("settle window", settle, "--settle-s")):
+        if value > 0 and dt > value:
+            raise InputError(f"dt {dt * 1e3:g} ms is longer than the {name} ({value:g} s): the press would not be "
+                             f"resolved; use a smaller --dt-ms or a longer {flag}")
+    per_press = max(ramp / dt, 1.0) + hold / dt + max(settle / dt, 1.0)
+    steps = presses * per_press
+    if not steps <= LIMITS["steps"]:
+        raise InputError(f"the run would take {steps:.3g} steps ({presses} x (ramp {ramp:g} s + hold {hold:g} s + "
+                         f"settle {settle:g} s) at dt {dt * 1e3:g} ms), more than the {LIMITS['steps']:,} a run may take; "
+                         f"use a larger --dt-ms or shorter times")
+    return int(per_press)
+
+
+def substeps_for(dt: float, critical: float, safety: float = 0.9) -> int:
+    """Explicit steps in one frame of `dt` [s] that keep each under `safety` x the `critical` step [s]."""
+    if not math.isfinite(critical):
+        return 1
+    if not critical > 0:
+        return LIMITS["substeps"] + 1
+    n = dt / (safety * critical)
+    return max(1, math.ceil(n)) if n <= LIMITS["substeps"] else LIMITS["substeps"] + 1
+
+
+def check_region_steps(points: int, frames: int, substeps: int, limit: float, flag: str = "--max-region-steps") -> float:
+    """A sweep's cost, points x frames x substeps region-steps [-], or InputError past `limit`."""
+    cost = float(points) * frames * substeps
+    if not cost <= limit:
+        raise InputError(f"the sweep would take {cost:.3g} region-steps ({points} points x {frames} frames x {substeps} "
+                         f"substep(s)), more than the {limit:.3g} allowed; give {flag} {cost:.2g} to run it anyway, "
+                         f"or fewer points, shorter times or a larger --dt-ms")
+    return cost
+
+
+def fixed_substeps(substeps):
+    """`substeps` of Palpation and BatchPalpation: None for "auto", else an int >= 1 (ValueError otherwise)."""
+    if substeps == AUTO:
+        return None
+    if isinstance(substeps, bool) or not isinstance(substeps, numbers.Integral) or substeps < 1:
+        raise ValueError(f"substeps must be {AUTO!r} or an int >= 1, got {substeps!r}")
+    return int(substeps)

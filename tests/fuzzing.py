@@ -27,7 +27,7 @@ LOG = os.environ.get("ALMSDM_FUZZ_LOG")
 HANG_S = 120
 """An example that runs longer than this is a hang (a failure), not a slow result."""
 FUZZ_MAX_STEPS = 20_000
-"""The command line's step limit while fuzzing (MAX_STEPS is 1e7): a drawn --hold-s 5000 on the
+"""The command line's step limit while fuzzing (LIMITS["steps"] is 1e7): a drawn --hold-s 5000 on the
 global implicit model is a legitimate hour-long run, not a hang; the same limit check refuses it."""
 
 
@@ -83,7 +83,7 @@ def run_main(argv, fuzz_limits=False):
     from almsdm_warp.cli.main import main
 
     out, err = io.StringIO(), io.StringIO()
-    limit = mock.patch("almsdm_warp.cli.palpate.MAX_STEPS", FUZZ_MAX_STEPS) if fuzz_limits else contextlib.nullcontext()
+    limit = mock.patch.dict("almsdm_warp.checks.LIMITS", steps=FUZZ_MAX_STEPS) if fuzz_limits else contextlib.nullcontext()
     with hang_guard(), limit, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main([str(a) for a in argv])
     return code, out.getvalue(), err.getvalue()

@@ -85,10 +85,23 @@ def test_a_folder_as_usd_target(tmp_path, capsys):
     assert [p.name for p in tmp_path.iterdir()] == ["stage.usda"] and not any((tmp_path / "stage.usda").iterdir())
 
 
-def test_a_run_that_fails_midway_leaves_no_stage(tmp_path, capsys):
-    # the explicit integrator diverges at dt 5 ms after the stage was opened: exit 2, no file
+def test_a_run_that_fails_midway_leaves_no_stage(tmp_path, capsys, monkeypatch):
+    # the simulation diverges at step 100, after the stage was opened: exit 2, no file
+    from almsdm_warp.protocol.palpation import Palpation
+
+    step = Palpation.step
+    calls = []
+
+    def diverging(self):
+        calls.append(1)
+        if len(calls) == 100:
+            self.diverged(len(calls))
+        return step(self)
+
+    monkeypatch.setattr(Palpation, "step", diverging)
     out = tmp_path / "out.usdc"
-    assert main(["palpate", "--dt-ms", "5", "--usd", str(out), "--png", str(tmp_path / "p.png")]) == 2
+    assert main(["palpate", *SHORT, "--usd", str(out), "--png", str(tmp_path / "p.png")]) == 2
+    assert len(calls) == 100
     assert "diverged" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
 

@@ -124,10 +124,11 @@ def test_cli_extreme_parameters(command, flags, probe, scene, json_kind):
     [
         # a hang: 1.3e12 steps (and arrays of that many floats) from one typo
         (["--dt-ms", "1e-9"], "the run would take 1.3e+12 steps"),
-        (["--hold-s", "1e12"], "more than the 10,000,000"),
+        (["--hold-s", "1e12"], "--hold-s 1e+12 is more than the largest duration [s]"),
         (["--presses", "100000000"], "more than the 10,000,000"),
         # OverflowError: int(round(inf)) steps
-        (["--ramp-s", "1e300", "--dt-ms", "1e-300"], "the run would take inf steps"),
+        (["--ramp-s", "1e300", "--dt-ms", "1e-300"], "--ramp-s 1e+300 is more than the largest duration [s]"),
+        (["--dt-ms", "1e-308"], "the run would take inf steps"),
         (["--dt-ms", "1e-322"], "--dt-ms underflows"),
         # a dt longer than the ramp: the implicit run "diverged ... dt exceeds the critical step"
         (["--dt-ms", "1e9", "--integrator", "implicit"], "is longer than the ramp"),
@@ -147,6 +148,39 @@ def test_impossible_parameters_are_one_line_errors(argv, message, tmp_path):
     code, stdout, err = run_main([*argv, "--json", str(out)] if "\0" not in argv[-1] else argv)
     check_outcome(code, stdout, err, out, tmp_path)
     assert code == 2 and message in err, err
+
+
+# sweep and bench check what palpate checks (checks.py): each of these was a traceback, and the
+# sweep's ones left OUT.parts/plan.json behind, which refused the corrected rerun
+CRAFTED = [
+    (["sweep", "--ramp-s", "1e308"], "--ramp-s 1e+308 is more than the largest duration [s]"),
+    (["sweep", "--settle-s", "1e308"], "--settle-s 1e+308 is more than the largest duration [s]"),
+    (["sweep", "--dt-ms", "1e-308"], "the run would take inf steps"),
+    (["sweep", "--rings", "1000000"], "--rings 1000000 is more than the mesh's 1002 vertices"),
+    (["sweep", "--points", "100000000000"], "--points 1e+11 is more than the largest points"),
+    (["sweep", "--points", "10", "--max-region-steps", "1000"], "more than the 1e+03 allowed; give --max-region-steps"),
+    (["bench", "--rings", "5000"], "--rings 5000 is more than the mesh's 1002 vertices"),
+    (["bench", "--batch", "10000000000"], "--batch 1e+10 is more than the largest batch"),
+    (["palpate", "--png", "{tmp}/p.png", "--png-at-s", "1e308"], "--png-at-s 1e+308 is after the last step"),
+    (["sweep", "{tmp}/lesion.toml"], "[lesion] stiffness_factor 1e+308 is more than the largest lesion stiffness factor"),
+]
+
+
+@pytest.mark.parametrize("argv, message", CRAFTED, ids=[" ".join(a) for a, _ in CRAFTED])
+def test_crafted_inputs_are_one_line_and_leave_nothing(argv, message, tmp_path):
+    """One line, exit 2, and nothing in the output's folder (no table, no parts, no plan.json): the
+    validation fails before any simulation, so a corrected rerun starts clean."""
+    lesion = (ROOT / "scenes" / "stomach_lesion.toml").read_text()
+    lesion = lesion.replace('path = "stomach.obj"', f'path = "{ROOT / "scenes" / "stomach.obj"}"')
+    (tmp_path / "lesion.toml").write_text(lesion.replace("stiffness_factor = 5.0", "stiffness_factor = 1e308"))
+    out = tmp_path / "out" / "table.csv"
+    out.parent.mkdir()
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    extra = ["--out", str(out)] if argv[0] == "sweep" else []
+    code, stdout, err = run_main([*argv, *extra])
+    assert code == 2 and err.count("\n") == 1 and message in err, err
+    assert "Traceback" not in err
+    assert list(out.parent.iterdir()) == [] and not (tmp_path / "p.png").exists()
 
 
 @pytest.mark.parametrize("rings", ["1000000", "99999999999999999999"])

@@ -190,11 +190,11 @@ def test_global_free_surface_never_recovers(device):
 def test_explicit_diverges_at_5_ms_and_implicit_does_not(device):
     """dt = 5 ms is about 3 x the region's critical step: the explicit press raises with a message
     that says where and why; the implicit one finishes with finite, sensible results."""
-    p = palpation(rings=4, integrator="explicit", dt=5e-3, device=device)
+    p = palpation(rings=4, integrator="explicit", dt=5e-3, device=device, substeps=1)
     with pytest.raises(SimulationDiverged) as info:
         p.press(DEPTH, ramp=0.1, hold=0.2, settle=0.5)
     message = str(info.value)
-    for word in ("step", "dt = 5 ms", "critical"):
+    for word in ("step", "5 ms", "critical"):
         assert word in message, message
     p = palpation(rings=4, integrator="implicit", dt=5e-3, device=device)
     result = p.press(DEPTH, ramp=0.1, hold=0.2, settle=0.5)
@@ -215,7 +215,7 @@ def test_critical_dt_brackets_explicit_stability(device):
     result = p.press(DEPTH, ramp=0.1, hold=0.2, settle=0.5)
     assert_finite(p)
     assert result.recovery_error_mm < 0.01
-    p = palpation(rings=4, integrator="explicit", dt=1.5 * crit, device=device)
+    p = palpation(rings=4, integrator="explicit", dt=1.5 * crit, device=device, substeps=1)
     with pytest.raises(SimulationDiverged, match="critical"):
         p.press(DEPTH, ramp=0.1, hold=0.2, settle=0.5)
 

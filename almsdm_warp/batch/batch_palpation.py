@@ -23,6 +23,8 @@ from ..kernels.block_cg import CGScratch
 from ..kernels import batch_press_fast as bkf
 from ..kernels import batch_press_implicit as bki
 from ..kernels import batch_rings as br
+from ..checks import LIMITS, fixed_substeps, substeps_for
+from ..protocol.palpation import SimulationDiverged, force_bound
 from ..sim.model import Model
 from ..region.region import check_rings
 
@@ -100,7 +102,12 @@ class BatchPalpation:
     "implicit" (backward Euler with CG, as SolverImplicit's: one thread per palpation, one launch a
     step; cg_max_iterations and cg_tolerance as the solver's).
 
-    rings: the local model's rings (the outermost fixed). dt [s].
+    rings: the local model's rings (the outermost fixed). dt [s]: the frame. The explicit
+    integrator steps dt / substeps, with substeps chosen at each touch() to keep that step under
+    0.9 x the critical step of the batch's free vertices together (Model.critical_dt of their union,
+    which no single region's exceeds); past LIMITS["substeps"] the batch runs the implicit
+    integrator and says so in `notes`. substeps: "auto" (that) or a fixed int >= 1.
+    The press raises SimulationDiverged where a result is not finite or beyond force_bound.
     kernel (explicit): "fast" (CUDA's default where the regions fit: one block per palpation, its
     threads sharing the springs, each computed once, with an approximate reciprocal square root
     and no division in the step: forces within 5e-6 relative of the exact kernel's) or "exact" (a
@@ -116,7 +123,7 @@ class BatchPalpation:
     def __init__(
         self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
         kernel=None, threads=None, capacity=None,
-        cg_max_iterations=200, cg_tolerance=1e-6, **model_kw,
+        cg_max_iterations=200, cg_tolerance=1e-6, substeps="auto", **model_kw,
     ):
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
         if self.model.support_count:
@@ -130,10 +137,16 @@ class BatchPalpation:
             raise ValueError(f"rings must be >= 1, got {rings}")
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
-        self.dt = float(dt)
+        self.frame_dt = float(dt)
+        """The frame [s]: the dt asked for; the kernels step `dt`, the frame over its substeps."""
         if integrator not in BATCH_INTEGRATORS:
             raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(BATCH_INTEGRATORS)})")
-        self.integrator = integrator
+        self.integrator = self.requested_integrator = integrator
+        self._fixed_substeps = fixed_substeps(substeps)
+        # substeps (explicit steps a frame), critical_dt [s] of the batch's free vertices and notes (what
+        # the batch changed on its own): as Palpation's, set by plan_substeps at each touch()
+        self.substeps, self.critical_dt, self.notes = 1, math.inf, []
+        self._critical_cache, self._bound = {}, force_bound(self.model)
         self.cg_max_iterations = int(cg_max_iterations)
         self.cg_tolerance = float(cg_tolerance)
         if kernel is not None and kernel not in KERNELS:
@@ -154,9 +167,37 @@ class BatchPalpation:
         self.batch_size = len(self.vertices)
         self.regions = self._build_regions(self.vertices)
         self._choose_kernel()
+        self.plan_substeps()
         self._allocate_states()
         br.rest_states(self)
         return self
+
+    @property
+    def dt(self) -> float:
+        """The integrator's step [s]: the frame over its substeps (what every batch kernel reads)."""
+        return self.frame_dt / self.substeps
+
+    step_dt = dt
+
+    def plan_substeps(self) -> None:
+        """Substeps of the explicit integrator for the batch's regions (or the implicit fall-back)."""
+        self.integrator, self.substeps = self.requested_integrator, 1
+        if self.integrator != "explicit":
+            return
+        rv = self.regions.region_vertex.numpy()
+        free = rv[np.arange(rv.shape[1])[None, :] < self.free_vertex_counts[:, None]]
+        key = np.unique(free).tobytes()
+        if key not in self._critical_cache:
+            self._critical_cache[key] = self.model.critical_dt(np.unique(free))
+        self.critical_dt = crit = self._critical_cache[key]
+        n = self._fixed_substeps or substeps_for(self.frame_dt, crit)
+        if n > LIMITS["substeps"]:
+            note = (f"the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {self.frame_dt * 1e3:g} ms "
+                    f"(critical step {crit * 1e3:.3g} ms): the batch runs the implicit integrator instead")
+            if note not in self.notes:
+                self.notes.append(note)
+            self.integrator, n = "implicit", 1
+        self.substeps = n
 
     def _checked_vertices(self, vertices) -> np.ndarray:
         verts = np.asarray(vertices)
@@ -263,7 +304,7 @@ class BatchPalpation:
         from ..protocol.schedule import PressSchedule, check_press
 
         check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
-        schedule = PressSchedule.from_times(self.dt, ramp, hold, settle)
+        schedule = PressSchedule.from_times(self.step_dt, ramp, hold, settle)
         return schedule.ramp_n, schedule.release_step, schedule.total
 
     def start_press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, steps_per_launch=None, on_launch=None):
@@ -322,6 +363,7 @@ class BatchPalpation:
         h64 = hold.astype(np.float64)
         hold_n = np.sqrt(h64[:, 0] ** 2 + h64[:, 1] ** 2 + h64[:, 2] ** 2)
         recovery = np.linalg.norm(q0 - rest, axis=1)
+        self._check_results(peak_n, hold_n, recovery)
         return BatchResult(
             vertex=self.vertices.copy(),
             depth=self.depth,
@@ -331,6 +373,19 @@ class BatchPalpation:
             region_vertices=self.region_vertex_counts.copy(),
             free_vertices=self.free_vertex_counts.copy(),
         )
+
+    def _check_results(self, peak, hold, recovery) -> None:
+        """SimulationDiverged naming the first palpation whose force or recovery is not finite or runs away."""
+        size = float(np.ptp(self.mesh.vertices, axis=0).max())
+        bad = ~(np.isfinite(peak) & np.isfinite(hold) & np.isfinite(recovery))
+        bad |= (peak > self._bound) | (recovery > 2.0 * size)
+        if np.any(bad):
+            b = int(np.flatnonzero(bad)[0])
+            raise SimulationDiverged(
+                f"the batch's {self.integrator} integrator diverged at {int(bad.sum())} of {self.batch_size} contacts, the "
+                f"first at vertex {int(self.vertices[b])} (peak force {peak[b]:.3g} N, recovery {recovery[b] * 1e3:.3g} mm; "
+                f"dt {self.frame_dt * 1e3:g} ms in {self.substeps} substep(s), critical step {self.critical_dt * 1e3:.3g} ms)"
+            )
 
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, **kw) -> BatchResult:
         """Press every contact: ramp to `depth` [m] along the inward normal over `ramp` [s], hold

@@ -174,10 +174,23 @@ def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_
         idx = np.flatnonzero(rings == k)
         batch = batches.get(int(k))
         batch.touch(plan.vertices[begin:end][idx])
-        launch = None if on_launch is None else (lambda steps, n=len(idx): on_launch(steps * n))
+        # the progress counts frames: a launch of `steps` substeps advances it by steps / substeps frames each
+        launch = None if on_launch is None else (lambda steps, n=len(idx), b=batch: on_launch(steps * n // b.substeps))
         batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=launch)
         started.append((idx, batch))
-    return lambda: plan.columns(begin, end, [(idx, batch.finish_press()) for idx, batch in started])
+    return lambda: checked_columns(plan.columns(begin, end, [(idx, batch.finish_press()) for idx, batch in started]))
+
+
+def checked_columns(columns: dict) -> dict:
+    """`columns`, or SimulationDiverged where a number is not finite: a sweep never writes one."""
+    from ..protocol.palpation import SimulationDiverged
+
+    for name, values in columns.items():
+        bad = np.flatnonzero(~np.isfinite(values))
+        if len(bad):
+            raise SimulationDiverged(f"the sweep's {name} is not finite at vertex {int(columns['vertex'][bad[0]])} "
+                                     f"({len(bad)} of {len(values)} points): nothing is written")
+    return columns
 
 
 # -- files -------------------------------------------------------------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..checks import check_limit, check_ring_count
 from .args import add_command, count_arg, get_device, int_list, quiet_warp
 
 
@@ -35,12 +36,15 @@ def cmd_bench(args) -> int:
     device = get_device(args.device)
     scene = resolve_scene_or_mesh(args.mesh)
     mesh = scene.load_mesh()
+    check_ring_count(args.rings, mesh.vertex_count, "--rings")
+    sizes = args.batch or ([16, 64] if device.is_cpu else [1000, 10000, 100000])
+    check_limit(max(sizes), "batch", "--batch")
     print(f"{mesh.summary()}; device {device.alias}")
     blocks, steps = (2, 200) if args.quick else (args.blocks, 2000)
     single = []
     print("single palpation (probe held 5 mm in, force read every step):")
     for integrator in ("explicit", "implicit"):
-        for rings in (1, 2, 3, 4):
+        for rings in sorted({1, 2, 3, 4, args.rings}):  # --rings: the batch's, also single for the ratio
             row = measure(mesh, rings, integrator, device.alias, blocks, steps)
             single.append({k: row[k] for k in ("rings", "integrator", "steps_per_s", "step_us_median")})
             print(f"  {rings} rings {integrator}: {row['step_us_median']:.2f} us/step, {row['steps_per_s']:,.0f} steps/s")
@@ -53,7 +57,6 @@ def cmd_bench(args) -> int:
     from ..batch.sweep import auto_dt
 
     dt = auto_dt(Model(mesh, scene.tissue, "cpu"))  # 1 ms unless the mesh's critical step is shorter
-    sizes = args.batch or ([16, 64] if device.is_cpu else [1000, 10000, 100000])
     batch = []
     for b in sizes:
         row = measure_batch(mesh, args.rings, b, device.alias, steps=(100 if device.is_cpu or args.quick else 1000), repeats=3, dt=dt)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..checks import check_protocol, check_ring_count
 from ..errors import InputError
 from ..solvers import INTEGRATORS
 from .args import (
@@ -30,13 +31,10 @@ from .args import (
     scene_with_tissue_args,
 )
 
-__all__ = ["AUTO_TOL_MM", "GLOBAL_RINGS", "MAX_STEPS", "add_parser", "check_protocol", "cmd_palpate"]
+__all__ = ["AUTO_TOL_MM", "GLOBAL_RINGS", "add_parser", "cmd_palpate"]
 
 TIMING_STEPS = 2000
 """Steps timed after the presses, in batches (fewer when a step is slow: about 1 s in all)."""
-MAX_STEPS = 10_000_000
-"""Steps one run may take (every press together): a hundred minutes at a few us a step; more is a
-typo (a dt in seconds given to --dt-ms, a hold in ms given to --hold-s), not a run to wait for."""
 
 
 def add_parser(sub) -> None:
@@ -52,7 +50,7 @@ def add_parser(sub) -> None:
     palpate.add_argument("--rings", type=rings_arg(), default=None, metavar="{N,auto,global,global-free}", help="rings of the local region (outermost fixed), auto (sized to --tol-mm), or a global model (default: the scene's)")
     palpate.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: grow the region until its fixed ring would move less than this [mm] (default 0.1)")
     palpate.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
-    palpate.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="time step [ms] (default 1)")
+    palpate.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="frame [ms], at which the force is reported (default 1); the explicit integrator takes it in substeps under 0.9 x its critical step")
     palpate.add_argument("--depth-mm", "--depth", dest="depth_mm", type=number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
     palpate.add_argument("--ramp-s", type=number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
     palpate.add_argument("--hold-s", type=number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
@@ -68,26 +66,6 @@ def add_parser(sub) -> None:
     add_tissue_args(palpate)
     add_record_args(palpate)
     palpate.set_defaults(func=cmd_palpate)
-
-
-def check_protocol(depth, dt, ramp, hold, settle, presses, mesh):
-    """A press the simulator can run: depth within the organ, dt no longer than the ramp or the
-    settle window, and no more than MAX_STEPS steps in all (floats first: 1e300 / 1e-300 is inf)."""
-    if not dt > 0:
-        raise InputError(f"dt must be > 0, got {dt!r} s (--dt-ms underflows)")
-    size = float(np.ptp(mesh.vertices, axis=0).max())
-    if depth > size:
-        raise InputError(f"press depth {depth * 1e3:g} mm is more than the mesh's extent ({size * 1e3:.4g} mm): "
-                         f"the probe would go through the organ")
-    for name, value, flag in (("ramp", ramp, "--ramp-s"), ("settle window", settle, "--settle-s")):
-        if value > 0 and dt > value:
-            raise InputError(f"dt {dt * 1e3:g} ms is longer than the {name} ({value:g} s): the press would not be "
-                             f"resolved; use a smaller --dt-ms or a longer {flag}")
-    steps = presses * (max(ramp / dt, 1.0) + hold / dt + max(settle / dt, 1.0))
-    if not steps <= MAX_STEPS:
-        raise InputError(f"the run would take {steps:.3g} steps ({presses} x (ramp {ramp:g} s + hold {hold:g} s + "
-                         f"settle {settle:g} s) at dt {dt * 1e3:g} ms), more than the {MAX_STEPS:,} a run may take; "
-                         f"use a larger --dt-ms or shorter times")
 
 
 def _contact(args, mesh, device):
@@ -186,18 +164,15 @@ def _resolve(args) -> _Run:
     scene = scene_with_tissue_args(args, scene, mesh)
 
     rings = scene.rings if args.rings is None else args.rings
-    if isinstance(rings, int) and rings > mesh.vertex_count:  # (not "global", "global-free")
-        # more rings than vertices can only repeat the whole component (and 1e20 overflows the ring table)
-        where = "--rings" if args.rings is not None else "the scene's [region] rings"
-        raise InputError(f"{where} {rings} is more than the mesh's {mesh.vertex_count} vertices; "
-                         f"a region that large is the whole mesh: use --rings global")
+    # more rings than vertices can only repeat the whole component (and 1e20 overflows the ring table)
+    check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     p = scene.press
     depth = p.depth if args.depth_mm is None else args.depth_mm * 1e-3
     ramp = p.ramp if args.ramp_s is None else args.ramp_s
     hold = p.hold if args.hold_s is None else args.hold_s
     settle = p.settle if args.settle_s is None else args.settle_s
     dt = args.dt_ms * 1e-3
-    check_protocol(depth, dt, ramp, hold, settle, args.presses, mesh)
+    check_protocol(depth, dt, ramp, hold, settle, args.presses, float(np.ptp(mesh.vertices, axis=0).max()))
     vertex, point, contact_extra = _contact(args, mesh, device)
     if scene.fixed_below is not None and mesh.vertices[vertex, 2] < scene.fixed_below:
         raise InputError(f"the contact vertex {vertex} (z {mesh.vertices[vertex, 2] * 1e3:.4g} mm) is supported: it lies below "
@@ -241,13 +216,8 @@ def _report_model(args, run: _Run, pal):
     (critical step [s], free vertices)."""
     rings, tol, dt = run.rings, run.tol, run.dt
     anchored = rings != "global-free"
-    free = pal.region.vertices()[: pal.region.free_count] if pal.region is not None else None
-    if free is not None:
-        free = free[~pal.model.support_mask[free]]  # supported vertices are fixed too
-    elif pal.model.support_count:
-        free = np.flatnonzero(~pal.model.support_mask)
-    critical = pal.model.critical_dt(free, anchors=anchored)
-    free_count = len(free) if free is not None else pal.region_vertices
+    critical = pal.region_critical_dt()
+    free_count = pal.solver.free_count  # supported vertices are fixed too
     if tol is not None:
         what = (
             f"auto rings (tol {tol * 1e3:g} mm) around vertex {run.vertex}, grown from "
@@ -258,10 +228,12 @@ def _report_model(args, run: _Run, pal):
     else:
         kind = "anchored" if anchored else "free, no anchors"
         what = f"{rings} ({kind}), {free_count} of {pal.region_vertices} vertices free"
+    for note in pal.notes:
+        print(f"note: {note}")
     beyond = ", at the start" if tol is not None else ""
-    beyond += ", dt exceeds it" if args.integrator == "explicit" and dt > critical else ""
+    steps = f" in {pal.substeps} substeps of {pal.step_dt * 1e3:.3g} ms" if pal.substeps > 1 else ""
     print(
-        f"model: {what}, {pal.region_springs} springs; {args.integrator} integrator, dt {dt * 1e3:g} ms "
+        f"model: {what}, {pal.region_springs} springs; {pal.solver.integrator} integrator, dt {dt * 1e3:g} ms{steps} "
         f"(explicit critical step {critical * 1e3:.3g} ms{beyond}), device {run.device}"
     )
     return critical, free_count
@@ -329,8 +301,9 @@ def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:
             "region_vertices": int(pal.region_vertices),
             "region_springs": int(pal.region_springs),
             "free_vertices": int(free_count),
-            "integrator": args.integrator,
+            "integrator": pal.solver.integrator,
             "dt_s": run.dt,
+            "substeps": int(pal.substeps),
             "critical_dt_s": finite(critical),
         },
         "presses": [

@@ -46,9 +46,9 @@ class Recording:
         self.snapshot = None
         self._base = 0
         if args.png:
-            step = deepest_step if args.png_at_s is None else int(round(args.png_at_s / pal.dt))
-            if step > self.total:
+            if args.png_at_s is not None and args.png_at_s > self.total * pal.dt:  # in seconds: 1e308 / dt overflows
                 raise InputError(f"--png-at-s {args.png_at_s:g} is after the last step ({self.total * pal.dt:g} s)")
+            step = deepest_step if args.png_at_s is None else min(int(round(args.png_at_s / pal.dt)), self.total)
             self.png_step = step
         if args.usd:
             from ..export.usd import UsdRecorder

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..checks import LIMITS, check_limit, check_protocol, check_region_steps, check_ring_count, substeps_for
 from ..errors import InputError
 from ..solvers import INTEGRATORS
 from .args import (auto_tol, add_tissue_args, count_arg, get_device, number_arg, press_steps, print_notes, quiet_warp, rings_arg,
@@ -34,12 +35,13 @@ def add_parser(sub) -> None:
     p.add_argument("--hold-s", type=number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
     p.add_argument("--settle-s", type=number_arg(">= 0"), default=None, metavar="S", help="settle window [s] (default: the scene's)")
     p.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's; default) or implicit (backward Euler, CG: one thread a palpation)")
-    p.add_argument("--dt-ms", type=number_arg("> 0"), default=None, metavar="MS", help="time step [ms] (default 1, less where the model's critical step asks)")
+    p.add_argument("--dt-ms", type=number_arg("> 0"), default=None, metavar="MS", help="frame [ms] (default 1); the explicit integrator takes it in substeps under 0.9 x the critical step")
     p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
     p.add_argument("--chunk", type=count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU, all points split over the GPUs)")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks as Ray tasks (one GPU each with a CUDA --device, else one CPU); ADDRESS of a cluster, or a local one")
     p.add_argument("--png", default=None, metavar="PATH", help="also draw the organ coloured by stiffness (matplotlib)")
+    p.add_argument("--max-region-steps", type=number_arg("> 0"), default=LIMITS["region_steps"], metavar="N", help=f"refuse a sweep that would take more region-steps (points x frames x substeps) than N (default {LIMITS['region_steps']:g})")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
     add_tissue_args(p, supports=False)
     p.set_defaults(func=cmd_sweep)
@@ -61,6 +63,7 @@ def _devices(text: str) -> list[str]:
 
 def cmd_sweep(args) -> int:
     from ..batch.sweep import run_local, run_ray
+    from ..protocol.palpation import SimulationDiverged
     from ..export.writers import check_output, write_output
     from ..progress import Progress
 
@@ -83,6 +86,9 @@ def cmd_sweep(args) -> int:
     except KeyboardInterrupt:
         print(f"almsdm: interrupted; the chunks done are in {parts.dir}: run the same command again to resume", file=sys.stderr)
         return 130
+    except SimulationDiverged as exc:  # a rerun of the same plan would diverge again: keep nothing
+        parts.remove()
+        raise InputError(str(exc)) from exc
     elapsed = time.perf_counter() - t0
     columns = parts.gather()
     write_output(out, columns, "table", "--out")
@@ -100,7 +106,7 @@ def cmd_sweep(args) -> int:
 def _plan(args, devices):
     """The scene, its mesh and the sweep's plan (points, chunks, rings, step); says what will be pressed.
     Returns (plan, scene, the rings in words)."""
-    from ..batch.sweep import SweepPlan, auto_dt, sample_points
+    from ..batch.sweep import SweepPlan, sample_points
     from ..batch.sweep_auto import rings_summary
     from ..scene.loader import resolve_scene_or_mesh
 
@@ -118,17 +124,19 @@ def _plan(args, devices):
     ramp = press.ramp if args.ramp_s is None else args.ramp_s
     hold = press.hold if args.hold_s is None else args.hold_s
     settle = press.settle if args.settle_s is None else args.settle_s
+    dt = 1e-3 if args.dt_ms is None else args.dt_ms * 1e-3
+    frames = check_protocol(depth, dt, ramp, hold, settle, 1, float(np.ptp(mesh.vertices, axis=0).max()))
+    check_limit(args.points, "points", "--points")
+    check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
     points, vertices = sample_points(mesh, args.points)
     cuda = devices[0] != "cpu"
     chunk = args.chunk or (64 if not cuda else min(-(-len(vertices) // len(devices)), 16384))
-    plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, 1e-3, depth, ramp, hold, settle, points,
+    plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, dt, depth, ramp, hold, settle, points,
                      vertices, chunk, args.integrator, tol)
-    if args.dt_ms is not None:
-        plan.dt = args.dt_ms * 1e-3
-    elif args.integrator == "explicit":
-        plan.dt = auto_dt(plan.model("cpu"))  # 1 ms, or less where the mesh's critical step asks
     print(mesh.summary())
+    substeps = _substeps(plan)
+    cost = check_region_steps(len(vertices), frames, substeps, args.max_region_steps)
     if tol is not None:
         plan.rings = _size(plan, scene, scales, tol, args.progress)
         rings_text = f"auto rings (tol {tol * 1e3:g} mm: {rings_summary(plan.rings)})"
@@ -138,9 +146,26 @@ def _plan(args, devices):
     where = f"Ray ({'GPU' if cuda else 'CPU'} tasks)" if args.ray else ", ".join(devices)
     print(
         f"sweep: {len(vertices)} points ({len(np.unique(vertices))} distinct vertices), {rings_text}, press {depth * 1e3:g} mm "
-        f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s), {args.integrator}, dt {plan.dt * 1e3:g} ms, chunks of {chunk} on {where}{lesion}"
+        f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s), {plan.integrator}, dt {plan.dt * 1e3:g} ms, chunks of {chunk} on {where}{lesion}"
     )
+    print(f"cost: {cost:.3g} region-steps ({len(vertices)} points x {frames} frames x at most {substeps} substep(s); "
+          f"limit {args.max_region_steps:.3g}, --max-region-steps)")
     return plan, scene, rings_text
+
+
+def _substeps(plan) -> int:
+    """The explicit substeps a frame of the plan takes at most (the whole mesh's critical step bounds
+    every region's), or 1 after switching the plan to the implicit integrator past LIMITS["substeps"]."""
+    if plan.integrator != "explicit":
+        return 1
+    crit = plan.model("cpu").critical_dt()
+    n = substeps_for(plan.dt, crit)
+    if n > LIMITS["substeps"]:
+        print(f"note: the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {plan.dt * 1e3:g} ms "
+              f"(critical step {crit * 1e3:.3g} ms): the sweep runs the implicit integrator instead")
+        plan.integrator = "implicit"
+        return 1
+    return n
 
 
 def _resume(out: Path, plan):

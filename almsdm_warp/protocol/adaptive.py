@@ -165,9 +165,12 @@ class AdaptivePalpation(Palpation):
             force = self._step_setup()
         else:  # Palpation.step written out: one Python call less per step
             replay = replays[self._cur]
-            self._cur ^= 1
+            self._cur ^= self._parity
             replay()
             force = self._force_view
+            w = self._force_words  # as Palpation.step
+            if not -self._bound < w[0] + w[1] + w[2] < self._bound:
+                self.diverged()
         self._countdown -= 1
         if self._countdown <= 0:
             self._countdown = self.check_steps

@@ -25,7 +25,8 @@ from ..kernels.rings import seed_region_rings
 from ..kernels.region_state import clear_region
 from ..kernels.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from .palpation import PressResult, capture_step_pair
+from ..checks import LIMITS, substeps_for
+from .palpation import PressResult, SimulationDiverged, capture_step_pair
 from ..region.region import Region, check_rings
 from ..solvers import make_solver, solver_class
 from .schedule import PressSchedule, check_press
@@ -117,7 +118,10 @@ class MultiPalpation:
     """Several probes on one organ: a region per probe, merged where they touch.
 
     rings: an int (every region that many rings, no growth) or None with `tol` [m] (adaptive).
-    The other parameters are AdaptivePalpation's. Probe i holds ``vertices[i]``.
+    The other parameters are AdaptivePalpation's. Probe i holds ``vertices[i]``. As Palpation's,
+    the explicit integrator takes each frame of dt in `substeps` under 0.9 x the critical step of
+    the patches' free vertices together (re-planned whenever the patches change); past
+    LIMITS["substeps"] a step raises SimulationDiverged: use the implicit integrator.
     """
 
     def __init__(self, mesh, tissue=None, *, tol=1e-4, rings=None, integrator="explicit", dt=1e-3, device=None,
@@ -152,6 +156,8 @@ class MultiPalpation:
         self.vertices = np.zeros(0, dtype=np.int32)
         self._graphs = None
         self._dirty = True
+        self.substeps, self._parity = 1, 1
+        """Explicit steps in each frame of dt (1 for the implicit integrator)."""
 
     @property
     def state(self):
@@ -247,15 +253,32 @@ class MultiPalpation:
         driven = self.vertices[self._driven]
         for p in self.patches:
             p.set_driven(self.model, driven)
+        self._plan_substeps()
         self._graphs = None
         self._dirty = False
+
+    def _plan_substeps(self):
+        """Substeps of the explicit integrator for the patches as they are now."""
+        self.substeps, self._parity = 1, 1
+        if not self.patches or not solver_class(self.integrator).conditionally_stable:
+            return
+        free = np.unique(np.concatenate([p.region.vertices()[: p.region.free_count] for p in self.patches]))
+        crit = self.model.critical_dt(free)
+        n = substeps_for(self.dt, crit)
+        if n > LIMITS["substeps"]:
+            raise SimulationDiverged(f"the explicit integrator would need more than {LIMITS['substeps']} substeps of dt "
+                                     f"{self.dt * 1e3:g} ms (critical step {crit * 1e3:.3g} ms): use integrator='implicit'")
+        self.substeps, self._parity = n, n & 1
 
     # -- stepping ------------------------------------------------------------------------------
     def _launch_step(self, a, b):
         self.probes.copy_in()
-        for p in self.patches:
-            p.solver.step(a, b, self._off, self.dt)
-            drive_probe_vertices(self.model, p.patch_probe, self.probes, self.dt, a, b)
+        h = self.dt / self.substeps
+        for _ in range(self.substeps):  # a -> b, b -> a, ...: the frame ends in b for an odd count
+            for p in self.patches:
+                p.solver.step(a, b, self._off, h)
+                drive_probe_vertices(self.model, p.patch_probe, self.probes, h, a, b)
+            a, b = b, a
         self.probes.copy_out()
 
     def step(self) -> np.ndarray:
@@ -266,10 +289,10 @@ class MultiPalpation:
             self.probes.reaction[:] = 0.0
         elif self._graphs is not None:
             self._graphs[self._cur]()
-            self._cur ^= 1
+            self._cur ^= self._parity
         else:
             self._launch_step(self.states[self._cur], self.states[1 - self._cur])  # loads the modules uncaptured
-            self._cur ^= 1
+            self._cur ^= self._parity
             if self.capture:
                 self._graphs = capture_step_pair(self._launch_step, self.states, self.device)
             if not self.device.is_cpu:

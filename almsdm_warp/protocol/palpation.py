@@ -18,6 +18,7 @@ from ..kernels.region_state import reset_vertices_left_behind
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, Model
 from ..region.region import Region
 from ..solvers import make_solver
+from ..checks import LIMITS, fixed_substeps, substeps_for
 from .schedule import PressSchedule, check_press
 
 GLOBAL_MODELS = ("global", "global-free")
@@ -61,7 +62,26 @@ def capture_step_pair(launch_step, states, device):
 
 
 class SimulationDiverged(RuntimeError):
-    """The explicit integrator blew up: its step exceeds the critical step of the region."""
+    """The simulation blew up: a force or position is not finite or beyond what the model can hold."""
+
+
+FORCE_BOUND_FACTOR = 100.0
+"""A feedback force beyond this many times the stiffest vertex's springs and anchor stretched by
+the mesh's size is a run that diverged (a press the model holds stays far under it)."""
+
+
+def force_bound(model) -> float:
+    """The largest feedback force [N] a run that has not diverged can report (see FORCE_BOUND_FACTOR)."""
+    mesh = model.mesh
+    e = mesh.edges
+    k = np.zeros(model.particle_count)
+    ke = model.spring_ke.numpy().astype(np.float64)
+    np.add.at(k, e[:, 0], ke)
+    np.add.at(k, e[:, 1], ke)
+    k += model.anchor_ke.numpy()
+    size = float(np.ptp(mesh.vertices, axis=0).max())
+    bound = FORCE_BOUND_FACTOR * float(k.max(initial=0.0)) * size
+    return bound if math.isfinite(bound) and bound > 0 else math.inf
 
 
 @dataclass
@@ -114,11 +134,19 @@ class Palpation:
     free, no anchors: the paper's global surface model). dt [s]. edge_scale [edge_count] and
     anchor_scale [vertex_count]: per-spring and per-anchor multipliers of stiffness and damping
     (a scene's lesion, `Lesion.scales`), fixed for the model's life.
+
+    dt is the frame: step() advances the model by dt and reports the force at its end. The explicit
+    integrator takes `substeps` steps of dt / substeps in each frame, as many as keep each under 0.9 x
+    the critical step of the region's free vertices (re-checked whenever the region changes); past
+    LIMITS["substeps"] the palpation switches to the implicit integrator and says so in `notes`.
+    substeps: "auto" (that) or an int >= 1, fixed whatever the critical step (the paper's scheme
+    at 1: a step past the critical one then diverges and raises).
+    step() raises SimulationDiverged when the force it reads is not finite or beyond force_bound.
     fixed_below [m]: vertices with z below it are supported (fixed), as Model's.
     """
 
     def __init__(self, mesh, tissue=None, *, rings=4, integrator="explicit", dt=1e-3, device=None, capture=True,
-                 edge_scale=None, anchor_scale=None, fixed_below=None, **solver_kw):
+                 edge_scale=None, anchor_scale=None, fixed_below=None, substeps="auto", **solver_kw):
         if not (isinstance(rings, (int, np.integer)) and not isinstance(rings, bool)) and rings not in GLOBAL_MODELS:
             raise ValueError(f"rings must be an int >= 1 or one of {GLOBAL_MODELS}, got {rings!r}")
         if isinstance(rings, (int, np.integer)) and rings < 1:
@@ -131,6 +159,17 @@ class Palpation:
         self.rings = rings
         self.dt = float(dt)
         self.solver = make_solver(self.model, integrator, **solver_kw)
+        self._solver_kw = solver_kw
+        self._fixed_substeps = fixed_substeps(substeps)
+        self.substeps = 1
+        """Explicit steps in each frame of dt (1 for the implicit integrator)."""
+        self.critical_dt = math.inf
+        """Critical step [s] of the explicit integrator over the region's free vertices (inf: not asked)."""
+        self.notes = []
+        """What the palpation changed on its own (a fall-back to the implicit integrator), one line each."""
+        self._parity = 1  # substeps % 2: whether a frame ends in the other state
+        self._critical_cache = {}
+        self._bound = force_bound(self.model)
         self.states = [self.model.state(), self.model.state()]
         self._cur = 0  # states[_cur] is the current state
         self.control = self.model.control()
@@ -155,8 +194,10 @@ class Palpation:
             self._mode = self._pinned["mode"].numpy()
             self._reaction = self._pinned["reaction"].numpy()
         self._force_view = self._reaction[0]  # a view of the reaction buffer: no copy per step
+        self._force_words = memoryview(self._reaction).cast("B").cast("f")  # the reaction as Python floats
         if self.region is None:
             self.solver.set_global(anchors=(rings == "global"))
+            self.plan_substeps()
 
     # -- the region ----------------------------------------------------------------------------
     @property
@@ -185,6 +226,7 @@ class Palpation:
             if old_count:
                 reset_vertices_left_behind(self.model, old_vertex, old_count, old, self.states)
             self.solver.set_region(old)
+            self.plan_substeps()
         else:
             from ..mesh.device_mesh import check_vertex
 
@@ -201,7 +243,48 @@ class Palpation:
         self.region.expand(rings)
         self.rings = self.region.rings
         self.solver.set_region(self.region)
+        self.plan_substeps()
         self._graphs = None
+
+    @property
+    def step_dt(self) -> float:
+        """The integrator's step [s]: the frame dt over its substeps."""
+        return self.dt / self.substeps
+
+    def region_critical_dt(self) -> float:
+        """The explicit integrator's critical step [s] over the free vertices (Model.critical_dt), cached by region."""
+        # the solver's free set: the region's (or every vertex) less the supported ones
+        free = self.solver.free_vertex.numpy()[: self.solver.free_count]
+        anchors = self.rings != "global-free"
+        key = (np.sort(free).tobytes(), anchors)
+        if key not in self._critical_cache:
+            self._critical_cache[key] = self.model.critical_dt(free, anchors=anchors)
+        return self._critical_cache[key]
+
+    def plan_substeps(self) -> None:
+        """Substeps of the explicit integrator for the current region (or the implicit fall-back)."""
+        self._graphs = None
+        if not self.solver.conditionally_stable:
+            self.substeps, self._parity = 1, 1
+            return
+        self.critical_dt = crit = self.region_critical_dt()
+        if self._fixed_substeps is not None:
+            self.substeps, self._parity = self._fixed_substeps, self._fixed_substeps & 1
+            return
+        n = substeps_for(self.dt, crit)
+        if n > LIMITS["substeps"]:
+            self.notes.append(
+                f"the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {self.dt * 1e3:g} ms "
+                f"(critical step {crit * 1e3:.3g} ms): it runs the implicit integrator instead"
+            )
+            region = self.region
+            self.solver = make_solver(self.model, "implicit", **self._solver_kw)
+            if region is not None:
+                self.solver.set_region(region)
+            else:
+                self.solver.set_global(anchors=(self.rings == "global"))
+            n = 1
+        self.substeps, self._parity = n, n & 1
 
     # -- stepping ------------------------------------------------------------------------------
     def _launch_step(self, a, b):
@@ -209,7 +292,10 @@ class Palpation:
             wp.copy(self.control.probe_target, self._pinned["target"])
             wp.copy(self.control.probe_force, self._pinned["force"])
             wp.copy(self.control.probe_mode, self._pinned["mode"])
-        self.solver.step(a, b, self.control, self.dt)
+        h = self.dt / self.substeps
+        for _ in range(self.substeps):  # a -> b, b -> a, ...: the frame ends in b for an odd count
+            self.solver.step(a, b, self.control, h)
+            a, b = b, a
         if not self._cpu:
             wp.copy(self._pinned["reaction"], self.control.probe_reaction)
 
@@ -217,25 +303,43 @@ class Palpation:
         self._graphs = capture_step_pair(self._launch_step, self.states, self.device)
 
     def step(self) -> np.ndarray:
-        """One step of dt; returns the feedback force [N]: a view that every step updates in place."""
+        """One frame of dt; returns the feedback force [N]: a view that every step updates in place.
+
+        Raises SimulationDiverged when that force is not finite or beyond force_bound."""
         replays = self._graphs
         if replays is not None:
             replay = replays[self._cur]
-            self._cur ^= 1
+            self._cur ^= self._parity
             replay()
+            w = self._force_words  # a sum of the components: inf or nan once any one runs away
+            if not -self._bound < w[0] + w[1] + w[2] < self._bound:
+                self.diverged()
             return self._force_view
         return self._step_setup()
+
+    def diverged(self, step_index=None) -> None:
+        """Raise SimulationDiverged for a feedback force that is not finite or beyond force_bound."""
+        f = np.asarray(self._force_view, dtype=np.float64)
+        at = "" if step_index is None else f" at step {step_index}"
+        raise SimulationDiverged(
+            f"the {self.solver.integrator} integrator diverged{at}: the feedback force {f.tolist()} N is not finite or "
+            f"more than {self._bound:.3g} N (dt {self.dt * 1e3:g} ms in {self.substeps} substep(s), critical step "
+            f"{self.critical_dt * 1e3:.3g} ms); the press is deeper, or its force larger, than the model holds"
+        )
 
     def _step_setup(self) -> np.ndarray:
         if self.vertex < 0:
             raise RuntimeError("touch(vertex) first: the probe is on no vertex")
         # the first step runs uncaptured: it compiles and loads the kernels outside any capture
         self._launch_step(self.states[self._cur], self.states[1 - self._cur])
-        self._cur ^= 1
+        self._cur ^= self._parity
         if self.capture:
             self._capture()
         if not self._cpu:
             wp.synchronize_device(self.device)
+        w = self._force_words
+        if not -self._bound < w[0] + w[1] + w[2] < self._bound:
+            self.diverged()
         return self._force_view
 
     def set_probe(self, mode: int, target=None) -> None:
@@ -283,16 +387,16 @@ class Palpation:
         if not ok:
             free = self.region.vertices()[: self.region.free_count] if self.region is not None else None
             crit = self.model.critical_dt(free, anchors=self.solver.anchor_scale > 0)
-            if self.solver.conditionally_stable and self.dt > crit:
+            if self.solver.conditionally_stable and self.step_dt > crit:
                 raise SimulationDiverged(
                     f"the {self.solver.integrator} integrator diverged at step {step_index} "
-                    f"(t = {step_index * self.dt:.4g} s): dt = {self.dt * 1e3:.4g} ms exceeds the critical "
+                    f"(t = {step_index * self.dt:.4g} s): its step {self.step_dt * 1e3:.4g} ms exceeds the critical "
                     f"step of about {crit * 1e3:.4g} ms; use a smaller --dt-ms or --integrator implicit"
                 )
             raise SimulationDiverged(  # not the step: the press (or the force) is more than the model holds
                 f"the {self.solver.integrator} integrator ran away at step {step_index} "
                 f"(t = {step_index * self.dt:.4g} s): a vertex is not finite or more than twice the mesh's size "
-                f"({size * 1e3:.4g} mm) from rest, with dt = {self.dt * 1e3:.4g} ms under the critical step at rest "
+                f"({size * 1e3:.4g} mm) from rest, with a step of {self.step_dt * 1e3:.4g} ms under the critical step at rest "
                 f"(about {crit * 1e3:.4g} ms); the press is deeper, or its force larger, than the model holds"
             )
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from ..errors import InputError
 from ..kernels.arrays import ProbeArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
 from ..tissue.material import Material, springs_for_mesh
@@ -145,7 +146,7 @@ class Model:
         a deep press adds geometric stiffness to the stretched springs.
         """
         import scipy.sparse as sp
-        from scipy.sparse.linalg import eigsh
+        from scipy.sparse.linalg import ArpackError, eigsh
 
         n = self.particle_count
         free = np.arange(n) if vertices is None else np.unique(np.asarray(vertices, dtype=np.int64))
@@ -175,17 +176,26 @@ class Model:
         dof = (3 * free[:, None] + np.arange(3)).ravel()
         w = np.repeat(1.0 / np.sqrt(self.particle_mass_host), 3)[dof]
         Winv = sp.diags(w)
-        K = Winv @ assemble(self._ke_host, self._ka_host)[dof][:, dof] @ Winv
-        C = Winv @ assemble(self._kd_host, self._da_host)[dof][:, dof] @ Winv
+        with np.errstate(all="ignore"):  # an overflow is reported below, in words
+            K = Winv @ assemble(self._ke_host, self._ka_host)[dof][:, dof] @ Winv
+            C = Winv @ assemble(self._kd_host, self._da_host)[dof][:, dof] @ Winv
+        if not (np.all(np.isfinite(K.data)) and np.all(np.isfinite(C.data))):
+            raise InputError(
+                f"the model's stiffness or damping over mass is not finite (largest spring {self._ke_host.max():.3g} N/m, "
+                f"anchor {self._ka_host.max():.3g} N/m; a lesion's stiffness_factor too large?): it has no stable step"
+            )
         if K.shape[0] <= 60:
             vals, vecs = np.linalg.eigh(K.toarray())
             lam, v = vals[-1], vecs[:, -1]
         else:
-            vals, vecs = eigsh(K, k=1, which="LA", tol=1e-6)
-            lam, v = vals[0], vecs[:, 0]
+            try:
+                vals, vecs = eigsh(K, k=1, which="LA", tol=1e-6)
+                lam, v = vals[0], vecs[:, 0]
+            except ArpackError:  # no convergence: Gershgorin's bounds, which under-estimate the step
+                lam, v = float(abs(K).sum(axis=1).max()), None
         if lam <= 0:
             return float("inf")
-        g = float(v @ (C @ v))
+        g = float(v @ (C @ v)) if v is not None else float(abs(C).sum(axis=1).max())
         return float((-g + np.sqrt(g * g + 4.0 * lam)) / lam)
 
 

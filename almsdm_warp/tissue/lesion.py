@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..checks import check_limit
 from ..errors import InputError
 
 KEYS = ("center_mm", "radius_mm", "stiffness_factor")
@@ -72,8 +73,10 @@ def parse_lesion(table, where: str) -> Lesion:
             raise InputError(f"{where}: [lesion] {key} must be a finite number > 0, got {value!r}")
         return float(value)
 
+    factor = positive("stiffness_factor", 5.0)
+    check_limit(factor, "lesion_factor", f"{where}: [lesion] stiffness_factor")  # past it float32 stiffness means nothing
     return Lesion(
         center=tuple(float(c) / 1000.0 for c in center),
         radius=positive("radius_mm") / 1000.0,
-        stiffness_factor=positive("stiffness_factor", 5.0),
+        stiffness_factor=factor,
     )
