@@ -10,22 +10,11 @@ FAST = ["--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05", "--dt-ms",
 ARGS = ["sweep", "--points", "20", "--chunk", "6", *FAST]
 
 
-def test_damaged_chunks_are_pressed_again(tmp_path, monkeypatch, capsys):
+def test_damaged_chunks_are_pressed_again(tmp_path, capsys):
     whole = tmp_path / "whole.csv"
     assert main([*ARGS, "--out", str(whole)]) == 0
     out = tmp_path / "resumed.csv"
-    real_write = sw.Parts.write
-    written = []
-
-    def write_then_stop(self, i, columns):
-        if len(written) == 3:
-            raise KeyboardInterrupt
-        written.append(i)
-        real_write(self, i, columns)
-
-    monkeypatch.setattr(sw.Parts, "write", write_then_stop)
-    assert main([*ARGS, "--out", str(out)]) == 130
-    monkeypatch.setattr(sw.Parts, "write", real_write)
+    interrupt_after(3, out)
     parts = tmp_path / "resumed.csv.parts"
     chunks = sorted(parts.glob("chunk_*.npz"))
     assert len(chunks) == 3
@@ -65,13 +54,22 @@ def test_a_chunk_without_its_checksum_is_pressed_again(tmp_path, capsys):
     assert out.read_text() == whole.read_text()
 
 
-def _key_of_the_sweep(tmp_path):
-    """The plan key of ARGS: stop a run after its first chunk and read its plan.json."""
+def interrupt_after(chunks: int, out) -> None:
+    """Run the sweep of ARGS into `out`, interrupted (Ctrl-C) when `chunks` chunks are written."""
     from unittest import mock
 
-    def stop(self, i, columns):
-        raise KeyboardInterrupt
+    real = sw.Parts.write
 
-    with mock.patch.object(sw.Parts, "write", stop):
-        assert main([*ARGS, "--out", str(tmp_path / "k.csv")]) == 130
+    def write(self, i, columns):
+        if len(self.sums) >= chunks:
+            raise KeyboardInterrupt
+        real(self, i, columns)
+
+    with mock.patch.object(sw.Parts, "write", write):
+        assert main([*ARGS, "--out", str(out)]) == 130
+
+
+def _key_of_the_sweep(tmp_path):
+    """The plan key of ARGS, from the plan.json of a run stopped before its first chunk."""
+    interrupt_after(0, tmp_path / "k.csv")
     return json.loads((tmp_path / "k.csv.parts" / "plan.json").read_text())["key"]

@@ -52,16 +52,45 @@ def _terminate(signum, frame):
 @contextlib.contextmanager
 def signals_as_interrupts():
     """While the command runs, SIGTERM raises Terminated, and SIGINT KeyboardInterrupt (Python's
-    default, set again in case the caller changed it). Only the main thread can take signals."""
+    default, set again in case the caller changed it), unless ignored when the command starts.
+    Only the main thread can take signals."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    old = {s: signal.signal(s, h) for s, h in ((signal.SIGTERM, _terminate), (signal.SIGINT, signal.default_int_handler))}
+    # a signal ignored when we start stays ignored (`nohup`, a shell's background job: SIGINT)
+    wanted = ((signal.SIGTERM, _terminate), (signal.SIGINT, signal.default_int_handler))
+    old = {s: signal.signal(s, h) for s, h in wanted if signal.getsignal(s) is not signal.SIG_IGN}
     try:
         yield
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+
+
+SHIELDED_IMPORTS = ("trimesh", "trimesh.graph", "trimesh.repair")
+"""Libraries imported at start-up with signals held: trimesh imports scipy inside `except
+BaseException`, so a Ctrl-C there would be swallowed and leave trimesh without its graph engine
+(a traceback later, in the mesh's repair)."""
+
+
+@contextlib.contextmanager
+def signals_held():
+    """SIGINT and SIGTERM that arrive in the block are held, and raised as soon as it ends."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = []
+    old = {s: signal.signal(s, lambda signum, frame: held.append(signum))
+           for s in (signal.SIGINT, signal.SIGTERM) if signal.getsignal(s) is not signal.SIG_IGN}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    if held:
+        if held[0] == signal.SIGTERM:
+            _terminate(signal.SIGTERM, None)
+        raise KeyboardInterrupt
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -126,6 +155,9 @@ def _run(argv) -> int:
         if _default_command(argv):
             argv = ["palpate", *argv]  # `almsdm`, `almsdm --depth-mm 5`, `almsdm liver`, `almsdm my.obj`
         args = build_parser().parse_args(argv)
+        with signals_held():
+            for name in SHIELDED_IMPORTS:
+                importlib.import_module(name)
         check_paths(args)
         return args.func(args)
     except InputError as exc:
