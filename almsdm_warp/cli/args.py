@@ -179,7 +179,7 @@ def units_hint(mesh) -> str | None:
     span = float(np.ptp(vertices, axis=0).max()) * 1e3 if len(vertices) else 0.0
     lo, hi = ORGAN_SPAN_MM
     if 0.0 < span < lo:
-        return f"the mesh spans {span:.3g} mm; if its file is in metres or centimetres, give --scale-mm 1000 or 10"
+        return f"the mesh spans {span:.4g} mm; if its file is in metres or centimetres, give --scale-mm 1000 or 10"
     if span > hi:
         return f"the mesh spans {span:.4g} mm; if its file is in micrometres or tenths of a millimetre, give --scale-mm 0.001 or 0.1"
     return None
