@@ -71,6 +71,8 @@ SHIELDED_IMPORTS = ("trimesh", "trimesh.graph", "trimesh.repair")
 """Libraries imported at start-up with signals held: trimesh imports scipy inside `except
 BaseException`, so a Ctrl-C there would be swallowed and leave trimesh without its graph engine
 (a traceback later, in the mesh's repair)."""
+SHIELDED_USD_IMPORTS = ("pxr.Tf", "pxr.Sdf", "pxr.Usd", "pxr.UsdGeom", "pxr.Vt")
+"""With --usd, usd-core's modules too: its import turns an interrupt into a warning and goes on."""
 
 
 @contextlib.contextmanager
@@ -156,7 +158,7 @@ def _run(argv) -> int:
             argv = ["palpate", *argv]  # `almsdm`, `almsdm --depth-mm 5`, `almsdm liver`, `almsdm my.obj`
         args = build_parser().parse_args(argv)
         with signals_held():
-            for name in SHIELDED_IMPORTS:
+            for name in SHIELDED_IMPORTS + (SHIELDED_USD_IMPORTS if getattr(args, "usd", None) else ()):
                 importlib.import_module(name)
         check_paths(args)
         return args.func(args)
