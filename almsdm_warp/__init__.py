@@ -23,23 +23,44 @@ def _map_source_kernels():
 
 _map_source_kernels()
 
-from .region.contact import ContactQuery, Contacts, find_contacts  # noqa: E402
-from .mesh.device_mesh import DeviceMesh  # noqa: E402
-from .errors import InputError  # noqa: E402
-from .mesh.io import load_mesh  # noqa: E402
-from .mesh.tissue_mesh import TissueMesh  # noqa: E402
-from .region.region import Region, ring_distances  # noqa: E402
+# The public names, each from the module that defines it; imported when first used (PEP 562), so
+# that `import almsdm_warp` (and the command line's start, which must answer Ctrl-C at once) does
+# not load Warp before it is needed.
+_PUBLIC = {
+    "BatchPalpation": "batch.batch_palpation",
+    "ContactQuery": "region.contact",
+    "Contacts": "region.contact",
+    "DeviceMesh": "mesh.device_mesh",
+    "InputError": "errors",
+    "Material": "tissue.material",
+    "Model": "sim.model",
+    "Palpation": "protocol.palpation",
+    "PressResult": "protocol.palpation",
+    "PROBE_DISPLACEMENT": "sim.model",
+    "PROBE_FORCE": "sim.model",
+    "PROBE_OFF": "sim.model",
+    "Region": "region.region",
+    "TissueMesh": "mesh.tissue_mesh",
+    "TissueParams": "tissue.params",
+    "find_contacts": "region.contact",
+    "load_mesh": "mesh.io",
+    "ring_distances": "region.region",
+}
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "ContactQuery",
-    "Contacts",
-    "DeviceMesh",
-    "InputError",
-    "Region",
-    "TissueMesh",
-    "find_contacts",
-    "load_mesh",
-    "ring_distances",
-]
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name):
+    if name not in _PUBLIC:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_PUBLIC))

@@ -249,3 +249,65 @@ def test_no_traceback_from_a_real_process(argv):
     assert r.returncode == 2
     assert "Traceback" not in r.stderr and "Warning" not in r.stderr, r.stderr
     assert r.stderr.count("\n") == 1 and r.stderr.startswith("almsdm: error: ")
+
+
+# -- scenes nested deeply, suffixes, units, the version, evaluate's folder --------------------
+@given(depth=st.integers(min_value=1, max_value=200_000), kind=st.sampled_from(["array", "table"]))
+@fuzz_settings(6)
+def test_deeply_nested_scene_is_one_line(depth, kind):
+    """A TOML value nested `depth` levels (a RecursionError traceback before): a scene or one line."""
+    with tempfile.TemporaryDirectory() as d:
+        scene = Path(d) / "deep.toml"
+        value = "[" * depth + "]" * depth if kind == "array" else "{a=" * depth + "1" + "}" * depth
+        scene.write_text(f"[mesh]\npath = {value}\n")
+        code, stdout, err = run_main(["touch", scene, "--rings", "1"])
+        record("deeply_nested_scene", f"{kind} {depth}", check_outcome(code, stdout, err), err)
+        assert code == 2  # no depth makes a mesh path
+
+
+def test_png_suffix_is_png(tmp_path):
+    """One table says which suffixes a picture takes: --png x.svg is refused, not PNG bytes in an .svg."""
+    code, stdout, err = run_main(["palpate", "--png", tmp_path / "x.svg"])
+    check_outcome(code, stdout, err, folder=tmp_path)
+    assert code == 2 and "'.svg' (allowed: .png)" in err and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("scale_mm, hint", [(1e-3, "--scale-mm 1000 or 10"), (1.0, None), (100.0, "--scale-mm 0.001 or 0.1")])
+def test_units_hint(tmp_path, scale_mm, hint):
+    """A mesh spanning under 2 mm or over 2 m gets a note on its likely unit (the stomach spans 128 mm)."""
+    code, stdout, err = run_main(["sweep", ROOT / "scenes" / "stomach.obj", "--scale-mm", scale_mm, "--points", "1",
+                                  "--out", tmp_path / "s.csv", "--ramp-s", "0.002", "--hold-s", "0", "--settle-s", "0"])
+    notes = [ln for ln in err.splitlines() if "the mesh spans" in ln]
+    if hint is None:
+        assert notes == []
+    else:
+        import re
+
+        import trimesh
+
+        span = float(trimesh.load(ROOT / "scenes" / "stomach.obj", process=False).extents.max()) * scale_mm
+        said = float(re.search(r"spans (\S+) mm", notes[0]).group(1))
+        assert len(notes) == 1 and hint in notes[0] and math.isclose(said, span, rel_tol=1e-3), err
+
+
+def test_version():
+    import tomllib
+
+    import almsdm_warp
+
+    r = _subprocess("--version")
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    assert r.returncode == 0 and r.stdout.strip() == f"almsdm {version}" == f"almsdm {almsdm_warp.__version__}"
+
+
+def test_evaluate_keeps_docs_unless_told(tmp_path, monkeypatch):
+    """Without --out, evaluate writes to a folder of its own in the working folder, not docs/."""
+    import almsdm_warp.evaluation.evaluate as ev
+
+    seen = []
+    monkeypatch.setattr(ev, "run_evaluation", lambda out, *a, **k: seen.append(out) or {"figures": [], "elapsed_s": 0.0})
+    monkeypatch.chdir(tmp_path)
+    code, stdout, err = run_main(["evaluate", "--settings", "tiny"])
+    assert code == 0 and seen == [Path("evaluation_results")] and (tmp_path / "evaluation_results").is_dir(), err
+    code, stdout, err = run_main(["evaluate", "--settings", "tiny", "--out", "docs"])
+    assert code == 2 and "--out docs: no such folder" in err

@@ -85,3 +85,143 @@ def test_sweep_table_goes_through_the_one_writer(tmp_path, monkeypatch):
     out = write_table(tmp_path / "s.csv", columns)
     assert published == ["s.csv"] and (out.stat().st_mode & 0o777) == _new_file_mode()
     assert read_table(out)["peak_force_N"].tolist() == [1.0, 2.0]
+
+
+# -- outputs only to regular files, each its own, never an input -----------------------------
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _special(tmp_path, case):
+    """(argv, message, check that the special file is intact) for one kind of bad output."""
+    if case == "device":
+        link = tmp_path / "null.json"
+        link.symlink_to("/dev/null")
+        return ["touch", "--rings", "1", "--json", link], "is a device", lambda: Path("/dev/null").is_char_device()
+    if case == "folder":
+        (tmp_path / "d.json").mkdir()
+        return ["touch", "--rings", "1", "--json", tmp_path / "d.json"], "is a folder", lambda: (tmp_path / "d.json").is_dir()
+    if case == "fifo":
+        os.mkfifo(tmp_path / "f.json")
+        return ["touch", "--rings", "1", "--json", tmp_path / "f.json"], "is a FIFO", lambda: (tmp_path / "f.json").is_fifo()
+    if case == "twice":
+        x = tmp_path / "x.json"
+        return ["palpate", *FAST, "--json", x, "--usd", x], "are the same file", lambda: not x.exists()
+    if case == "twice-by-link":
+        (tmp_path / "x.png").symlink_to(tmp_path / "x.usdc")
+        return ["palpate", *FAST, "--usd", tmp_path / "x.usdc", "--png", tmp_path / "x.png"], "are the same file", \
+            lambda: not (tmp_path / "x.usdc").exists()
+    if case == "input-mesh":
+        mesh = tmp_path / "m.obj"
+        mesh.write_bytes((ROOT / "scenes" / "stomach.obj").read_bytes())
+        (tmp_path / "out.json").symlink_to(mesh)
+        return ["touch", mesh, "--rings", "1", "--json", tmp_path / "out.json"], "is the input", \
+            lambda: mesh.read_bytes() == (ROOT / "scenes" / "stomach.obj").read_bytes()
+    raise ValueError(case)
+
+
+@pytest.mark.parametrize("case", ["device", "folder", "fifo", "twice", "twice-by-link", "input-mesh"])
+def test_outputs_only_to_regular_files_of_their_own(tmp_path, case):
+    """An output onto a device, a folder, a FIFO, another output or an input: one line, exit 2,
+    before any work, and nothing written (a rename would have replaced the special file)."""
+    argv, message, intact = _special(tmp_path, case)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code, stdout, err = run_main(argv)
+    check_outcome(code, stdout, err, folder=tmp_path)
+    assert code == 2 and message in err, err
+    assert intact() and sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_a_special_file_made_after_the_check_is_not_replaced(tmp_path):
+    """publish checks the target again: a FIFO put there during the run stays a FIFO."""
+    from almsdm_warp.errors import InputError
+    from almsdm_warp.export.output import atomic_write
+
+    target = tmp_path / "t.csv"
+
+    def write(tmp):
+        Path(tmp).write_text("a\n")
+        os.mkfifo(target)
+
+    with pytest.raises(InputError, match="is a FIFO"):
+        atomic_write(target, write)
+    assert target.is_fifo() and [p.name for p in tmp_path.iterdir()] == ["t.csv"]
+
+
+# -- a full disk -------------------------------------------------------------------------------
+@pytest.fixture
+def full_disk(tmp_path):
+    """A 64 KiB tmpfs (root only; skipped elsewhere): too small for a USD stage of the stomach."""
+    import subprocess
+
+    mount = tmp_path / "full"
+    mount.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mount)],
+                                           capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a small tmpfs here (needs root)")
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", str(mount)], check=False)
+
+
+@pytest.mark.parametrize("suffix", [".usdc", ".usda"])
+def test_usd_on_a_full_disk_is_one_line(full_disk, suffix):
+    """USD's error stack (hundreds of lines and a traceback before) is one line naming the cause."""
+    code, stdout, err = run_main(["palpate", *FAST, "--usd", full_disk / f"p{suffix}", "--usd-every", "1"])
+    check_outcome(code, stdout, err, folder=full_disk)
+    assert code == 2 and "No space left on device" in err, err
+    assert list(full_disk.iterdir()) == []
+
+
+# -- signals, in a real process ----------------------------------------------------------------
+def _start(tmp_path, *argv):
+    import subprocess
+    import sys
+
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    return subprocess.Popen([sys.executable, "-m", "almsdm_warp.cli.main", *map(str, argv)], cwd=tmp_path, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _signalled(tmp_path, argv, signum, wait):
+    """Start the command, call wait(proc), send `signum`: (exit code, stderr)."""
+    proc = _start(tmp_path, *argv)
+    try:
+        wait(proc)
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    return proc.returncode, err
+
+
+def test_sigterm_during_a_usd_recording(tmp_path):
+    """SIGTERM while frames are written: one line, exit 143 (128 + 15), no temporary file left."""
+    import signal
+    import time
+
+    def recording(proc):
+        deadline = time.monotonic() + 120
+        while not list(tmp_path.glob(".p.usdc.*")) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert list(tmp_path.glob(".p.usdc.*")), "the recording never started"
+        time.sleep(0.3)
+
+    argv = ["palpate", "--presses", "1000", "--usd", "p.usdc", "--usd-every", "1", "--no-progress"]
+    code, err = _signalled(tmp_path, argv, signal.SIGTERM, recording)
+    assert code == 143, err
+    assert err.strip().splitlines() == ["almsdm: terminated"], err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("after_s", [0.2, 0.8])
+def test_ctrl_c_in_the_first_second(tmp_path, after_s):
+    """SIGINT while the program starts (imports, Warp's start; trimesh's imports swallowed it and
+    failed later): one line, exit 130, no traceback, nothing written."""
+    import signal
+    import time
+
+    code, err = _signalled(tmp_path, ["palpate", "--json", "out.json"], signal.SIGINT, lambda proc: time.sleep(after_s))
+    assert code == 130, err
+    assert err.strip().splitlines() == ["almsdm: interrupted"], err
+    assert list(tmp_path.iterdir()) == []

@@ -15,6 +15,8 @@ import hashlib
 import json
 import math
 import shutil
+import threading
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -236,21 +238,49 @@ def read_table(path) -> dict:
     return out
 
 
+def file_sha256(path) -> str:
+    """The SHA-256 of a file's bytes, in hex."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
 class Parts:
-    """The chunks a sweep has written so far, beside its output: OUT.parts/{plan.json, chunk_*.npz}."""
+    """The chunks a sweep has written so far, beside its output: OUT.parts/{plan.json, chunk_*.npz}.
+
+    plan.json holds the plan's key and the SHA-256 of every chunk written (rewritten, atomically,
+    after each chunk). A chunk counts as done only when its bytes match that checksum: a chunk
+    truncated or changed on disk, or one written but not yet in plan.json (an interrupt between
+    the two), is removed and pressed again on resume (:attr:`damaged` lists them).
+    """
 
     def __init__(self, out: Path, plan: SweepPlan):
         self.dir = Path(str(out) + ".parts")
         self.plan = plan
         self.key = plan.key()
+        self.sums: dict[int, str] = {}
+        """Chunk index -> SHA-256 of its file, as written."""
+        self.damaged: list[int] = []
+        """Chunks found on disk by open() that did not match their checksum (removed, to be pressed again)."""
+        self._lock = threading.Lock()  # chunks finish on several threads (several GPUs)
+
+    @property
+    def manifest(self) -> Path:
+        return self.dir / "plan.json"
+
+    def chunk_path(self, i: int) -> Path:
+        return self.dir / f"chunk_{i:06d}.npz"
 
     def open(self) -> list[int]:
-        """Create or reuse the parts folder; returns the chunk indices already done."""
-        manifest = self.dir / "plan.json"
+        """Create or reuse the parts folder; returns the chunk indices already done (checksums verified)."""
         if self.dir.exists():
             try:
-                found = json.loads(manifest.read_text())["key"]
-            except (OSError, ValueError, KeyError):
+                data = json.loads(self.manifest.read_text())
+                found = data["key"]
+                self.sums = {int(i): str(h) for i, h in data.get("chunks", {}).items()}
+            except (OSError, ValueError, KeyError, TypeError, AttributeError):
                 found = None
             if found != self.key:
                 raise InputError(
@@ -259,21 +289,50 @@ class Parts:
                 )
         else:
             self.dir.mkdir()
-            atomic_write(manifest, lambda tmp: Path(tmp).write_text(json.dumps({"key": self.key, "points": len(self.plan.vertices)})))
-        return [i for i in range(len(self.plan.chunks)) if (self.dir / f"chunk_{i:06d}.npz").exists()]
+            self._write_manifest()
+        done, self.damaged = [], []
+        for i in range(len(self.plan.chunks)):
+            path = self.chunk_path(i)
+            if not path.exists():
+                continue
+            if self.sums.get(i) == file_sha256(path):
+                done.append(i)
+            else:
+                self.damaged.append(i)
+                path.unlink()
+                self.sums.pop(i, None)
+        return done
+
+    def _write_manifest(self) -> None:
+        data = {"key": self.key, "points": len(self.plan.vertices), "chunks": {str(i): h for i, h in sorted(self.sums.items())}}
+        atomic_write(self.manifest, lambda tmp: Path(tmp).write_text(json.dumps(data)))
 
     def write(self, i: int, columns: dict) -> None:
+        """Write chunk `i` atomically, then its checksum into plan.json."""
+        digest = []
+
         def write(tmp):
             with open(tmp, "wb") as f:
                 np.savez(f, **columns)
+            digest.append(file_sha256(tmp))
 
-        atomic_write(self.dir / f"chunk_{i:06d}.npz", write)
+        atomic_write(self.chunk_path(i), write)
+        with self._lock:
+            self.sums[i] = digest[0]
+            self._write_manifest()
 
     def gather(self) -> dict:
+        """Every chunk's columns, in point order; InputError for a chunk damaged since it was written."""
         parts = []
         for i in range(len(self.plan.chunks)):
-            with np.load(self.dir / f"chunk_{i:06d}.npz") as z:
-                parts.append({c: z[c] for c in COLUMNS})
+            path = self.chunk_path(i)
+            try:
+                if self.sums.get(i) != file_sha256(path):
+                    raise ValueError("its checksum does not match plan.json")
+                with np.load(path) as z:
+                    parts.append({c: z[c] for c in COLUMNS})
+            except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+                raise InputError(f"{path}: damaged ({exc}); run the same command again to press that chunk again") from exc
         return {c: np.concatenate([p[c] for p in parts]) for c in COLUMNS}
 
     def remove(self) -> None:
@@ -305,7 +364,6 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
 
 
 def _run_threads(plan, parts, queues, batches, advance):
-    import threading
     from concurrent.futures import ThreadPoolExecutor
 
     stop = threading.Event()

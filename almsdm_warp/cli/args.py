@@ -172,9 +172,26 @@ def check_contact(contact, probe, mesh):
                          f"(it is too far from the mesh)")
 
 
+ORGAN_SPAN_MM = (2.0, 2000.0)
+"""An organ's largest extent lies between these [mm]; outside, the mesh's unit is likely not mm."""
+
+
+def units_hint(mesh) -> str | None:
+    """A note when the mesh's largest extent suggests its file is not in millimetres, else None."""
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    span = float(np.ptp(vertices, axis=0).max()) * 1e3 if len(vertices) else 0.0
+    lo, hi = ORGAN_SPAN_MM
+    if 0.0 < span < lo:
+        return f"the mesh spans {span:.4g} mm; if its file is in metres or centimetres, give --scale-mm 1000 or 10"
+    if span > hi:
+        return f"the mesh spans {span:.4g} mm; if its file is in micrometres or tenths of a millimetre, give --scale-mm 0.001 or 0.1"
+    return None
+
+
 def print_notes(mesh):
-    """The mesh's validation notes, one line each on stderr."""
-    for note in mesh.notes:
+    """The mesh's validation notes, and a units hint where its size suggests one, one line each on stderr."""
+    hint = units_hint(mesh)
+    for note in [*mesh.notes, *([hint] if hint else [])]:
         print(f"note: {note}", file=sys.stderr)
 
 

@@ -11,6 +11,10 @@ from ..errors import InputError
 from .args import add_command, get_device, quiet_warp
 
 
+DEFAULT_OUT = "evaluation_results"
+"""Where a run without --out writes: a folder of its own, never the committed docs/."""
+
+
 def add_parser(sub) -> None:
     p = add_command(
         sub,
@@ -21,7 +25,8 @@ def add_parser(sub) -> None:
         "OUT/figures/*.png (nothing is written until every experiment has run).",
     )
     p.add_argument("--quick", action="store_true", help="reduced versions of every part (under 2 minutes on 2 CPU cores)")
-    p.add_argument("--out", default="docs", metavar="DIR", help="folder for results.md and figures/ (default docs)")
+    p.add_argument("--out", default=None, metavar="DIR", help=f"folder for results.md and figures/ (default {DEFAULT_OUT}/, made if missing; "
+                   "the project's committed results are docs/: --out docs replaces them)")
     p.add_argument("--extra-json", default=None, metavar="PATH", help="step times measured elsewhere (e.g. `almsdm bench` on a GPU) to add to the speed-accuracy figure")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
     p.add_argument("--settings", choices=("full", "quick", "tiny"), default=None, help=argparse.SUPPRESS)  # tests: "tiny"
@@ -31,10 +36,16 @@ def add_parser(sub) -> None:
 def cmd_evaluate(args) -> int:
     from ..evaluation.evaluate import run_evaluation
 
+    make = args.out is None and not Path(DEFAULT_OUT).exists()  # the default folder is made when the run starts
+    if args.out is None:
+        args.out = DEFAULT_OUT
     out = Path(args.out)
-    if not out.is_dir():
+    if make:
+        if not os.access(out.absolute().parent, os.W_OK):
+            raise InputError(f"cannot make {out}/ in {out.absolute().parent}: folder is not writable (give --out DIR)")
+    elif not out.is_dir():
         raise InputError(f"--out {out}: no such folder")
-    if not os.access(out, os.W_OK) or ((out / "figures").exists() and not os.access(out / "figures", os.W_OK)):
+    if not make and not os.access(out, os.W_OK) or ((out / "figures").exists() and not os.access(out / "figures", os.W_OK)):
         raise InputError(f"--out {out}: folder is not writable")
     if args.extra_json is not None:
         from ..evaluation.accuracy import read_extra_points
@@ -43,6 +54,8 @@ def cmd_evaluate(args) -> int:
     quiet_warp()
     device = get_device(args.device)
     settings = args.settings or ("quick" if args.quick else "full")
+    if make:
+        out.mkdir()
     results = run_evaluation(out, settings, str(device), command=_command(args, settings), extra_json=args.extra_json, progress=args.progress)
     print(f"wrote {out / 'results.md'}, {out / 'results.json'} and {len(results['figures'])} figures in {out / 'figures'} ({results['elapsed_s']:.0f} s)")
     return 0

@@ -1,4 +1,6 @@
-"""The `almsdm` command line. Bad input ends with one line on stderr and exit code 2.
+"""The `almsdm` command line. Bad input ends with one line on stderr and exit code 2; Ctrl-C
+(SIGINT) and SIGTERM end with one line and exit code 130 or 143 (128 + the signal, as a shell
+reports a process the signal ended), every temporary file removed on the way out.
 
 Commands: ``palpate`` (the default: press the probe into a scene, report force, recovery and
 speed), ``touch`` (print the ring regions at the contact), ``sweep``, ``bench`` and ``evaluate``.
@@ -8,25 +10,111 @@ Each command's module adds its parser (``add_parser``) and runs it; this one onl
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib
+import signal
 import sys
+import threading
 
 from ..errors import InputError
-from . import bench, evaluate, palpate, sweep, touch
-from .args import Parser
 
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 128 + signal.SIGINT
+"""130: Ctrl-C."""
+EXIT_TERMINATED = 128 + signal.SIGTERM
+"""143: SIGTERM (a batch system's or `kill`'s request to stop)."""
 
-SUBCOMMANDS = {"touch": touch, "palpate": palpate, "evaluate": evaluate, "sweep": sweep, "bench": bench}
-"""Command name -> its module, in the order `almsdm --help` lists them."""
 COMMANDS = ("palpate", "touch", "evaluate", "sweep", "bench")
+"""The subcommands, each a module of this package with add_parser(sub), in the order `almsdm --help` lists them."""
+OUTPUTS = ("json", "usd", "png", "out")
+"""The arguments that name an output file (as argparse stores them); checked to be distinct."""
+INPUTS = ("scene", "mesh", "extra_json")
+"""The arguments that name an input file, which no output may replace."""
+FOLDER_OUTPUTS = {"evaluate": ("out",)}
+"""Outputs that are folders, not files: left out of the distinct-file check."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that it unwinds as Ctrl-C does: every writer's
+    cleanup (export.output.atomic_path, the USD recorder, a sweep's chunks) runs, nothing is left half-written."""
+
+
+_TERMS = []
+"""SIGTERMs received during the current run (a command that catches the interrupt itself, as a
+sweep does to say where its chunks are, returns 130; main makes that 143 when SIGTERM it was)."""
+
+
+def _terminate(signum, frame):
+    _TERMS.append(signum)
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def signals_as_interrupts():
+    """While the command runs, SIGTERM raises Terminated, and SIGINT KeyboardInterrupt (Python's
+    default, set again in case the caller changed it), unless ignored when the command starts.
+    Only the main thread can take signals."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    # a signal ignored when we start stays ignored (`nohup`, a shell's background job: SIGINT)
+    wanted = ((signal.SIGTERM, _terminate), (signal.SIGINT, signal.default_int_handler))
+    old = {s: signal.signal(s, h) for s, h in wanted if signal.getsignal(s) is not signal.SIG_IGN}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+SHIELDED_IMPORTS = ("trimesh", "trimesh.graph", "trimesh.repair")
+"""Libraries imported at start-up with signals held: trimesh imports scipy inside `except
+BaseException`, so a Ctrl-C there would be swallowed and leave trimesh without its graph engine
+(a traceback later, in the mesh's repair)."""
+SHIELDED_USD_IMPORTS = ("pxr.Tf", "pxr.Sdf", "pxr.Usd", "pxr.UsdGeom", "pxr.Vt")
+"""With --usd, usd-core's modules too: its import turns an interrupt into a warning and goes on."""
+
+
+@contextlib.contextmanager
+def signals_held():
+    """SIGINT and SIGTERM that arrive in the block are held, and raised as soon as it ends."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = []
+    old = {s: signal.signal(s, lambda signum, frame: held.append(signum))
+           for s in (signal.SIGINT, signal.SIGTERM) if signal.getsignal(s) is not signal.SIG_IGN}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    if held:
+        if held[0] == signal.SIGTERM:
+            _terminate(signal.SIGTERM, None)
+        raise KeyboardInterrupt
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .. import __version__
+    from .args import Parser
+
     parser = Parser(prog="almsdm", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"almsdm {__version__}")
     sub = parser.add_subparsers(dest="command", parser_class=Parser)
-    for module in SUBCOMMANDS.values():
-        module.add_parser(sub)
+    for name in COMMANDS:
+        importlib.import_module(f"{__package__}.{name}").add_parser(sub)
     return parser
+
+
+def check_paths(args) -> None:
+    """Before any work: no two outputs on one file, no output onto an input."""
+    from ..export.writers import check_distinct
+
+    folders = FOLDER_OUTPUTS.get(args.command, ())
+    outputs = {f"--{a.replace('_', '-')}": getattr(args, a, None) for a in OUTPUTS if a not in folders}
+    inputs = {a.replace("_", "-"): getattr(args, a, None) for a in INPUTS}
+    check_distinct(outputs, inputs)
 
 
 def _default_command(argv) -> bool:
@@ -35,7 +123,7 @@ def _default_command(argv) -> bool:
     if not argv:
         return True
     first = argv[0]
-    if first in COMMANDS or first in ("-h", "--help"):
+    if first in COMMANDS or first in ("-h", "--help", "--version"):
         return False
     if first.startswith("-") or "/" in first or "\\" in first or "." in first:
         return True
@@ -50,12 +138,29 @@ def _default_command(argv) -> bool:
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if _default_command(argv):
-        argv = ["palpate", *argv]  # `almsdm`, `almsdm --depth-mm 5`, `almsdm liver`, `almsdm my.obj`
+    _TERMS.clear()
+    with signals_as_interrupts():
+        try:
+            code = _run(argv)
+            return EXIT_TERMINATED if code == EXIT_INTERRUPTED and _TERMS else code
+        except Terminated:
+            print("almsdm: terminated", file=sys.stderr)
+            return EXIT_TERMINATED
+        except KeyboardInterrupt:
+            print("almsdm: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+
+
+def _run(argv) -> int:
     try:
-        args = parser.parse_args(argv)
+        argv = list(sys.argv[1:] if argv is None else argv)
+        if _default_command(argv):
+            argv = ["palpate", *argv]  # `almsdm`, `almsdm --depth-mm 5`, `almsdm liver`, `almsdm my.obj`
+        args = build_parser().parse_args(argv)
+        with signals_held():
+            for name in SHIELDED_IMPORTS + (SHIELDED_USD_IMPORTS if getattr(args, "usd", None) else ()):
+                importlib.import_module(name)
+        check_paths(args)
         return args.func(args)
     except InputError as exc:
         message = " ".join(str(exc).split())  # one line, whatever the message holds
@@ -68,9 +173,6 @@ def main(argv=None) -> int:
         name = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"almsdm: error: {name}{exc.strerror or ' '.join(str(exc).split())}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("almsdm: interrupted", file=sys.stderr)
-        return 130
 
 
 if __name__ == "__main__":

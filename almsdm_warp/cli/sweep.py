@@ -174,6 +174,8 @@ def _resume(out: Path, plan):
 
     parts = Parts(out, plan)
     done = parts.open()
+    if parts.damaged:
+        print(f"note: {len(parts.damaged)} chunk(s) in {parts.dir} did not match their checksum (damaged): pressed again", file=sys.stderr)
     todo = [i for i in range(len(plan.chunks)) if i not in set(done)]
     if done:
         print(f"resuming: {len(done)} of {len(plan.chunks)} chunks already in {parts.dir}")

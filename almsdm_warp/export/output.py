@@ -5,18 +5,36 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import stat
 import tempfile
 from pathlib import Path
 
 from ..errors import InputError
 
 
-def check_writable(path) -> Path:
-    """Fail early, before any work, when `path` cannot be written: its folder is missing or read-only."""
+def check_regular(path) -> Path:
+    """InputError when `path` exists and is not a regular file (a folder, a device such as
+    /dev/null, a FIFO, a socket): a rename would replace it, so an output never goes there."""
     p = Path(path)
-    parent = p.parent if str(p.parent) else Path(".")
-    if p.is_dir():
+    try:
+        mode = os.stat(p).st_mode
+    except FileNotFoundError:
+        return p
+    except OSError as exc:
+        raise InputError(f"{p}: cannot write: {exc.strerror or exc}") from exc
+    if stat.S_ISDIR(mode):
         raise InputError(f"{p}: is a folder, not a file")
+    if not stat.S_ISREG(mode):
+        kind = "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else "not a regular file"
+        raise InputError(f"{p}: is {kind}, not a regular file; outputs go only to regular files")
+    return p
+
+
+def check_writable(path) -> Path:
+    """Fail early, before any work, when `path` cannot be written: it is not a regular file (a
+    folder, a device, a FIFO), or its folder is missing or read-only."""
+    p = check_regular(path)
+    parent = p.parent if str(p.parent) else Path(".")
     if not parent.is_dir():
         raise InputError(f"{p}: folder {parent} does not exist")
     if not os.access(parent, os.W_OK):
@@ -43,6 +61,7 @@ def temp_path(path, suffix: str = ".tmp") -> Path:
 def publish(tmp, path) -> Path:
     """Rename the finished temporary file `tmp` to `path`, its data on disk first (fsync) and with
     the mode a new file gets (0o666 less the umask; mkstemp makes it owner-only)."""
+    check_regular(path)  # something else may have taken the name since the check before the run
     with open(tmp, "rb+") as f:
         os.fsync(f.fileno())
     mask = os.umask(0)

@@ -22,6 +22,7 @@ end. All of it is written under a temporary name beside the target and renamed w
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,14 @@ def check_usd_path(path) -> Path:
     if p.suffix.lower() not in USD_SUFFIXES:
         raise InputError(f"{p}: unknown USD suffix {p.suffix!r} (allowed: {', '.join(USD_SUFFIXES)})")
     return check_writable(p)
+
+
+def usd_error_cause(exc) -> str:
+    """The cause in a USD error stack (Tf.ErrorException: one line per error, each with its
+    commentary quoted): the first error's commentary, from its last colon ("No space left on device")."""
+    notes = re.findall(r" : '(.*)'\s*$", str(exc), flags=re.M)
+    text = notes[0] if notes else " ".join(str(exc).split())
+    return text.rsplit(": ", 1)[-1].strip() or text
 
 
 def ring_colors(vertex_ring: np.ndarray, outer_ring: int) -> np.ndarray:
@@ -217,7 +226,7 @@ class UsdRecorder:
         if self._unsaved >= self.flush_every:
             self._unsaved = 0
             self.stage.SetEndTimeCode(self._last_code)
-            self._layer.Save()  # crate layers save incrementally: the written samples leave memory
+            self._save()  # crate layers save incrementally: the written samples leave memory
 
     def _write_frame(self, code, q, n):
         Vt = self._Vt
@@ -277,11 +286,10 @@ class UsdRecorder:
             return self.path
         try:
             self.stage.SetEndTimeCode(self._last_code or 0)
-            self._layer.Save()
+            self._save()
             if self.path.suffix.lower() == ".usda":
                 with atomic_path(self.path, ".tmp.usda") as text_tmp:
-                    if not self._layer.Export(text_tmp):
-                        raise OSError(f"USD could not write {text_tmp}")
+                    self._save(text_tmp)
                 self._discard()
             else:
                 self._release()
@@ -291,6 +299,18 @@ class UsdRecorder:
             self._discard()
             raise
         return self.path
+
+    def _save(self, export_to=None):
+        """Save the layer (or export it as text to `export_to`); a write USD refuses (a full disk, a
+        quota) is one InputError naming the target and the cause, not USD's error stack."""
+        from pxr import Tf
+
+        try:
+            ok = self._layer.Export(export_to) if export_to is not None else self._layer.Save()
+        except Tf.ErrorException as exc:
+            raise InputError(f"{self.path}: cannot write the USD stage: {usd_error_cause(exc)}") from None
+        if not ok:
+            raise InputError(f"{self.path}: cannot write the USD stage (USD refused to save {export_to or self._tmp})")
 
     def _release(self):
         self.stage = self._layer = self.organ = self.curves = self.probe = None

@@ -8,6 +8,7 @@ lists the ones it does.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -88,3 +89,27 @@ def write_output(path, data, kind: str, flag: str | None = None) -> Path:
     if fmt.write is None:
         raise TypeError(f"{fmt.suffix} ({fmt.what}) is written by its producer, not by write_output")
     return fmt.write(path, data)
+
+
+def _same_file(a, b) -> bool:
+    ra, rb = Path(os.path.realpath(a)), Path(os.path.realpath(b))
+    if ra == rb:
+        return True
+    try:
+        return os.path.samefile(a, b)  # hard links, bind mounts
+    except OSError:  # one of them does not exist yet
+        return False
+
+
+def check_distinct(outputs: dict, inputs: dict | None = None) -> None:
+    """InputError when two outputs name the same file (one would silently replace the other) or an
+    output names an input (it would be replaced by the output). outputs, inputs: flag -> path,
+    None for one not given; a path that names no existing file can match only an output."""
+    outs = [(flag, p) for flag, p in outputs.items() if p is not None]
+    for k, (flag, p) in enumerate(outs):
+        for other, q in outs[:k]:
+            if _same_file(p, q):
+                raise InputError(f"{other} {q} and {flag} {p} are the same file: give each output its own path")
+        for what, q in (inputs or {}).items():
+            if q is not None and Path(q).exists() and _same_file(p, q):
+                raise InputError(f"{flag} {p} is the input {what} {q}: the output would replace it; give another path")

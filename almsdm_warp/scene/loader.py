@@ -222,6 +222,8 @@ def _read_toml(p: Path, where: str) -> dict:
             return tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{where}: TOML syntax error: {exc}") from exc
+    except RecursionError:  # the parser recurses once per level of nested arrays or tables
+        raise InputError(f"{where}: arrays or tables nested too deeply (a scene file needs two levels)") from None
     except UnicodeDecodeError as exc:
         raise InputError(f"{where}: not a UTF-8 text file (TOML), byte {exc.start} is 0x{exc.object[exc.start]:02x}") from exc
     except PermissionError as exc:
