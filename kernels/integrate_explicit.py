@@ -4,7 +4,10 @@ One launch per step: gather the forces from `state_in`, integrate, write `state_
 grid-stride loop over the free vertices: one thread per vertex on CUDA, a single thread on the
 CPU, where each thread's prologue (copying every array descriptor) would otherwise cost more than
 the vertex's physics. The probe's vertex is driven (displacement mode) or pushed (force mode), and
-its thread writes the reaction, so the feedback force needs no second kernel.
+its thread writes the reaction, so the feedback force needs no second kernel. A spherical probe
+(sphere mode, kernels/probe_contact.py) puts every free surface vertex it would contain on its
+surface; each writes its own contact reaction, and a second one-thread launch sums them in local
+order (a gather: the same bits every run).
 
 Its arrays are direct arguments, not the structs of kernels/arrays.py that the other kernels
 take: on the CPU Warp compiles direct array arguments for unit stride, and a struct's members
@@ -14,6 +17,7 @@ keep a stride read at run time; with the structs this step took 3.7% longer (doc
 import warp as wp
 
 from .forces import add_spring_force, anchor_force
+from .probe_contact import sphere_contact_reaction, sphere_normal
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -36,12 +40,15 @@ def integrate_region_explicit(
     probe_mode: wp.array(dtype=wp.int32),
     probe_target: wp.array(dtype=wp.vec3),
     probe_force: wp.array(dtype=wp.vec3),
+    probe_radius: wp.array(dtype=wp.float32),
+    probe_surface: wp.array(dtype=wp.int32),
     dt: float,
     q_in: wp.array(dtype=wp.vec3),
     qd_in: wp.array(dtype=wp.vec3),
     q_out: wp.array(dtype=wp.vec3),
     qd_out: wp.array(dtype=wp.vec3),
     probe_reaction: wp.array(dtype=wp.vec3),
+    probe_contact: wp.array(dtype=wp.vec3),
 ):
     # the gather written out in the kernel (a wp.func taking the arrays would copy every descriptor a call)
     pv = probe_vertex[0]
@@ -55,7 +62,7 @@ def integrate_region_explicit(
             j = adj_vertex[k]
             spring = adj_spring[k]  # (k_ij, d_ij, rest length)
             f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
-        if v == pv and mode != 0:
+        if v == pv and (mode == 1 or mode == 2):
             probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
         if v == pv and mode == 1:
             # displacement control: the vertex is where the probe puts it
@@ -67,12 +74,42 @@ def integrate_region_explicit(
                 f += probe_force[0]
             # m u'' + d u' + k u = F, eq. (3), by semi-implicit Euler: velocity first, then position
             u1 = u + dt * f / particle_mass[v]
-            q_out[v] = x + dt * u1
+            x1 = x + dt * u1
+            if mode == 3:
+                # the sphere (centre probe_target): a surface vertex it would contain goes on its surface
+                contact = wp.vec3(0.0)
+                if probe_surface[v] != 0:
+                    n, l = sphere_normal(x1, probe_target[0])
+                    radius = probe_radius[0]
+                    if l < radius:
+                        x1 = probe_target[0] + radius * n
+                        u1 = (x1 - x) / dt
+                        contact = sphere_contact_reaction(f, n)
+                probe_contact[v] = contact
+            q_out[v] = x1
             qd_out[v] = u1
 
 
+@wp.kernel
+def sum_contact_reaction(
+    free_vertex: wp.array(dtype=wp.int32),
+    free_count: int,
+    probe_mode: wp.array(dtype=wp.int32),
+    probe_contact: wp.array(dtype=wp.vec3),
+    probe_reaction: wp.array(dtype=wp.vec3),
+):
+    # one thread: the feedback force is the sum of the contact reactions, in local order
+    if probe_mode[0] != 3:
+        return
+    f = wp.vec3(0.0)
+    for i in range(free_count):
+        f += probe_contact[free_vertex[i]]
+    probe_reaction[0] = f
+
+
 def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, state_out, control, dt):
-    """Advance the free vertices by one semi-implicit Euler step of `dt` [s]."""
+    """Advance the free vertices by one semi-implicit Euler step of `dt` [s]; in sphere mode, the contact
+    reactions summed into the feedback force by a second launch where the Control has a sphere."""
     dm = model.dmesh
     threads = 1 if model.device.is_cpu else free_count
     wp.launch(
@@ -81,9 +118,15 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
         inputs=[
             free_vertex, free_count, threads, dm.adj_offsets, dm.adj_vertex, model.adj_spring, model.particle_q_rest,
             model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale,
-            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force, dt,
-            state_in.particle_q, state_in.particle_qd,
+            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force,
+            control.probe_radius, control.probe_surface, dt, state_in.particle_q, state_in.particle_qd,
         ],
-        outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction],
+        outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction, control.probe_contact],
         device=model.device,
     )
+    if control.sphere:
+        # the sphere's feedback force (a Control without a sphere never launches this)
+        wp.launch(
+            sum_contact_reaction, dim=1, inputs=[free_vertex, free_count, control.probe_mode, control.probe_contact],
+            outputs=[control.probe_reaction], device=model.device,
+        )
