@@ -58,6 +58,8 @@ class Scene:
     tol: float | None = None
     """With rings = "auto": the displacement tolerance [m] the region is sized to (None: the
     command line's default, almsdm_warp.cli.args.AUTO_TOL_MM); None otherwise."""
+    probe_radius: float = 0.0
+    """Radius of the spherical probe [m]; 0: the paper's probe (the contact vertex driven)."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
@@ -65,6 +67,7 @@ class Scene:
             object.__setattr__(self, "path", Path(self.path))
         object.__setattr__(self, "scale_mm", check_value(self.scale_mm, float, "> 0", "Scene.scale_mm"))
         check_rings(self.rings, "Scene.rings")
+        object.__setattr__(self, "probe_radius", check_value(self.probe_radius, float, ">= 0", "Scene.probe_radius"))
         if self.tol is not None:
             object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
@@ -155,6 +158,7 @@ def load_scene(path) -> Scene:
             tol=region.get("tol"),
             press=PressParams(**values["press"]),
             lesion=lesion,
+            probe_radius=values["probe"].get("probe_radius", 0.0),
         )
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None

@@ -23,6 +23,9 @@ SCHEMA: dict[str, dict[str, tuple[str, type, float, str]]] = {
         "tol_mm": ("tol", float, 1000.0, "> 0"),  # only with rings = "auto"
     },
     "press": PRESS_KEYS,
+    "probe": {
+        "radius_mm": ("probe_radius", float, 1000.0, ">= 0"),  # 0: the paper's probe, one driven vertex
+    },
 }
 """Every section and key a scene file may hold: attribute, type, file units per SI unit, rule."""
 
