@@ -354,6 +354,10 @@ class Palpation:
         if self.probe_radius > 0:
             if self.region is not None and self.patch_depth != depth:
                 self.touch(self.vertex, depth)  # the patch the sphere covers at this depth
+            travel = depth / max(schedule.ramp_n, 1)
+            if travel >= self.probe_radius:
+                raise ValueError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its radius "
+                                 f"{self.probe_radius * 1e3:g} mm: it would pass through vertices; ramp longer or use a smaller dt")
             # the sphere's centre, touching the surface at the contact at rest, then along the inward normal
             drive, start = PROBE_SPHERE, rest - direction * self.probe_radius
         dt, v = self.dt, self.vertex
