@@ -4,10 +4,13 @@ One launch per step: gather the forces from `state_in`, integrate, write `state_
 grid-stride loop over the free vertices: one thread per vertex on CUDA, a single thread on the
 CPU, where each thread's prologue (copying every array descriptor) would otherwise cost more than
 the vertex's physics. The probe's vertex is driven (displacement mode) or pushed (force mode), and
-its thread writes the reaction, so the feedback force needs no second kernel. A spherical probe
-(sphere mode, kernels/probe_contact.py) puts every free surface vertex it would contain on its
-surface; each writes its own contact reaction, and a second one-thread launch sums them in local
-order (a gather: the same bits every run).
+its thread writes the reaction, so the feedback force needs no second kernel.
+
+A spherical probe (sphere mode) is a second launch, made only for a Control with a sphere, so the
+paper's probe runs the step as it was: one thread goes over the free vertices in local order,
+puts each surface vertex that the step left inside the sphere on its surface (kernels/probe_contact.py)
+and sums the contact reactions (a gather in a fixed order: the same bits every run). The internal
+force it needs is the step's own, f = m (v_out - v_in) / dt.
 
 Its arrays are direct arguments, not the structs of kernels/arrays.py that the other kernels
 take: on the CPU Warp compiles direct array arguments for unit stride, and a struct's members
@@ -40,15 +43,12 @@ def integrate_region_explicit(
     probe_mode: wp.array(dtype=wp.int32),
     probe_target: wp.array(dtype=wp.vec3),
     probe_force: wp.array(dtype=wp.vec3),
-    probe_radius: wp.array(dtype=wp.float32),
-    probe_surface: wp.array(dtype=wp.int32),
     dt: float,
     q_in: wp.array(dtype=wp.vec3),
     qd_in: wp.array(dtype=wp.vec3),
     q_out: wp.array(dtype=wp.vec3),
     qd_out: wp.array(dtype=wp.vec3),
     probe_reaction: wp.array(dtype=wp.vec3),
-    probe_contact: wp.array(dtype=wp.vec3),
 ):
     # the gather written out in the kernel (a wp.func taking the arrays would copy every descriptor a call)
     pv = probe_vertex[0]
@@ -62,7 +62,7 @@ def integrate_region_explicit(
             j = adj_vertex[k]
             spring = adj_spring[k]  # (k_ij, d_ij, rest length)
             f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring[0], spring[1], spring[2])
-        if v == pv and (mode == 1 or mode == 2):
+        if v == pv and mode != 0:
             probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
         if v == pv and mode == 1:
             # displacement control: the vertex is where the probe puts it
@@ -74,42 +74,53 @@ def integrate_region_explicit(
                 f += probe_force[0]
             # m u'' + d u' + k u = F, eq. (3), by semi-implicit Euler: velocity first, then position
             u1 = u + dt * f / particle_mass[v]
-            x1 = x + dt * u1
-            if mode == 3:
-                # the sphere (centre probe_target): a surface vertex it would contain goes on its surface
-                contact = wp.vec3(0.0)
-                if probe_surface[v] != 0:
-                    n, l = sphere_normal(x1, probe_target[0])
-                    radius = probe_radius[0]
-                    if l < radius:
-                        x1 = probe_target[0] + radius * n
-                        u1 = (x1 - x) / dt
-                        contact = sphere_contact_reaction(f, n)
-                probe_contact[v] = contact
-            q_out[v] = x1
+            q_out[v] = x + dt * u1
             qd_out[v] = u1
 
 
 @wp.kernel
-def sum_contact_reaction(
+def constrain_sphere_explicit(
     free_vertex: wp.array(dtype=wp.int32),
     free_count: int,
+    particle_mass: wp.array(dtype=wp.float32),
     probe_mode: wp.array(dtype=wp.int32),
-    probe_contact: wp.array(dtype=wp.vec3),
+    probe_target: wp.array(dtype=wp.vec3),
+    probe_radius: wp.array(dtype=wp.float32),
+    probe_surface: wp.array(dtype=wp.int32),
+    dt: float,
+    q_in: wp.array(dtype=wp.vec3),
+    qd_in: wp.array(dtype=wp.vec3),
+    q_out: wp.array(dtype=wp.vec3),
+    qd_out: wp.array(dtype=wp.vec3),
     probe_reaction: wp.array(dtype=wp.vec3),
+    probe_contact: wp.array(dtype=wp.vec3),
 ):
-    # one thread: the feedback force is the sum of the contact reactions, in local order
+    # one thread: the sphere (centre probe_target) after the step; the feedback force is the sum of
+    # the contact reactions, in local order
     if probe_mode[0] != 3:
         return
-    f = wp.vec3(0.0)
+    centre = probe_target[0]
+    radius = probe_radius[0]
+    total = wp.vec3(0.0)
     for i in range(free_count):
-        f += probe_contact[free_vertex[i]]
-    probe_reaction[0] = f
+        v = free_vertex[i]
+        contact = wp.vec3(0.0)
+        if probe_surface[v] != 0:
+            n, l = sphere_normal(q_out[v], centre)
+            if l < radius:
+                f = particle_mass[v] * (qd_out[v] - qd_in[v]) / dt  # the internal force of the step
+                x1 = centre + radius * n
+                q_out[v] = x1
+                qd_out[v] = (x1 - q_in[v]) / dt
+                contact = sphere_contact_reaction(f, n)
+                total += contact
+        probe_contact[v] = contact
+    probe_reaction[0] = total
 
 
 def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, state_out, control, dt):
-    """Advance the free vertices by one semi-implicit Euler step of `dt` [s]; in sphere mode, the contact
-    reactions summed into the feedback force by a second launch where the Control has a sphere."""
+    """Advance the free vertices by one semi-implicit Euler step of `dt` [s]; a Control with a sphere
+    adds the sphere's contact (a second, one-thread launch)."""
     dm = model.dmesh
     threads = 1 if model.device.is_cpu else free_count
     wp.launch(
@@ -118,15 +129,20 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
         inputs=[
             free_vertex, free_count, threads, dm.adj_offsets, dm.adj_vertex, model.adj_spring, model.particle_q_rest,
             model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale,
-            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force,
-            control.probe_radius, control.probe_surface, dt, state_in.particle_q, state_in.particle_qd,
+            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force, dt,
+            state_in.particle_q, state_in.particle_qd,
         ],
-        outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction, control.probe_contact],
+        outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction],
         device=model.device,
     )
     if control.sphere:
-        # the sphere's feedback force (a Control without a sphere never launches this)
         wp.launch(
-            sum_contact_reaction, dim=1, inputs=[free_vertex, free_count, control.probe_mode, control.probe_contact],
-            outputs=[control.probe_reaction], device=model.device,
+            constrain_sphere_explicit,
+            dim=1,
+            inputs=[
+                free_vertex, free_count, model.particle_mass, control.probe_mode, control.probe_target,
+                control.probe_radius, control.probe_surface, dt, state_in.particle_q, state_in.particle_qd,
+            ],
+            outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction, control.probe_contact],
+            device=model.device,
         )
