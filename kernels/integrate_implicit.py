@@ -10,8 +10,8 @@ A spherical probe (sphere mode) constrains each surface vertex it holds along th
 its normal velocity is prescribed (the step ends on the sphere) and CG moves it only in the tangent
 plane (Baraff & Witkin's filter, kernels/block_cg.py); a vertex is held where its predicted
 position (x + dt v) is inside the sphere, or where it is on the sphere while the tissue pushes the
-probe (which keeps a held vertex held: no chatter). The feedback force is
-the sum of the contact reactions (kernels/probe_contact.py), summed in local order.
+probe (which keeps a held vertex held: no chatter). The feedback force is the sum of the contact
+reactions (kernels/probe_contact.py), in local order.
 """
 
 import warp as wp
@@ -20,7 +20,7 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .arrays import CGArrays, ProbeArrays, ProbeSphereArrays, TissueArrays
-from .block_cg import solve_block_cg
+from .block_cg import filter_normal, solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
 from .probe_contact import sphere_contact_reaction, sphere_normal
 
@@ -99,7 +99,7 @@ def integrate_region_implicit(
         if v == driven:
             b = wp.vec3(0.0)
         if constrained != 0:
-            # the sphere holds the vertex: its normal velocity is prescribed so the step ends on the sphere
+            # a vertex the sphere holds: its normal velocity prescribed, so that the step ends on the sphere
             n_c = wp.vec3(0.0)
             contact = wp.vec3(0.0)
             if sphere.probe_surface[v] != 0:
@@ -108,8 +108,8 @@ def integrate_region_implicit(
                 if l_p < radius or (l < radius * (1.0 + CONTACT_SLACK) and wp.dot(f, n) < 0.0):
                     n_c = n
                     dv_n = (radius - wp.dot(n, x - centre)) / dt - wp.dot(n, u)
-                    cg.dv[i] = cg.dv[i] - wp.dot(cg.dv[i], n) * n + dv_n * n
-                    b = b - wp.dot(b, n) * n
+                    cg.dv[i] = filter_normal(cg.dv[i], n) + dv_n * n
+                    b = filter_normal(b, n)
                     contact = sphere_contact_reaction(f, n)
                     reaction += contact
             cg.normal[i] = n_c
