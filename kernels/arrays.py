@@ -52,6 +52,18 @@ class ProbeArrays:
     """Output: the tissue's internal forces on the held vertex [N]."""
 
 
+@wp.struct
+class ProbeSphereArrays:
+    """A spherical probe (a Control's, sphere mode): its radius, who may touch, each contact's reaction."""
+
+    probe_radius: wp.array(dtype=wp.float32)
+    """Radius [m], [1]; the centre is probe_target[0]."""
+    probe_surface: wp.array(dtype=wp.int32)
+    """1 for a vertex the sphere may touch (a surface vertex), [particle_count]."""
+    probe_contact: wp.array(dtype=wp.vec3)
+    """Output: each free vertex's contact reaction [N], zero off contact, [particle_count]."""
+
+
 CG_FIELDS = (
     ("dv", wp.vec3, "vertex"),
     ("r", wp.vec3, "vertex"),
@@ -59,12 +71,14 @@ CG_FIELDS = (
     ("Ap", wp.vec3, "vertex"),
     ("diag", wp.mat33, "vertex"),
     ("diag_inv", wp.mat33, "vertex"),
+    ("normal", wp.vec3, "vertex"),
     ("csr_block", wp.mat33, "entry"),
     ("csr_local", wp.int32, "entry"),
     ("stats", wp.float32, "stats"),
 )
 """The conjugate-gradient solve's arrays (kernels/block_cg.py): name, element type and size
-(per unknown, per CSR entry, or the solve's (iterations, relative residual))."""
+(per unknown, per CSR entry, or the solve's (iterations, relative residual)); `normal`: the unit
+normal of an unknown constrained along it (a sphere's contact), else zero."""
 
 
 def struct_of(name: str, doc: str, members: dict):

@@ -97,7 +97,7 @@ def step_batch_implicit(
     # 2) and 3): r = b - A dv (warm start), then conjugate gradients (kernels/block_cg.py), on this palpation's rows
     solve_block_cg(
         free_n, driven, regions.local_offsets[b], regions.local_offsets[b], 0, cg.csr_local[b], cg.csr_block[b], cg.diag[b], cg.diag_inv[b],
-        b_norm2, max_iterations, tolerance, cg.dv[b], cg.r[b], cg.p[b], cg.Ap[b],
+        0, cg.normal[b], b_norm2, max_iterations, tolerance, cg.dv[b], cg.r[b], cg.p[b], cg.Ap[b],
     )
 
     # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it

@@ -9,7 +9,10 @@ The system is A dv = b over the `free_count` unknowns in local order, with A's r
 block `block_diag[i]` and, for each CSR entry k of the row, -`csr_block[k]` at column
 `csr_local[k]` (-1: a known, not an unknown: the fixed ring or the driven vertex). Row i's
 entries are offsets[row]..offsets[row + 1] with row = rows[i] when `by_row`, else i. The driven
-vertex (local index `driven`, -1 for none) has dv = 0.
+vertex (local index `driven`, -1 for none) has dv = 0. Where `constrained`, an unknown with a
+nonzero unit `normal[i]` keeps the normal part of its warm start (the prescribed normal velocity
+of a sphere's contact) and moves only in its tangent plane: residual and search directions are
+filtered with S = I - n n^T (Baraff & Witkin 1998, modified PCG).
 """
 
 import warp as wp
@@ -18,6 +21,12 @@ from .arrays import CG_FIELDS, BatchCGArrays, CGArrays, struct_from
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def filter_normal(x: wp.vec3, n: wp.vec3):
+    # S x with S = I - n n^T: x without its part along the constrained normal (n = 0: unconstrained)
+    return x - wp.dot(x, n) * n
 
 
 @wp.func
@@ -31,6 +40,8 @@ def solve_block_cg(
     csr_block: wp.array(dtype=wp.mat33),
     block_diag: wp.array(dtype=wp.mat33),
     block_diag_inv: wp.array(dtype=wp.mat33),
+    constrained: int,
+    normal: wp.array(dtype=wp.vec3),
     b_norm2: float,
     max_iterations: int,
     tolerance: float,
@@ -57,8 +68,12 @@ def solve_block_cg(
         r = cg_r[i] - Ax
         if i == driven:
             r = wp.vec3(0.0)
-        cg_r[i] = r
+        if constrained != 0:
+            r = filter_normal(r, normal[i])
         z = block_diag_inv[i] * r
+        if constrained != 0:
+            z = filter_normal(z, normal[i])
+        cg_r[i] = r
         cg_p[i] = z
         rz += wp.dot(r, z)
 
@@ -80,6 +95,8 @@ def solve_block_cg(
                     lj = csr_local[k]
                     if lj >= 0:
                         Ap -= csr_block[k] * cg_p[lj]
+                if constrained != 0:
+                    Ap = filter_normal(Ap, normal[i])
             cg_Ap[i] = Ap
             pAp += wp.dot(cg_p[i], Ap)
         if pAp <= 0.0:
@@ -92,6 +109,8 @@ def solve_block_cg(
             r = cg_r[i] - alpha * cg_Ap[i]
             cg_r[i] = r
             z = block_diag_inv[i] * r
+            if constrained != 0:
+                z = filter_normal(z, normal[i])
             cg_Ap[i] = z  # A p is spent: keep the preconditioned residual there
             r_norm2 += wp.dot(r, r)
             rz_new += wp.dot(r, z)

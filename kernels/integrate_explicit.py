@@ -6,6 +6,12 @@ CPU, where each thread's prologue (copying every array descriptor) would otherwi
 the vertex's physics. The probe's vertex is driven (displacement mode) or pushed (force mode), and
 its thread writes the reaction, so the feedback force needs no second kernel.
 
+A spherical probe (sphere mode) is a second launch, made only for a Control with a sphere, so the
+paper's probe runs the step as it was: one thread goes over the free vertices in local order,
+puts each surface vertex that the step left inside the sphere on its surface (kernels/probe_contact.py)
+and sums the contact reactions (a gather in a fixed order: the same bits every run). The internal
+force it needs is the step's own, f = m (v_out - v_in) / dt.
+
 Its arrays are direct arguments, not the structs of kernels/arrays.py that the other kernels
 take: on the CPU Warp compiles direct array arguments for unit stride, and a struct's members
 keep a stride read at run time; with the structs this step took 3.7% longer (docs/performance.md).
@@ -14,6 +20,7 @@ keep a stride read at run time; with the structs this step took 3.7% longer (doc
 import warp as wp
 
 from .forces import add_spring_force, anchor_force
+from .probe_contact import sphere_contact_reaction, sphere_normal
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -71,8 +78,49 @@ def integrate_region_explicit(
             qd_out[v] = u1
 
 
+@wp.kernel
+def constrain_sphere_explicit(
+    free_vertex: wp.array(dtype=wp.int32),
+    free_count: int,
+    particle_mass: wp.array(dtype=wp.float32),
+    probe_mode: wp.array(dtype=wp.int32),
+    probe_target: wp.array(dtype=wp.vec3),
+    probe_radius: wp.array(dtype=wp.float32),
+    probe_surface: wp.array(dtype=wp.int32),
+    dt: float,
+    q_in: wp.array(dtype=wp.vec3),
+    qd_in: wp.array(dtype=wp.vec3),
+    q_out: wp.array(dtype=wp.vec3),
+    qd_out: wp.array(dtype=wp.vec3),
+    probe_reaction: wp.array(dtype=wp.vec3),
+    probe_contact: wp.array(dtype=wp.vec3),
+):
+    # one thread: the sphere (centre probe_target) after the step; the feedback force is the sum of
+    # the contact reactions, in local order
+    if probe_mode[0] != 3:
+        return
+    centre = probe_target[0]
+    radius = probe_radius[0]
+    total = wp.vec3(0.0)
+    for i in range(free_count):
+        v = free_vertex[i]
+        contact = wp.vec3(0.0)
+        if probe_surface[v] != 0:
+            n, l = sphere_normal(q_out[v], centre)
+            if l < radius:
+                f = particle_mass[v] * (qd_out[v] - qd_in[v]) / dt  # the internal force of the step
+                x1 = centre + radius * n
+                q_out[v] = x1
+                qd_out[v] = (x1 - q_in[v]) / dt
+                contact = sphere_contact_reaction(f, n)
+                total += contact
+        probe_contact[v] = contact
+    probe_reaction[0] = total
+
+
 def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, state_out, control, dt):
-    """Advance the free vertices by one semi-implicit Euler step of `dt` [s]."""
+    """Advance the free vertices by one semi-implicit Euler step of `dt` [s]; a Control with a sphere
+    adds the sphere's contact (a second, one-thread launch)."""
     dm = model.dmesh
     threads = 1 if model.device.is_cpu else free_count
     wp.launch(
@@ -87,3 +135,14 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
         outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction],
         device=model.device,
     )
+    if control.sphere:
+        wp.launch(
+            constrain_sphere_explicit,
+            dim=1,
+            inputs=[
+                free_vertex, free_count, model.particle_mass, control.probe_mode, control.probe_target,
+                control.probe_radius, control.probe_surface, dt, state_in.particle_q, state_in.particle_qd,
+            ],
+            outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction, control.probe_contact],
+            device=model.device,
+        )

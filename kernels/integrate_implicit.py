@@ -6,6 +6,12 @@ C = -df/dv. Block-Jacobi preconditioned conjugate gradients, warm-started from t
 step's dv. One thread per region does the whole solve in one launch: its sums run in a fixed
 order, so a rerun gives the same bits on any device, and on the CPU a step is a single call.
 The driven vertex is a known velocity (moved to the right-hand side); the fixed ring has dv = 0.
+A spherical probe (sphere mode) constrains each surface vertex it holds along the sphere's normal:
+its normal velocity is prescribed (the step ends on the sphere) and CG moves it only in the tangent
+plane (Baraff & Witkin's filter, kernels/block_cg.py); a vertex is held where its predicted
+position (x + dt v) is inside the sphere, or where it is on the sphere while the tissue pushes the
+probe (which keeps a held vertex held: no chatter). The feedback force is the sum of the contact
+reactions (kernels/probe_contact.py), in local order.
 """
 
 import warp as wp
@@ -13,9 +19,13 @@ import warp as wp
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
-from .arrays import CGArrays, ProbeArrays, TissueArrays
-from .block_cg import solve_block_cg
+from .arrays import CGArrays, ProbeArrays, ProbeSphereArrays, TissueArrays
+from .block_cg import filter_normal, solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
+from .probe_contact import sphere_contact_reaction, sphere_normal
+
+CONTACT_SLACK = 1.0e-5
+"""A vertex within radius x (1 + this) of the centre is on the sphere (float32 positions)."""
 
 
 @wp.kernel
@@ -26,6 +36,7 @@ def integrate_region_implicit(
     tissue: TissueArrays,
     anchor_scale: float,
     probe: ProbeArrays,
+    sphere: ProbeSphereArrays,
     dt: float,
     max_iterations: int,
     tolerance: float,
@@ -42,6 +53,13 @@ def integrate_region_implicit(
     if mode == 1 and pv >= 0:
         driven = pv
         dv_driven = (probe.probe_target[0] - q_in[pv]) / dt - qd_in[pv]
+    constrained = int(0)
+    centre = probe.probe_target[0]
+    radius = float(0.0)
+    if mode == 3:
+        constrained = 1
+        radius = sphere.probe_radius[0]
+    reaction = wp.vec3(0.0)
 
     # 1) forces, diagonal blocks and right-hand side b = dt (f0 - dt K v0) - A_ic dv_c
     b_norm2 = float(0.0)
@@ -71,7 +89,7 @@ def integrate_region_implicit(
             Kv += Kb * (u - qd_in[j])
             if j == driven:
                 correction += B * dv_driven  # -A_ic dv_c, with A_ic = -B
-        if v == pv and mode != 0:
+        if v == pv and (mode == 1 or mode == 2):
             probe.probe_reaction[0] = f  # the feedback force: internal forces on the probe's vertex
         if v == pv and mode == 2:
             f += probe.probe_force[0]
@@ -80,8 +98,27 @@ def integrate_region_implicit(
         b = dt * (f - dt * Kv) + correction
         if v == driven:
             b = wp.vec3(0.0)
+        if constrained != 0:
+            # a vertex the sphere holds: its normal velocity prescribed, so that the step ends on the sphere
+            n_c = wp.vec3(0.0)
+            contact = wp.vec3(0.0)
+            if sphere.probe_surface[v] != 0:
+                n_p, l_p = sphere_normal(x + dt * u, centre)
+                n, l = sphere_normal(x, centre)
+                if l_p < radius or (l < radius * (1.0 + CONTACT_SLACK) and wp.dot(f, n) < 0.0):
+                    n_c = n
+                    dv_n = (radius - wp.dot(n, x - centre)) / dt - wp.dot(n, u)
+                    cg.dv[i] = filter_normal(cg.dv[i], n) + dv_n * n
+                    b = filter_normal(b, n)
+                    contact = sphere_contact_reaction(f, n)
+                    reaction += contact
+            cg.normal[i] = n_c
+            sphere.probe_contact[v] = contact
         cg.r[i] = b
         b_norm2 += wp.dot(b, b)
+
+    if constrained != 0:
+        probe.probe_reaction[0] = reaction  # the feedback force: the sum of the contact reactions
 
     # 2) and 3): r = b - A dv (warm start), then conjugate gradients (kernels/block_cg.py)
     driven_local = int(-1)
@@ -89,7 +126,7 @@ def integrate_region_implicit(
         driven_local = vertex_local[driven]
     iterations, r_norm2 = solve_block_cg(
         free_count, driven_local, tissue.adj_offsets, free_vertex, 1, cg.csr_local, cg.csr_block, cg.diag, cg.diag_inv,
-        b_norm2, max_iterations, tolerance, cg.dv, cg.r, cg.p, cg.Ap,
+        constrained, cg.normal, b_norm2, max_iterations, tolerance, cg.dv, cg.r, cg.p, cg.Ap,
     )
 
     # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
@@ -102,7 +139,14 @@ def integrate_region_implicit(
             qd_out[v] = (target - x) / dt
         else:
             u1 = qd_in[v] + cg.dv[i]
-            q_out[v] = x + dt * u1
+            x1 = x + dt * u1
+            if constrained != 0:
+                if wp.length_sq(cg.normal[i]) > 0.0:
+                    # exactly on the sphere (the solve held it on the tangent plane)
+                    n1, l1 = sphere_normal(x1, centre)
+                    x1 = centre + radius * n1
+                    u1 = (x1 - x) / dt
+            q_out[v] = x1
             qd_out[v] = u1
     cg.stats[0] = float(iterations)
     cg.stats[1] = wp.sqrt(r_norm2 / wp.max(b_norm2, 1.0e-30))
@@ -115,7 +159,7 @@ def integrate_implicit(model, region_arrays, anchor_scale, state_in, state_out, 
         integrate_region_implicit,
         dim=1,
         inputs=[
-            free_vertex, free_count, vertex_local, model.arrays, anchor_scale, control.arrays, dt, max_iterations, tolerance,
+            free_vertex, free_count, vertex_local, model.arrays, anchor_scale, control.arrays, control.sphere_arrays, dt, max_iterations, tolerance,
             state_in.particle_q, state_in.particle_qd, scratch.arrays,
         ],
         outputs=[state_out.particle_q, state_out.particle_qd],

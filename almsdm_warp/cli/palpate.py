@@ -55,6 +55,7 @@ def add_parser(sub) -> None:
     palpate.add_argument("--ramp-s", type=number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
     palpate.add_argument("--hold-s", type=number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
     palpate.add_argument("--settle-s", type=number_arg(">= 0"), default=None, metavar="S", help="settle window after release [s] (default: the scene's)")
+    palpate.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
     palpate.add_argument("--presses", type=count_arg, default=1, metavar="N", help="presses at the same spot (default 1)")
     palpate.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default 1; 10 for cm, 1000 for m)")
     where = palpate.add_mutually_exclusive_group()
@@ -110,6 +111,8 @@ class _Run:
     vertex: int
     point: np.ndarray
     contact_extra: dict
+    probe_radius: float = 0.0
+    """The spherical probe's radius [m] (0: the paper's probe)."""
 
 
 def cmd_palpate(args) -> int:
@@ -178,7 +181,11 @@ def _resolve(args) -> _Run:
         raise InputError(f"the contact vertex {vertex} (z {mesh.vertices[vertex, 2] * 1e3:.4g} mm) is supported: it lies below "
                          f"the support plane z = {scene.fixed_below * 1e3:g} mm and cannot be pressed")
     tol = auto_tol(args, rings, scene)
-    return _Run(scene, mesh, device, rings, tol, depth, ramp, hold, settle, dt, vertex, point, contact_extra)
+    radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
+    if radius > 0 and tol is not None:
+        raise InputError("a spherical probe (--probe-radius-mm, [probe] radius_mm) needs a ring count or a global "
+                         "model: --rings auto sizes the region around one driven vertex")
+    return _Run(scene, mesh, device, rings, tol, depth, ramp, hold, settle, dt, vertex, point, contact_extra, radius)
 
 
 def _build(args, run: _Run):
@@ -204,8 +211,12 @@ def _build(args, run: _Run):
 
             pal = AdaptivePalpation(mesh, scene.tissue, tol=run.tol, integrator=args.integrator, dt=run.dt, device=run.device, **lesion)
         else:
-            pal = Palpation(mesh, scene.tissue, rings=run.rings, integrator=args.integrator, dt=run.dt, device=run.device, **lesion)
-        pal.touch(run.vertex)
+            pal = Palpation(mesh, scene.tissue, rings=run.rings, integrator=args.integrator, dt=run.dt, device=run.device,
+                            probe_radius=run.probe_radius, **lesion)
+        if run.probe_radius > 0:
+            pal.touch(run.vertex, run.depth)  # the region grown from the patch the sphere covers at this depth
+        else:
+            pal.touch(run.vertex)
     except ValueError as exc:  # a parameter Palpation rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
     return pal
@@ -228,6 +239,8 @@ def _report_model(args, run: _Run, pal):
     else:
         kind = "anchored" if anchored else "free, no anchors"
         what = f"{rings} ({kind}), {free_count} of {pal.region_vertices} vertices free"
+    if run.probe_radius > 0:
+        what += f", a {run.probe_radius * 1e3:g} mm sphere"
     for note in pal.notes:
         print(f"note: {note}")
     beyond = ", at the start" if tol is not None else ""
@@ -302,6 +315,7 @@ def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:
             "region_springs": int(pal.region_springs),
             "free_vertices": int(free_count),
             "integrator": pal.solver.integrator,
+            "probe_radius_mm": run.probe_radius * 1e3,
             "dt_s": run.dt,
             "substeps": int(pal.substeps),
             "critical_dt_s": finite(critical),

@@ -21,7 +21,6 @@ from .adaptive import FORCE_TOL, MARGIN, fixed_ring_estimate
 from ..mesh.device_mesh import check_vertex
 from ..kernels.arrays import ProbeArrays, struct_from
 from ..kernels.multi_probe import drive_probe_vertices
-from ..kernels.rings import seed_region_rings
 from ..kernels.region_state import clear_region
 from ..kernels.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
@@ -34,21 +33,6 @@ from .schedule import PressSchedule, check_press
 
 class MultiRegion(Region):
     """A Region grown from one or more seed vertices: ring r holds the vertices r hops from the nearest."""
-
-    def build_seeds(self, seeds, rings: int) -> "MultiRegion":
-        seeds = np.unique(np.asarray([check_vertex(self.dmesh.mesh, int(s)) for s in seeds], dtype=np.int32))
-        if len(seeds) == 0:
-            raise ValueError("a region needs at least one seed vertex")
-        rings = check_rings(rings)
-        self.clear()
-        seed_region_rings(self, wp.array(seeds, dtype=wp.int32, device=self.device))
-        self.region_count.fill_(len(seeds))
-        self.seed = int(seeds[0])
-        self.seeds = seeds
-        self.rings = 0
-        self.ring_offsets = np.array([0, len(seeds)], dtype=np.int64)
-        self._grow(rings)
-        return self
 
 
 class _Probes:

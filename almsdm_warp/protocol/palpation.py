@@ -15,13 +15,26 @@ import numpy as np
 import warp as wp
 
 from ..kernels.region_state import reset_vertices_left_behind
-from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, Model
+from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE, Model
 from ..region.region import Region
 from ..solvers import make_solver
 from ..checks import LIMITS, fixed_substeps, substeps_for
 from .schedule import PressSchedule, check_press
 
 GLOBAL_MODELS = ("global", "global-free")
+
+PATCH_DEPTH = 0.01
+"""Depth [m] a spherical probe's contact patch is sized for when touch() is given none (a press
+then resizes it to its own depth)."""
+
+
+def check_probe_radius(radius) -> float:
+    """The probe's radius [m]: a finite number >= 0 (0: the paper's probe, one driven vertex)."""
+    if isinstance(radius, (bool, np.bool_)) or not isinstance(radius, (int, float, np.integer, np.floating)):
+        raise TypeError(f"probe_radius must be a number [m], got {type(radius).__name__}")
+    if not (math.isfinite(radius) and radius >= 0):
+        raise ValueError(f"probe_radius must be >= 0 m and finite, got {radius}")
+    return float(radius)
 
 
 def replayer(graph, device):
@@ -142,17 +155,21 @@ class Palpation:
     substeps: "auto" (that) or an int >= 1, fixed whatever the critical step (the paper's scheme
     at 1: a step past the critical one then diverges and raises).
     step() raises SimulationDiverged when the force it reads is not finite or beyond force_bound.
-    fixed_below [m]: vertices with z below it are supported (fixed), as Model's.
+    fixed_below [m]: vertices with z below it are supported (fixed), as Model's. probe_radius [m]: 0, the
+    paper's probe (the contact vertex is driven); > 0, a rigid sphere in frictionless one-sided
+    contact with every free surface vertex it would contain, its region grown from the patch it
+    covers at full depth.
     """
 
     def __init__(self, mesh, tissue=None, *, rings=4, integrator="explicit", dt=1e-3, device=None, capture=True,
-                 edge_scale=None, anchor_scale=None, fixed_below=None, substeps="auto", **solver_kw):
+                 edge_scale=None, anchor_scale=None, fixed_below=None, substeps="auto", probe_radius=0.0, **solver_kw):
         if not (isinstance(rings, (int, np.integer)) and not isinstance(rings, bool)) and rings not in GLOBAL_MODELS:
             raise ValueError(f"rings must be an int >= 1 or one of {GLOBAL_MODELS}, got {rings!r}")
         if isinstance(rings, (int, np.integer)) and rings < 1:
             raise ValueError(f"rings must be >= 1 (ring 0 is the contact vertex alone), got {rings}")
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
+        self.probe_radius = check_probe_radius(probe_radius)
         self.model = Model(mesh, tissue, device, edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below)
         self.device = self.model.device
         self.mesh = self.model.mesh
@@ -173,6 +190,10 @@ class Palpation:
         self.states = [self.model.state(), self.model.state()]
         self._cur = 0  # states[_cur] is the current state
         self.control = self.model.control()
+        if self.probe_radius > 0:
+            self.control.set_sphere(self.probe_radius)
+        self.patch_depth = None
+        """Depth [m] the sphere's contact patch (the region's ring 0) was sized for; None: no patch."""
         self.region = Region(self.model.dmesh) if rings not in GLOBAL_MODELS else None
         self.capture = bool(capture)
         self.vertex = -1
@@ -213,8 +234,9 @@ class Palpation:
     def region_springs(self) -> int:
         return self.region.spring_count if self.region is not None else self.model.spring_count
 
-    def touch(self, vertex: int) -> None:
-        """Put the probe on `vertex`; the local model builds its region there (relocating it)."""
+    def touch(self, vertex: int, depth: float | None = None) -> None:
+        """Put the probe on `vertex`; the local model builds its region there (relocating it). With a
+        sphere, ring 0 is the patch it covers pressed `depth` [m] deep (default PATCH_DEPTH)."""
         if self.model.support_count and 0 <= vertex < self.model.particle_count and self.model.support_mask[vertex]:
             raise ValueError(f"vertex {vertex} is held by the support (below the fixed plane): the probe cannot move it")
         if self.region is not None:
@@ -222,7 +244,11 @@ class Palpation:
             old_count = old.vertex_count
             if old_count:
                 old_vertex = wp.clone(old.region_vertex[:old_count])
-            old.build(vertex, self.rings)
+            if self.probe_radius > 0:
+                self.patch_depth = PATCH_DEPTH if depth is None else float(depth)
+                old.build_seeds(self.sphere_patch(vertex, self.patch_depth), self.rings, contact=vertex)
+            else:
+                old.build(vertex, self.rings)
             if old_count:
                 reset_vertices_left_behind(self.model, old_vertex, old_count, old, self.states)
             self.solver.set_region(old)
@@ -235,6 +261,20 @@ class Palpation:
         self.control.set(vertex=self.vertex, mode=PROBE_OFF)
         self._mode[0] = PROBE_OFF
         self._graphs = None
+
+    def sphere_patch(self, vertex: int, depth: float) -> np.ndarray:
+        """Surface vertices the sphere may touch pressed `depth` [m] at `vertex`: within sqrt(2 R d)
+        (the contact circle's radius on a flat surface) plus the mesh's longest edge, facing the
+        probe (their rest normals within 90 degrees of the contact's); `vertex` among them."""
+        from ..mesh.device_mesh import check_vertex
+
+        vertex = check_vertex(self.mesh, vertex, "contact vertex")
+        surface = self.mesh.surface_vertices
+        x = self.mesh.vertices[surface]
+        reach = math.sqrt(2.0 * self.probe_radius * max(float(depth), 0.0)) + float(self.mesh.edge_rest_length.max(initial=0.0))
+        near = np.linalg.norm(x - self.mesh.vertices[vertex], axis=1) <= reach
+        facing = self.model.vertex_normal_rest[surface] @ self.model.vertex_normal_rest[vertex] > 0.0
+        return np.union1d(surface[near & facing], [vertex]).astype(np.int32)
 
     def expand(self, rings: int = 1) -> None:
         """Grow the local region by `rings` rings in place (during a press, too)."""
@@ -343,7 +383,8 @@ class Palpation:
         return self._force_view
 
     def set_probe(self, mode: int, target=None) -> None:
-        """Probe mode (PROBE_OFF / PROBE_DISPLACEMENT / PROBE_FORCE) and target [m], through host views."""
+        """Probe mode (PROBE_OFF / PROBE_DISPLACEMENT / PROBE_FORCE / PROBE_SPHERE) and target [m] (the
+        sphere's centre in sphere mode), through host views."""
         self._mode[0] = mode
         if target is not None:
             self._target[0] = target
@@ -416,13 +457,23 @@ class Palpation:
         multiple of `record_every`, and after the last step; it reads the state itself (a USD
         recorder, say). None (the default) costs one test per step."""
         schedule, rest, direction = self._begin_press(ramp, hold, settle, record, record_every, depth=depth)
+        drive, start = PROBE_DISPLACEMENT, rest
+        if self.probe_radius > 0:
+            if self.region is not None and self.patch_depth != depth:
+                self.touch(self.vertex, depth)  # the patch the sphere covers at this depth
+            travel = depth / max(schedule.ramp_n, 1)
+            if travel >= self.probe_radius:
+                raise ValueError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its radius "
+                                 f"{self.probe_radius * 1e3:g} mm: it would pass through vertices; ramp longer or use a smaller dt")
+            # the sphere's centre, touching the surface at the contact at rest, then along the inward normal
+            drive, start = PROBE_SPHERE, rest - direction * self.probe_radius
         dt, v = self.dt, self.vertex
         total, release = schedule.total, schedule.release_step
         force = np.zeros(total)
         disp = np.zeros(total)
         for s in range(total):
             if s < release:
-                self.set_probe(PROBE_DISPLACEMENT, rest + direction * depth * schedule.fraction(s))
+                self.set_probe(drive, start + direction * depth * schedule.fraction(s))
             else:
                 self.set_probe(PROBE_OFF)
             f = self.step()
@@ -446,7 +497,10 @@ class Palpation:
         """Force-controlled press: push the touched vertex along the inward normal with a force
         ramped to `force` [N] over `ramp` [s], held `hold` [s], then released for `settle` [s].
         The result's `force` is the applied force; its `depth` the deepest displacement reached.
-        record, record_every: as in :meth:`press`."""
+        record, record_every: as in :meth:`press`. The paper's probe only (probe_radius 0)."""
+        if self.probe_radius > 0:
+            raise ValueError(f"press_force pushes the contact vertex; a spherical probe (probe_radius "
+                             f"{self.probe_radius:g} m) presses by displacement (press)")
         schedule, rest, direction = self._begin_press(ramp, hold, settle, record, record_every, force=force)
         dt, v = self.dt, self.vertex
         total, release = schedule.total, schedule.release_step

@@ -103,6 +103,28 @@ class Region:
         self._grow(rings)
         return self
 
+    def build_seeds(self, seeds, rings: int, contact: int | None = None) -> "Region":
+        """Build the region of `rings` rings around several seed vertices (ring 0: all of them; ring r:
+        the vertices r hops from the nearest), clearing any old region first. `contact`: the vertex
+        the region is read at (`seed`; default the smallest seed), e.g. a spherical probe's contact
+        in the middle of its patch."""
+        seeds = np.unique(np.asarray([check_vertex(self.dmesh.mesh, int(s)) for s in seeds], dtype=np.int32))
+        if len(seeds) == 0:
+            raise ValueError("a region needs at least one seed vertex")
+        rings = check_rings(rings)
+        seed = int(seeds[0]) if contact is None else check_vertex(self.dmesh.mesh, contact)
+        if seed not in seeds:
+            raise ValueError(f"the contact vertex {seed} is not one of the region's seeds")
+        self.clear()
+        rk.seed_region_rings(self, wp.array(seeds, dtype=wp.int32, device=self.device))
+        self.region_count.fill_(len(seeds))
+        self.seed = seed
+        self.seeds = seeds
+        self.rings = 0
+        self.ring_offsets = np.array([0, len(seeds)], dtype=np.int64)
+        self._grow(rings)
+        return self
+
     def expand(self, rings: int = 1) -> "Region":
         """Grow the region by `rings` more rings in place; vertices inside keep their local index."""
         if self.is_empty:

@@ -63,6 +63,8 @@ class Scene:
     fixed_below: float | None = None
     """[support] fixed_below_mm: every vertex with z below this height [m] is fixed (an organ on a
     plate, pressed from above, +z up); None: no supports."""
+    probe_radius: float = 0.0
+    """Radius of the spherical probe [m]; 0: the paper's probe (the contact vertex driven)."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
@@ -74,6 +76,7 @@ class Scene:
             raise TypeError(f"Scene.tissue must be a TissueParams or a Material, got {type(self.tissue).__name__}")
         if self.fixed_below is not None:
             object.__setattr__(self, "fixed_below", check_value(self.fixed_below, float, "number", "Scene.fixed_below"))
+        object.__setattr__(self, "probe_radius", check_value(self.probe_radius, float, ">= 0", "Scene.probe_radius"))
         if self.tol is not None:
             object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
@@ -187,6 +190,7 @@ def load_scene(path) -> Scene:
             press=PressParams(**values["press"]),
             lesion=lesion,
             fixed_below=values["support"].get("fixed_below"),
+            probe_radius=values["probe"].get("probe_radius", 0.0),
         )
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None

@@ -32,6 +32,9 @@ SCHEMA: dict[str, dict[str, tuple[str, type, float, str]]] = {
     "support": {
         "fixed_below_mm": ("fixed_below", float, 1000.0, "number"),  # vertices with z below it are fixed
     },
+    "probe": {
+        "radius_mm": ("probe_radius", float, 1000.0, ">= 0"),  # 0: the paper's probe, one driven vertex
+    },
 }
 """Every section and key a scene file may hold: attribute, type, file units per SI unit, rule."""
 

@@ -6,11 +6,13 @@ State at rest; a solver steps ``state_in`` to ``state_out`` under a ``Control``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import warp as wp
 
 from ..errors import InputError
-from ..kernels.arrays import ProbeArrays, TissueArrays, struct_from
+from ..kernels.arrays import ProbeArrays, ProbeSphereArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
 from ..tissue.material import Material, springs_for_mesh
 from ..tissue.params import TissueParams
@@ -21,6 +23,10 @@ PROBE_DISPLACEMENT = 1
 """The probe drives its vertex to `probe_target`; the reaction is the sum of internal forces on it."""
 PROBE_FORCE = 2
 """The probe pushes its vertex with `probe_force`, which then moves freely."""
+PROBE_SPHERE = 3
+"""The probe is a rigid sphere (centre `probe_target`, radius `probe_radius`): frictionless one-sided
+contact on every free surface vertex it would contain; the reaction is the sum of the contact
+reactions (kernels/probe_contact.py)."""
 
 
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -135,7 +141,8 @@ class Model:
         return State(self)
 
     def control(self) -> "Control":
-        return Control(self.device)
+        """A Control for this model's vertices (the sphere may touch the surface vertices)."""
+        return Control(self.device, self.particle_count, self.mesh.surface_vertices)
 
     def critical_dt(self, vertices=None, anchors: bool = True) -> float:
         """Largest stable step [s] of semi-implicit Euler, for the model linearized at rest.
@@ -217,7 +224,8 @@ class Control:
     step through a view kept across steps (``control.reaction_view()``), with no copy on the CPU.
     """
 
-    def __init__(self, device):
+    def __init__(self, device, particle_count: int = 1, surface_vertices=None):
+        """surface_vertices: the mesh ids a spherical probe may touch (default none)."""
         self.device = device
         self.probe_vertex = wp.full(1, -1, dtype=wp.int32, device=device)
         """Mesh id of the vertex the probe holds, shape [1], int32 (-1: none)."""
@@ -228,9 +236,31 @@ class Control:
         self.probe_force = wp.zeros(1, dtype=wp.vec3, device=device)
         """Force the probe applies [N] (force mode), shape [1], vec3."""
         self.probe_reaction = wp.zeros(1, dtype=wp.vec3, device=device)
-        """Output: sum of the tissue's internal forces on the held vertex [N], shape [1], vec3."""
+        """Output: sum of the tissue's internal forces on the held vertex [N], shape [1], vec3; in
+        sphere mode the sum of the contact reactions."""
+        self.probe_radius = wp.zeros(1, dtype=wp.float32, device=device)
+        """Radius of the spherical probe [m] (sphere mode), shape [1], float32."""
+        surface = np.zeros(max(int(particle_count), 1), dtype=np.int32)
+        if surface_vertices is not None:
+            surface[np.asarray(surface_vertices, dtype=np.int64)] = 1
+        self.probe_surface = wp.array(surface, dtype=wp.int32, device=device)
+        """1 for a vertex the sphere may touch (a surface vertex), else 0, shape [particle_count], int32."""
+        self.probe_contact = wp.zeros(len(surface), dtype=wp.vec3, device=device)
+        """Output: each free vertex's contact reaction [N] in sphere mode (zero off contact), shape
+        [particle_count], vec3."""
+        self.sphere = False
+        """Host: True once a sphere is set; the explicit step then sums the contact reactions."""
         self.arrays = struct_from(ProbeArrays, self)
-        """The probe's arrays as one kernel argument (kernels/arrays.py)."""
+        self.sphere_arrays = struct_from(ProbeSphereArrays, self)
+        """The probe's arrays as one kernel argument (kernels/arrays.py); the sphere's in sphere_arrays."""
+
+    def set_sphere(self, radius: float) -> None:
+        """A spherical probe of `radius` [m] > 0 (its centre is `probe_target` in sphere mode)."""
+        radius = float(radius)
+        if not (math.isfinite(radius) and radius > 0):
+            raise ValueError(f"the probe's radius must be > 0 m and finite, got {radius}")
+        self.probe_radius.fill_(radius)
+        self.sphere = True
 
     def set(self, vertex: int | None = None, mode: int | None = None, target=None, force=None) -> None:
         """Update the probe from the host (small copies; the hot loop writes views instead)."""
