@@ -222,6 +222,8 @@ def test_ctrl_c_in_the_first_second(tmp_path, after_s):
     import time
 
     code, err = _signalled(tmp_path, ["palpate", "--json", "out.json"], signal.SIGINT, lambda proc: time.sleep(after_s))
-    assert code == 130, err
+    # 130, or ended by the signal itself after the line was written (a native library's handler, e.g.
+    # LLVM's while Warp compiles, re-raises SIGINT): a shell reports both as 130
+    assert code in (130, -signal.SIGINT), err
     assert err.strip().splitlines() == ["almsdm: interrupted"], err
     assert list(tmp_path.iterdir()) == []
