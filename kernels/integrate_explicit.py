@@ -19,6 +19,7 @@ keep a stride read at run time; with the structs this step took 3.7% longer (doc
 
 import warp as wp
 
+from .arrays import ProbeArrays, ProbeSphereArrays
 from .forces import add_spring_force, anchor_force
 from .probe_contact import sphere_contact_reaction, sphere_normal
 
@@ -83,29 +84,25 @@ def constrain_sphere_explicit(
     free_vertex: wp.array(dtype=wp.int32),
     free_count: int,
     particle_mass: wp.array(dtype=wp.float32),
-    probe_mode: wp.array(dtype=wp.int32),
-    probe_target: wp.array(dtype=wp.vec3),
-    probe_radius: wp.array(dtype=wp.float32),
-    probe_surface: wp.array(dtype=wp.int32),
+    probe: ProbeArrays,
+    sphere: ProbeSphereArrays,
     dt: float,
     q_in: wp.array(dtype=wp.vec3),
     qd_in: wp.array(dtype=wp.vec3),
     q_out: wp.array(dtype=wp.vec3),
     qd_out: wp.array(dtype=wp.vec3),
-    probe_reaction: wp.array(dtype=wp.vec3),
-    probe_contact: wp.array(dtype=wp.vec3),
 ):
     # one thread: the sphere (centre probe_target) after the step; the feedback force is the sum of
     # the contact reactions, in local order
-    if probe_mode[0] != 3:
+    if probe.probe_mode[0] != 3:
         return
-    centre = probe_target[0]
-    radius = probe_radius[0]
+    centre = probe.probe_target[0]
+    radius = sphere.probe_radius[0]
     total = wp.vec3(0.0)
     for i in range(free_count):
         v = free_vertex[i]
         contact = wp.vec3(0.0)
-        if probe_surface[v] != 0:
+        if sphere.probe_surface[v] != 0:
             n, l = sphere_normal(q_out[v], centre)
             if l < radius:
                 f = particle_mass[v] * (qd_out[v] - qd_in[v]) / dt  # the internal force of the step
@@ -114,8 +111,8 @@ def constrain_sphere_explicit(
                 qd_out[v] = (x1 - q_in[v]) / dt
                 contact = sphere_contact_reaction(f, n)
                 total += contact
-        probe_contact[v] = contact
-    probe_reaction[0] = total
+        sphere.probe_contact[v] = contact
+    probe.probe_reaction[0] = total
 
 
 def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, state_out, control, dt):
@@ -140,9 +137,9 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
             constrain_sphere_explicit,
             dim=1,
             inputs=[
-                free_vertex, free_count, model.particle_mass, control.probe_mode, control.probe_target,
-                control.probe_radius, control.probe_surface, dt, state_in.particle_q, state_in.particle_qd,
+                free_vertex, free_count, model.particle_mass, control.arrays, control.sphere_arrays, dt,
+                state_in.particle_q, state_in.particle_qd,
             ],
-            outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction, control.probe_contact],
+            outputs=[state_out.particle_q, state_out.particle_qd],
             device=model.device,
         )

@@ -85,8 +85,8 @@ def _check_suffix(suffix: str, where: str) -> None:
         raise InputError(f"{where}: unknown mesh format {suffix or '(no suffix)'!r}; known: {known}")
 
 
-def read_bounded(path, where: str, before_reading=None) -> bytes:
-    """The bytes of a regular file of at most MAX_FILE_BYTES, else InputError before reading.
+def read_bounded(path, where: str, before_reading=None, what: str = "mesh file") -> bytes:
+    """The bytes of a regular file (a `what`) of at most MAX_FILE_BYTES, else InputError before reading.
 
     The file is opened without blocking and checked on the open descriptor (fstat), so a path that
     names a FIFO, a device (/dev/zero, /dev/urandom) or a socket is refused instead of read without
@@ -97,7 +97,7 @@ def read_bounded(path, where: str, before_reading=None) -> bytes:
     except FileNotFoundError as exc:
         raise InputError(f"{where}: no such file") from exc
     except IsADirectoryError as exc:
-        raise InputError(f"{where}: is a directory, not a mesh file") from exc
+        raise InputError(f"{where}: is a directory, not a {what}") from exc
     except PermissionError as exc:
         raise InputError(f"{where}: permission denied, cannot read the file") from exc
     except OSError as exc:
@@ -105,15 +105,15 @@ def read_bounded(path, where: str, before_reading=None) -> bytes:
     mode = os.fstat(fd)
     if stat.S_ISDIR(mode.st_mode):
         os.close(fd)
-        raise InputError(f"{where}: is a directory, not a mesh file")
+        raise InputError(f"{where}: is a directory, not a {what}")
     with os.fdopen(fd, "rb") as f:
         if not stat.S_ISREG(mode.st_mode):
             kind = next((name for test, name in _SPECIAL if test(mode.st_mode)), "special file")
-            raise InputError(f"{where}: is a {kind}, not a regular file; meshes are read only from regular files "
+            raise InputError(f"{where}: is a {kind}, not a regular file; a {what} is read only from a regular file "
                              f"(a device or a pipe may never end)")
         if mode.st_size > MAX_FILE_BYTES:
             raise InputError(f"{where}: the file has {mode.st_size} bytes, more than the {MAX_FILE_BYTES} bytes "
-                             f"(MAX_FILE_BYTES) a mesh file may have")
+                             f"(MAX_FILE_BYTES) a {what} may have")
         if before_reading is not None:
             before_reading()
         try:
@@ -121,7 +121,7 @@ def read_bounded(path, where: str, before_reading=None) -> bytes:
         except OSError as exc:
             raise InputError(f"{where}: cannot read: {exc.strerror or exc}") from exc
     if len(data) > MAX_FILE_BYTES:
-        raise InputError(f"{where}: the file grew past the {MAX_FILE_BYTES} bytes a mesh file may have while it was read")
+        raise InputError(f"{where}: the file grew past the {MAX_FILE_BYTES} bytes a {what} may have while it was read")
     if not data:
         raise InputError(f"{where}: empty file (0 bytes)")
     return data

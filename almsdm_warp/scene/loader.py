@@ -216,24 +216,20 @@ def _tissue(table: dict, values: dict, where: str) -> TissueParams | Material:
 
 
 def _read_toml(p: Path, where: str) -> dict:
-    """The scene file's TOML document; InputError when it is missing, unreadable or not TOML."""
+    """The scene file's TOML document; InputError when it is missing, not a regular file, unreadable or not TOML."""
+    from ..mesh.io import read_bounded
+
     if not p.exists():
         raise InputError(f"{where}: no such scene file")
-    if p.is_dir():
-        raise InputError(f"{where}: is a directory, not a scene file")
+    data = read_bounded(p, where, what="scene file")
     try:
-        with open(p, "rb") as f:
-            return tomllib.load(f)
+        return tomllib.loads(data.decode("utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{where}: TOML syntax error: {exc}") from exc
     except RecursionError:  # the parser recurses once per level of nested arrays or tables
         raise InputError(f"{where}: arrays or tables nested too deeply (a scene file needs two levels)") from None
     except UnicodeDecodeError as exc:
         raise InputError(f"{where}: not a UTF-8 text file (TOML), byte {exc.start} is 0x{exc.object[exc.start]:02x}") from exc
-    except PermissionError as exc:
-        raise InputError(f"{where}: permission denied, cannot read the scene file") from exc
-    except OSError as exc:
-        raise InputError(f"{where}: cannot read the scene file: {exc.strerror or exc}") from exc
 
 
 def _section_values(data: dict, where: str) -> dict[str, dict[str, object]]:
