@@ -101,6 +101,16 @@ lose their meaning)."""
 _LIMIT_WORDS = {"duration_s": "duration [s]", "lesion_factor": "lesion stiffness factor", "region_steps": "region-steps"}
 
 
+def check_fields(params, keys: dict) -> None:
+    """Check every float field of a parameter dataclass against the rule its scene-file key gives
+    (`keys`: key -> (attribute, type, file units per SI unit, rule)); InputError naming the first bad one."""
+    from dataclasses import fields
+
+    rules = {attr: rule for attr, _kind, _factor, rule in keys.values()}
+    for f in fields(params):
+        check_value(getattr(params, f.name), float, rules[f.name], f"{type(params).__name__}.{f.name}")
+
+
 def check_limit(value, key: str, flag: str) -> None:
     """InputError('<flag> <value> is more than the largest <key> (<limit>)') past LIMITS[key]."""
     limit = LIMITS[key]

@@ -8,9 +8,9 @@ progress, the evaluation's hold) counts its steps and its ramp through PressSche
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-from ..checks import check_value
+from ..checks import check_fields
 
 PRESS_KEYS: dict[str, tuple[str, type, float, str]] = {
     "depth_mm": ("depth", float, 1000.0, "> 0"),
@@ -19,8 +19,6 @@ PRESS_KEYS: dict[str, tuple[str, type, float, str]] = {
     "settle_s": ("settle", float, 1.0, "> 0"),
 }
 """The [press] section of a scene file: key -> (attribute, type, file units per SI unit, rule)."""
-
-_RULE = {attr: rule for attr, _kind, _factor, rule in PRESS_KEYS.values()}
 
 
 @dataclass(frozen=True)
@@ -37,8 +35,7 @@ class PressParams:
     """Settle window [s] after release; the recovery error is measured at its end."""
 
     def __post_init__(self):
-        for f in fields(self):
-            check_value(getattr(self, f.name), float, _RULE[f.name], f"PressParams.{f.name}")
+        check_fields(self, PRESS_KEYS)
 
 
 def check_press(**values) -> None:

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-from ..checks import check_value
+from ..checks import check_fields
 
 TISSUE_KEYS: dict[str, tuple[str, type, float, str]] = {
     "density_kg_per_m3": ("density", float, 1.0, "> 0"),
@@ -15,8 +15,6 @@ TISSUE_KEYS: dict[str, tuple[str, type, float, str]] = {
     "anchor_damping_Ns_per_m": ("anchor_damping", float, 1.0, ">= 0"),
 }
 """The [tissue] section of a scene file: key -> (attribute, type, file units per SI unit, rule)."""
-
-_RULE = {attr: rule for attr, _kind, _factor, rule in TISSUE_KEYS.values()}
 
 
 @dataclass(frozen=True)
@@ -43,5 +41,4 @@ class TissueParams:
     """d_i [N s/m]: damping of each vertex's velocity, eq. (3)."""
 
     def __post_init__(self):
-        for f in fields(self):
-            check_value(getattr(self, f.name), float, _RULE[f.name], f"TissueParams.{f.name}")
+        check_fields(self, TISSUE_KEYS)
