@@ -174,19 +174,35 @@ def test_usd_on_a_full_disk_is_one_line(full_disk, suffix):
 
 
 # -- signals, in a real process ----------------------------------------------------------------
-def _start(tmp_path, *argv):
+READY = "ready: main() is about to run"
+"""Written to stderr by the process _start(..., ready=True) runs, just before main(): a signal sent
+after it reaches the command line's own handling, not the interpreter's start (which a loaded
+machine can stretch past any fixed delay, and which no code of ours can handle)."""
+
+
+def _start(tmp_path, *argv, ready=False):
     import subprocess
     import sys
 
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
-    return subprocess.Popen([sys.executable, "-m", "almsdm_warp.cli.main", *map(str, argv)], cwd=tmp_path, env=env,
+    if ready:
+        code = (f"import sys; from almsdm_warp.cli.main import main; print({READY!r}, file=sys.stderr, flush=True); "
+                "sys.exit(main(sys.argv[1:]))")
+        command = [sys.executable, "-c", code]
+    else:
+        command = [sys.executable, "-m", "almsdm_warp.cli.main"]
+    return subprocess.Popen([*command, *map(str, argv)], cwd=tmp_path, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def _signalled(tmp_path, argv, signum, wait):
-    """Start the command, call wait(proc), send `signum`: (exit code, stderr)."""
-    proc = _start(tmp_path, *argv)
+def _signalled(tmp_path, argv, signum, wait, ready=False):
+    """Start the command, call wait(proc), send `signum`: (exit code, stderr). ready: wait for the
+    READY line first (and leave it out of the stderr returned)."""
+    proc = _start(tmp_path, *argv, ready=ready)
     try:
+        if ready:
+            line = proc.stderr.readline()
+            assert line.strip() == READY, line
         wait(proc)
         proc.send_signal(signum)
         _, err = proc.communicate(timeout=60)
@@ -238,14 +254,15 @@ def test_sigterm_during_a_usd_recording(tmp_path):
 @pytest.mark.parametrize("after_s", [0.2, 0.8])
 def test_ctrl_c_in_the_first_second(tmp_path, after_s):
     """SIGINT while the program starts (imports, Warp's start; trimesh's imports swallowed it and
-    failed later): one line, exit 130, no traceback, nothing written."""
+    failed later), timed from the moment main() runs: one line, exit 130, no traceback, nothing written."""
     import signal
     import time
 
     def check(k):
         folder = tmp_path / str(k)
         folder.mkdir()
-        code, err = _signalled(folder, ["palpate", "--json", "out.json"], signal.SIGINT, lambda proc: time.sleep(after_s))
+        code, err = _signalled(folder, ["palpate", "--json", "out.json"], signal.SIGINT, lambda proc: time.sleep(after_s),
+                               ready=True)
         assert code == 130, err
         assert err.strip().splitlines() == ["almsdm: interrupted"], err
         assert list(folder.iterdir()) == []
