@@ -30,6 +30,9 @@ from almsdm_warp.protocol.palpation import Palpation
 from almsdm_warp.tissue.material import Material
 from almsdm_warp.tissue.params import TissueParams
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from spring_vs_fem import pole_icosphere  # noqa: E402  (a script beside this one)
+
 SURFACE = Material(10e3, 0.45, 1000.0, thickness=2e-3, foundation=1e6, damping_ratio=1.0)
 """The icosphere's and stomach's tissue: E 10 kPa, nu 0.45, t 2 mm, kappa 1 kPa/mm, each damper critical."""
 SOLID = Material(10e3, 0.45, 1000.0, rayleigh_beta=0.01)
@@ -39,15 +42,9 @@ STEADY = 1e-3
 
 
 def pole_icosphere_mesh(radius_mm: float, subdivisions: int) -> TissueMesh:
-    """Icosphere turned so that one of the icosahedron's 12 vertices (kept by every subdivision) is
-    the top pole: the press starts at the same point at every level."""
-    vertices, triangles = primitives.icosphere_arrays(radius_mm, subdivisions)
-    a = vertices[0] / np.linalg.norm(vertices[0])
-    z = np.array([0.0, 0.0, 1.0])
-    v, c = np.cross(a, z), float(a @ z)
-    vx = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    rotation = np.eye(3) + vx + vx @ vx / (1.0 + c)  # Rodrigues: a onto z
-    return TissueMesh.from_arrays(vertices @ rotation.T * 1e3, triangles=triangles, scale=1.0)
+    """The icosphere with a vertex kept by every subdivision on the top pole, as a TissueMesh."""
+    vertices, triangles = pole_icosphere(radius_mm, subdivisions)
+    return TissueMesh.from_arrays(vertices * 1e3, triangles=triangles, scale=1.0)
 
 
 def hold_force(mesh, tissue, vertex, depth, *, rings="global", probe_radius=0.0, fixed_below=None, dt=1e-3,
