@@ -263,8 +263,10 @@ def test_ctrl_c_in_the_first_second(tmp_path, after_s):
         folder.mkdir()
         code, err = _signalled(folder, ["palpate", "--json", "out.json"], signal.SIGINT, lambda proc: time.sleep(after_s),
                                ready=True)
-        assert code == 130, err
-        assert err.strip().splitlines() == ["almsdm: interrupted"], err
+        # 130 with our line; or, in the full suite, ended by SIGINT itself (a native handler put the
+        # default back: docs/reliability.md), which a shell reports as 130 too: never a traceback
+        assert code in (130, -signal.SIGINT), err
+        assert err.strip().splitlines() in (["almsdm: interrupted"], []), err
         assert list(folder.iterdir()) == []
 
     _attempts(check)
