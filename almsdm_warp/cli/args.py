@@ -128,13 +128,6 @@ def quiet_warp():
     init_warp()
 
 
-def press_steps(dt, ramp, hold, settle) -> int:
-    """Steps of one press, counted as Palpation.press counts them (for progress bars only)."""
-    from ..protocol.schedule import PressSchedule
-
-    return PressSchedule.from_times(dt, ramp, hold, settle).total
-
-
 def finite(value):
     """A float for JSON, or None where it is not finite (JSON has no inf or nan)."""
     value = float(value)

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..checks import check_protocol, check_ring_count
 from ..errors import InputError
+from ..protocol.schedule import PressSchedule
 from ..solvers import INTEGRATORS
 from .args import (
     AUTO_TOL_MM,
@@ -23,7 +24,6 @@ from .args import (
     mesh_json,
     number_arg,
     path_arg,
-    press_steps,
     print_notes,
     probe_position,
     quiet_warp,
@@ -259,10 +259,10 @@ def _press(args, run: _Run, pal) -> list:
     from .record import Recording
 
     dt, ramp, hold, settle = run.dt, run.ramp, run.hold, run.settle
-    per_press = press_steps(dt, ramp, hold, settle)
+    per_press = PressSchedule.from_times(dt, ramp, hold, settle).total
     presses = []
     original_step = pal.step
-    deepest = press_steps(dt, ramp, hold, 0) - 1  # the end of the first hold
+    deepest = PressSchedule.from_times(dt, ramp, hold).release_step  # the end of the first hold
     label = f"{run.mesh.name}, {run.rings} {'rings' if pal.region is not None else 'model'}, {run.depth * 1e3:g} mm press"
     recording = Recording(args, pal, args.presses, per_press, deepest, label)
     with recording, Progress(args.presses * per_press, enabled=args.progress) as bar:

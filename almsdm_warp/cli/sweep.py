@@ -12,7 +12,7 @@ import numpy as np
 from ..checks import LIMITS, check_limit, check_protocol, check_region_steps, check_ring_count, substeps_for
 from ..errors import InputError
 from ..solvers import INTEGRATORS
-from .args import (auto_tol, add_tissue_args, count_arg, get_device, number_arg, press_steps, print_notes, quiet_warp, rings_arg,
+from .args import (auto_tol, add_tissue_args, count_arg, get_device, number_arg, print_notes, quiet_warp, rings_arg,
                    scene_with_tissue_args)
 
 
@@ -75,7 +75,9 @@ def cmd_sweep(args) -> int:
     devices = _devices(args.device)
     plan, scene, rings_text = _plan(args, devices)
     parts, todo, left = _resume(out, plan)
-    steps = press_steps(plan.dt, plan.ramp, plan.hold, plan.settle)
+    from ..batch.sweep import press_steps
+
+    steps = press_steps(plan)
     t0 = time.perf_counter()
     try:
         with Progress(left * steps, enabled=args.progress, label="sweep") as bar:
