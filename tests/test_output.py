@@ -181,6 +181,7 @@ machine can stretch past any fixed delay, and which no code of ours can handle).
 
 
 def _start(tmp_path, *argv, ready=False):
+    import signal
     import subprocess
     import sys
 
@@ -191,8 +192,12 @@ def _start(tmp_path, *argv, ready=False):
         command = [sys.executable, "-c", code]
     else:
         command = [sys.executable, "-m", "almsdm_warp.cli.main"]
+    # SIGINT at its default, as a terminal's foreground process has it: a suite started as a
+    # background job of a non-interactive shell ignores SIGINT, and its children would inherit that
+    # (the command line rightly keeps an ignored SIGINT ignored, as under nohup)
     return subprocess.Popen([*command, *map(str, argv)], cwd=tmp_path, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def _signalled(tmp_path, argv, signum, wait, ready=False):
