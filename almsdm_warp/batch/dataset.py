@@ -351,9 +351,9 @@ class DatasetFolder:
 
     def open(self) -> list[DatasetItem]:
         """Create the folder or check that it holds this spec's dataset; returns the items still to press."""
-        check_regular(self.manifest)
         if self.dir.exists() and not self.dir.is_dir():
             raise InputError(f"{self.dir}: is a file, not a dataset folder")
+        check_regular(self.manifest)
         if self.dir.exists() and any(self.dir.iterdir()):
             self._check_manifest()
         (self.dir / "items").mkdir(parents=True, exist_ok=True)

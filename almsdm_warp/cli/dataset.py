@@ -33,6 +33,9 @@ def cmd_dataset(args, devices: list[str]) -> int:
     spec = ds.load_spec(args.dataset)
     if args.chunk:
         spec.chunk = args.chunk
+    for scene in spec.scenes:
+        if scene.lesion is not None:
+            print(f"note: the scene {scene.name!r}'s own [lesion] is left out: the dataset's lesion grid decides")
     items = ds.plan_items(spec, cuda=devices[0] != "cpu")
     folder = ds.DatasetFolder(args.out, items, spec)
     todo = folder.open()
