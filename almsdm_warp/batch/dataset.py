@@ -129,7 +129,7 @@ def load_spec(path) -> DatasetSpec:
     spec.integrator = ds.get("integrator", "explicit")
     if spec.integrator not in INTEGRATORS:
         raise InputError(f"{where}: [dataset] integrator {spec.integrator!r} is not one of {', '.join(INTEGRATORS)}")
-    spec.dt = _number(ds, "dt_ms", where, "[dataset]", 1.0, "> 0") * 1e-3
+    spec.dt = _number(ds, "dt_ms", where, "[dataset]", 1.0, "> 0") / 1000.0
     spec.maps = ds.get("maps", "scene")
     if spec.maps not in MAPS:
         raise InputError(f"{where}: [dataset] maps {spec.maps!r} is not one of {', '.join(map(repr, MAPS))}")
@@ -141,7 +141,7 @@ def load_spec(path) -> DatasetSpec:
     spec.chunk = _int(ds, "chunk", where, "[dataset]", None, required=False)
     press = data.get("press", {})
     spec.press = {k.rsplit("_", 1)[0]: _number(press, k, where, "[press]", None, "> 0" if k == "depth_mm" else ">= 0")
-                  * (1e-3 if k == "depth_mm" else 1.0) for k in press}
+                  / (1000.0 if k == "depth_mm" else 1.0) for k in press}
     _lesion_grid(spec, lesions, where)
     return spec
 
@@ -174,10 +174,10 @@ def _lesion_grid(spec: DatasetSpec, lesions: dict, where: str) -> None:
             check_value(v, float, "> 0", f"{where}: [lesions] {key} value")
     for f in factors:
         check_limit(f, "lesion_factor", f"{where}: [lesions] stiffness_factors value")
-    spec.radii = tuple(float(r) * 1e-3 for r in radii)
+    spec.radii = tuple(float(r) / 1000.0 for r in radii)  # mm -> m, correctly rounded
     spec.factors = tuple(float(f) for f in factors)
     spec.count = _int(lesions, "count", where, "[lesions]", 0, rule=">= 0")
-    spec.depth = _number(lesions, "depth_mm", where, "[lesions]", 10.0, ">= 0") * 1e-3
+    spec.depth = _number(lesions, "depth_mm", where, "[lesions]", 10.0, ">= 0") / 1000.0
     if "centers_mm" in lesions:
         spec.centers = _centers(lesions["centers_mm"], spec.scenes, where)
     has_centres = spec.count > 0 or bool(spec.centers)
@@ -202,7 +202,7 @@ def _centers(value, scenes, where: str) -> dict:
             for r in rows)
         if not ok:
             raise InputError(f"{where}: [lesions] centers_mm must be a list of [x, y, z] in mm, got {rows!r}")
-        out[name] = np.asarray(rows, dtype=np.float64) * 1e-3
+        out[name] = np.asarray(rows, dtype=np.float64) / 1000.0
     return out
 
 
@@ -219,10 +219,7 @@ def _int(table, key, where, section, default, required=True, rule=">= 1"):
         if required and default is None:
             raise InputError(f"{where}: {section} needs {key}")
         return default
-    value = check_value(table[key], int, rule, f"{where}: {section} {key}")
-    if rule == ">= 0" and value < 0:
-        raise InputError(f"{where}: {section} {key} must be >= 0, got {value}")
-    return value
+    return check_value(table[key], int, rule, f"{where}: {section} {key}")
 
 
 # -- the items ---------------------------------------------------------------------------------
