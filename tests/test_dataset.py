@@ -150,3 +150,12 @@ def test_a_bad_spec_exits_2_with_one_line(tmp_path, capsys, edit, words):
     assert words in captured.err and len(captured.err.strip().splitlines()) == 1
     assert "Traceback" not in captured.err
     assert not (tmp_path / "out").exists()
+
+
+def test_sweep_options_the_spec_decides_are_refused_beside_it(tmp_path, capsys):
+    spec = spec_file(tmp_path)
+    assert main(["sweep", "stomach", "--dataset", str(spec), "--out", str(tmp_path / "out")]) == 2
+    assert main(["sweep", "--dataset", str(spec), "--depth-mm", "5", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "SCENE is decided by the dataset spec" in err[0] and "--depth-mm is decided" in err[1]
+    assert not (tmp_path / "out").exists()
