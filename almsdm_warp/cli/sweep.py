@@ -12,6 +12,7 @@ import numpy as np
 from ..checks import LIMITS, check_limit, check_protocol, check_region_steps, check_ring_count, substeps_for
 from ..errors import InputError
 from ..solvers import INTEGRATORS
+from .dataset import add_dataset_arg, cmd_dataset
 from .args import (auto_tol, add_tissue_args, count_arg, get_device, number_arg, print_notes, quiet_warp, rings_arg,
                    scene_with_tissue_args)
 
@@ -44,6 +45,7 @@ def add_parser(sub) -> None:
     p.add_argument("--max-region-steps", type=number_arg("> 0"), default=LIMITS["region_steps"], metavar="N", help=f"refuse a sweep that would take more region-steps (points x frames x substeps) than N (default {LIMITS['region_steps']:g})")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
     add_tissue_args(p, supports=False)
+    add_dataset_arg(p)
     p.set_defaults(func=cmd_sweep)
 
 
@@ -67,6 +69,8 @@ def cmd_sweep(args) -> int:
     from ..export.writers import check_output, write_output
     from ..progress import Progress
 
+    if args.dataset:  # several scenes and a lesion grid: cli/dataset.py
+        return cmd_dataset(args, _devices(args.device))
     out = Path(args.out)
     check_output(out, "table", "--out")
     if args.png:

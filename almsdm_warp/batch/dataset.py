@@ -1,0 +1,492 @@
+"""Datasets: sweeps over several organs and a grid of lesions in one run, gathered into one table.
+
+A dataset spec (a TOML file, docs/datasets.md) lists scenes or meshes, the points pressed on each,
+the press, and a lesion grid: lesion centres (farthest-point-spread surface vertices of each organ,
+moved a depth inward along the surface normal, or listed), radii and stiffness factors, every
+combination, plus a baseline without a lesion. Each (scene, lesion) pair is an *item*: a sweep of
+the same points of its scene (a SweepPlan pressed by run_local, resumable from its parts as a
+sweep is), written as its own table. The output folder holds::
+
+    dataset.json              the spec's key and each finished item's key and checksum
+    items/<scene>_L<id>.npz   each item's sweep table (batch.sweep.COLUMNS)
+    maps/<scene>.png          force maps (each scene's baseline, or every item)
+    table.npz                 the dataset: one array per column and a "schema" entry (JSON)
+    table.csv                 the same table as text (when the spec asks for it)
+
+A rerun with the same spec skips finished items and resumes the one in progress; a rerun with
+another spec into the same folder is refused. Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..checks import AUTO, check_limit, check_protocol, check_value, describe
+from ..errors import InputError
+from ..export.output import atomic_write, check_regular
+from ..solvers import INTEGRATORS
+from .sweep import COLUMNS, Parts, SweepPlan, file_sha256, read_table, run_local, sample_points, write_table
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+FORMAT = "almsdm dataset 1"
+"""The manifest's format tag: a folder of another format is not resumed into."""
+LESION_COLUMNS = ("scene", "lesion_id", "lesion_x_mm", "lesion_y_mm", "lesion_z_mm", "lesion_radius_mm", "lesion_factor", "point")
+DATASET_COLUMNS = LESION_COLUMNS + COLUMNS
+"""The dataset table's columns: the item's scene and lesion, the point's index in its scene, then a sweep's."""
+SCHEMA = {
+    "scene": ("str", "", "the scene's name (its file's stem; a repeated name gets _2, _3, ...)"),
+    "lesion_id": ("int64", "", "0: the baseline (no lesion); 1.. the scene's lesions in grid order"),
+    "lesion_x_mm": ("float64", "mm", "lesion centre x (NaN for the baseline)"),
+    "lesion_y_mm": ("float64", "mm", "lesion centre y (NaN for the baseline)"),
+    "lesion_z_mm": ("float64", "mm", "lesion centre z (NaN for the baseline)"),
+    "lesion_radius_mm": ("float64", "mm", "lesion radius (0 for the baseline)"),
+    "lesion_factor": ("float64", "", "stiffness factor inside the lesion (1 for the baseline)"),
+    "point": ("int64", "", "index of the pressed point in its scene (the same points for every lesion)"),
+    "x_mm": ("float64", "mm", "contact point x"),
+    "y_mm": ("float64", "mm", "contact point y"),
+    "z_mm": ("float64", "mm", "contact point z"),
+    "vertex": ("int64", "", "contact vertex (the mesh vertex nearest the point)"),
+    "peak_force_N": ("float64", "N", "peak feedback force of the press"),
+    "stiffness_N_per_mm": ("float64", "N/mm", "force at full depth / depth"),
+    "recovery_error_mm": ("float64", "mm", "contact vertex's distance from rest at the end of the settle window"),
+    "rings": ("int64", "", "rings of the local region"),
+}
+"""Column -> (dtype, unit, meaning): written into table.npz as its "schema" entry."""
+MAPS = ("scene", "items", "none")
+SPEC_KEYS = {
+    "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "chunk"),
+    "press": ("depth_mm", "ramp_s", "hold_s", "settle_s"),
+    "lesions": ("count", "depth_mm", "centers_mm", "radii_mm", "stiffness_factors"),
+}
+
+
+# -- the spec ----------------------------------------------------------------------------------
+@dataclass
+class DatasetSpec:
+    """A dataset spec's values in SI units (load_spec reads one from TOML)."""
+
+    scenes: list
+    """The scenes (scene.loader.Scene), in the spec's order."""
+    points: int
+    """Points pressed on each scene (the same points for each of its lesions)."""
+    radii: tuple = ()
+    """Lesion radii [m]."""
+    factors: tuple = (5.0,)
+    """Lesion stiffness factors [-]."""
+    count: int = 0
+    """Lesion centres per scene, spread over its surface (with `depth`); 0 when `centers` are given."""
+    depth: float = 10e-3
+    """How far below the surface [m] a spread centre lies, along the inward normal."""
+    centers: dict = field(default_factory=dict)
+    """Scene name -> listed lesion centres [m], shape [n, 3] (instead of spread ones)."""
+    rings: int | None = None
+    """Rings of every region (None: each scene's)."""
+    integrator: str = "explicit"
+    dt: float = 1e-3
+    """Frame [s]."""
+    press: dict = field(default_factory=dict)
+    """Overrides of every scene's press: depth [m], ramp, hold, settle [s]."""
+    baseline: bool = True
+    maps: str = "scene"
+    csv: bool = False
+    chunk: int | None = None
+    """Points per resumable part (None: 64 on the CPU, an item's points on a GPU)."""
+    source: dict = field(default_factory=dict)
+    """The spec as read (interface units), kept in the manifest to say what changed on a refused resume."""
+
+
+def load_spec(path) -> DatasetSpec:
+    """Read and check a dataset spec (TOML); InputError naming the file and key for anything wrong."""
+    from ..mesh.io import read_bounded
+
+    where = str(path)
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{where}: no such dataset spec")
+    try:
+        data = tomllib.loads(read_bounded(p, where, what="dataset spec").decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{where}: not a TOML dataset spec: {exc}") from exc
+    for section, table in data.items():
+        if section not in SPEC_KEYS or not isinstance(table, dict):
+            raise InputError(f"{where}: unknown section {section!r}; allowed: {', '.join(f'[{s}]' for s in SPEC_KEYS)}")
+        for key in table:
+            if key not in SPEC_KEYS[section]:
+                raise InputError(f"{where}: unknown key {key!r} in [{section}]; allowed: {', '.join(SPEC_KEYS[section])}")
+    ds, lesions = data.get("dataset", {}), data.get("lesions", {})
+    spec = DatasetSpec(scenes=_scenes(ds, p, where), points=_int(ds, "points", where, "[dataset]", None), source=data)
+    spec.rings = _int(ds, "rings", where, "[dataset]", None, required=False)
+    spec.integrator = ds.get("integrator", "explicit")
+    if spec.integrator not in INTEGRATORS:
+        raise InputError(f"{where}: [dataset] integrator {spec.integrator!r} is not one of {', '.join(INTEGRATORS)}")
+    spec.dt = _number(ds, "dt_ms", where, "[dataset]", 1.0, "> 0") / 1000.0
+    spec.maps = ds.get("maps", "scene")
+    if spec.maps not in MAPS:
+        raise InputError(f"{where}: [dataset] maps {spec.maps!r} is not one of {', '.join(map(repr, MAPS))}")
+    for key in ("baseline", "csv"):
+        value = ds.get(key, key == "baseline")
+        if not isinstance(value, bool):
+            raise InputError(f"{where}: [dataset] {key} must be true or false, got {describe(value)}")
+        setattr(spec, key, value)
+    spec.chunk = _int(ds, "chunk", where, "[dataset]", None, required=False)
+    press = data.get("press", {})
+    spec.press = {k.rsplit("_", 1)[0]: _number(press, k, where, "[press]", None, "> 0" if k == "depth_mm" else ">= 0")
+                  / (1000.0 if k == "depth_mm" else 1.0) for k in press}
+    _lesion_grid(spec, lesions, where)
+    return spec
+
+
+def _scenes(ds: dict, p: Path, where: str) -> list:
+    from ..scene.loader import resolve_scene_or_mesh
+
+    names = ds.get("scenes")
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) and n.strip() for n in names):
+        raise InputError(f"{where}: [dataset] scenes must be a non-empty list of scene files, scene names or meshes, "
+                         f"got {describe(names) if names is not None else 'nothing'}")
+    scale = _number(ds, "scale_mm", where, "[dataset]", 1.0, "> 0")
+    scenes = []
+    for name in names:
+        local = p.parent / name  # a path is relative to the spec; a bare name may be a shipped scene
+        try:
+            scenes.append(resolve_scene_or_mesh(str(local) if local.exists() else name, scale_mm=scale))
+        except InputError as exc:
+            raise InputError(f"{where}: [dataset] scenes: {exc}") from None
+    return scenes
+
+
+def _lesion_grid(spec: DatasetSpec, lesions: dict, where: str) -> None:
+    radii = lesions.get("radii_mm", [])
+    factors = lesions.get("stiffness_factors", [5.0])
+    for key, values in (("radii_mm", radii), ("stiffness_factors", factors)):
+        if not isinstance(values, list):
+            raise InputError(f"{where}: [lesions] {key} must be a list of numbers, got {describe(values)}")
+        for v in values:
+            check_value(v, float, "> 0", f"{where}: [lesions] {key} value")
+    for f in factors:
+        check_limit(f, "lesion_factor", f"{where}: [lesions] stiffness_factors value")
+    spec.radii = tuple(float(r) / 1000.0 for r in radii)  # mm -> m, correctly rounded
+    spec.factors = tuple(float(f) for f in factors)
+    spec.count = _int(lesions, "count", where, "[lesions]", 0, rule=">= 0")
+    spec.depth = _number(lesions, "depth_mm", where, "[lesions]", 10.0, ">= 0") / 1000.0
+    if "centers_mm" in lesions:
+        spec.centers = _centers(lesions["centers_mm"], spec.scenes, where)
+    has_centres = spec.count > 0 or bool(spec.centers)
+    if spec.count and spec.centers:
+        raise InputError(f"{where}: [lesions] give count (centres spread over each organ) or centers_mm, not both")
+    if has_centres != bool(spec.radii):
+        raise InputError(f"{where}: [lesions] needs both centres (count or centers_mm) and radii_mm, or neither")
+    if not spec.baseline and not has_centres:
+        raise InputError(f"{where}: the dataset has no items: no lesions and [dataset] baseline = false")
+
+
+def _centers(value, scenes, where: str) -> dict:
+    """centers_mm: a list of [x, y, z] for every scene, or a table of such lists by scene name."""
+    names = [s.name for s in scenes]
+    table = value if isinstance(value, dict) else {n: value for n in names}
+    out = {}
+    for name, rows in table.items():
+        if name not in names:
+            raise InputError(f"{where}: [lesions] centers_mm names scene {name!r}, not in [dataset] scenes ({', '.join(names)})")
+        ok = isinstance(rows, list) and rows and all(
+            isinstance(r, list) and len(r) == 3 and all(isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in r)
+            for r in rows)
+        if not ok:
+            raise InputError(f"{where}: [lesions] centers_mm must be a list of [x, y, z] in mm, got {rows!r}")
+        out[name] = np.asarray(rows, dtype=np.float64) / 1000.0
+    return out
+
+
+def _number(table, key, where, section, default, rule):
+    if key not in table:
+        if default is None:
+            raise InputError(f"{where}: {section} needs {key}")
+        return float(default)
+    return check_value(table[key], float, rule, f"{where}: {section} {key}")
+
+
+def _int(table, key, where, section, default, required=True, rule=">= 1"):
+    if key not in table:
+        if required and default is None:
+            raise InputError(f"{where}: {section} needs {key}")
+        return default
+    return check_value(table[key], int, rule, f"{where}: {section} {key}")
+
+
+# -- the items ---------------------------------------------------------------------------------
+@dataclass
+class DatasetItem:
+    """One sweep of the dataset: a scene with one lesion (or none), its plan and its table's name."""
+
+    scene: str
+    lesion_id: int
+    lesion: object
+    """tissue.lesion.Lesion, or None for the baseline."""
+    plan: SweepPlan
+    scene_obj: object = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.scene}_L{self.lesion_id:03d}"
+
+    def key(self) -> str:
+        """What decides this item's numbers (the plan but its chunking, which only cuts the work)."""
+        h = hashlib.sha256(replace(self.plan, chunk=0).key().encode())
+        h.update(json.dumps([self.scene, self.lesion_id, None if self.lesion is None else self.lesion.as_dict()]).encode())
+        return h.hexdigest()[:16]
+
+    def columns(self, sweep: dict) -> dict:
+        """This item's rows of the dataset table from its sweep table."""
+        n = len(sweep["vertex"])
+        c = (np.nan, np.nan, np.nan) if self.lesion is None else np.asarray(self.lesion.center) * 1e3
+        out = {"scene": np.full(n, self.scene), "lesion_id": np.full(n, self.lesion_id, dtype=np.int64),
+               "lesion_x_mm": np.full(n, c[0]), "lesion_y_mm": np.full(n, c[1]), "lesion_z_mm": np.full(n, c[2]),
+               "lesion_radius_mm": np.full(n, 0.0 if self.lesion is None else self.lesion.radius * 1e3),
+               "lesion_factor": np.full(n, 1.0 if self.lesion is None else self.lesion.stiffness_factor),
+               "point": np.arange(n, dtype=np.int64)}
+        out.update({k: sweep[k] for k in COLUMNS})
+        return out
+
+
+def lesion_centers(mesh, count: int, depth: float) -> np.ndarray:
+    """`count` lesion centres [m]: surface vertices spread by farthest-point sampling (as a sweep's
+    points are), each moved `depth` [m] inward along its outward rest normal."""
+    from ..sim.model import vertex_normals
+
+    points, vertices = sample_points(mesh, count)
+    return points - depth * vertex_normals(mesh.vertices, mesh.triangles)[vertices]
+
+
+def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
+    """Every item of the spec, in order: per scene its baseline, then each centre x radius x factor."""
+    from ..tissue.lesion import Lesion
+
+    items, seen = [], {}
+    for scene in spec.scenes:
+        seen[scene.name] = seen.get(scene.name, 0) + 1
+        name = scene.name if seen[scene.name] == 1 else f"{scene.name}_{seen[scene.name]}"
+        name = name.replace(",", "_")  # a CSV cell
+        mesh, base = _scene_plan(spec, scene, name, cuda)
+        if spec.centers:
+            centers = spec.centers.get(scene.name, np.zeros((0, 3)))
+        else:
+            centers = lesion_centers(mesh, spec.count, spec.depth) if spec.count else np.zeros((0, 3))
+        if spec.baseline:
+            items.append(DatasetItem(name, 0, None, base, scene))
+        grid = [(c, r, f) for c in centers for r in spec.radii for f in spec.factors]
+        for k, (c, r, f) in enumerate(grid, start=1):
+            lesion = Lesion(tuple(float(x) for x in c), r, f)
+            edge_scale, anchor_scale = lesion.scales(mesh)
+            if not (edge_scale != 1.0).any() and not (anchor_scale != 1.0).any():
+                raise InputError(f"lesion {k} of {name}: radius {r * 1e3:g} mm around {np.round(c * 1e3, 2).tolist()} mm "
+                                 f"holds no vertex and no spring of the mesh (a lesion there changes nothing): "
+                                 f"give a larger radius or a smaller [lesions] depth_mm")
+            items.append(DatasetItem(name, k, lesion, replace(base, edge_scale=edge_scale, anchor_scale=anchor_scale), scene))
+    return items
+
+
+def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
+    """The scene's mesh and its baseline plan (no lesion), after the checks a sweep makes."""
+    from ..checks import check_ring_count
+
+    if scene.fixed_below is not None:
+        raise InputError(f"scene {name!r} has supports ([support] fixed_below_mm), which the batched sweep does not hold yet")
+    rings = spec.rings if spec.rings is not None else scene.rings
+    if rings == AUTO:
+        raise InputError(f"scene {name!r} has rings = 'auto'; a dataset presses a fixed ring count: give [dataset] rings")
+    mesh = scene.load_mesh()
+    check_ring_count(rings, mesh.vertex_count, f"rings of {name}")
+    press = {k: spec.press.get(k, getattr(scene.press, k)) for k in ("depth", "ramp", "hold", "settle")}
+    check_protocol(press["depth"], spec.dt, press["ramp"], press["hold"], press["settle"], 1, float(np.ptp(mesh.vertices, axis=0).max()))
+    check_limit(spec.points, "points", "[dataset] points")
+    points, vertices = sample_points(mesh, spec.points)
+    chunk = spec.chunk or (len(vertices) if cuda else 64)
+    plan = SweepPlan(mesh, scene.tissue, None, None, int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
+                     press["settle"], points, vertices, chunk, spec.integrator)
+    return mesh, plan
+
+
+def spec_key(items: list[DatasetItem]) -> str:
+    """The dataset's key: every item's, in order (the maps and the CSV copy do not change a number)."""
+    h = hashlib.sha256(FORMAT.encode())
+    for item in items:
+        h.update(item.key().encode())
+    return h.hexdigest()[:16]
+
+
+# -- the output folder -------------------------------------------------------------------------
+class DatasetFolder:
+    """A dataset's output folder: its manifest (dataset.json), the items' tables, maps and the table.
+
+    The manifest holds the spec's key and, for each finished item, its key and its table's SHA-256
+    (rewritten atomically after each item). An item counts as done only when its table's bytes
+    match: one damaged on disk is pressed again.
+    """
+
+    def __init__(self, out, items: list[DatasetItem], spec: DatasetSpec):
+        self.dir = Path(out)
+        self.items = items
+        self.spec = spec
+        self.key = spec_key(items)
+        self.done: dict[str, dict] = {}
+
+    @property
+    def manifest(self) -> Path:
+        return self.dir / "dataset.json"
+
+    def item_path(self, item: DatasetItem) -> Path:
+        return self.dir / "items" / f"{item.name}.npz"
+
+    def open(self) -> list[DatasetItem]:
+        """Create the folder or check that it holds this spec's dataset; returns the items still to press."""
+        if self.dir.exists() and not self.dir.is_dir():
+            raise InputError(f"{self.dir}: is a file, not a dataset folder")
+        check_regular(self.manifest)
+        if self.dir.exists() and any(self.dir.iterdir()):
+            self._check_manifest()
+        (self.dir / "items").mkdir(parents=True, exist_ok=True)
+        self._write_manifest()
+        return [item for item in self.items if not self._finished(item)]
+
+    def _check_manifest(self) -> None:
+        try:
+            data = json.loads(self.manifest.read_text())
+            found, fmt = data["key"], data["format"]
+            self.done = {str(k): dict(v) for k, v in data.get("items", {}).items()}
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            raise InputError(f"{self.dir}: not empty and not a dataset folder (no readable dataset.json): "
+                             f"give another --out") from None
+        if fmt != FORMAT or found != self.key:
+            changed = [k for k in sorted(set(data.get("spec", {})) | set(self.spec.source))
+                       if data.get("spec", {}).get(k) != self.spec.source.get(k)]
+            what = f" (changed: {', '.join(f'[{k}]' for k in changed)})" if changed else " (other meshes or scene files)"
+            raise InputError(f"{self.dir} holds a dataset of a different spec{what}: delete it, or give another --out")
+
+    def _finished(self, item: DatasetItem) -> bool:
+        entry = self.done.get(item.name)
+        path = self.item_path(item)
+        if entry is None or entry.get("key") != item.key() or not path.is_file():
+            return False
+        return entry.get("sha256") == file_sha256(path)
+
+    def _write_manifest(self) -> None:
+        data = {"format": FORMAT, "key": self.key, "spec": self.spec.source, "items": self.done}
+        atomic_write(self.manifest, lambda tmp: Path(tmp).write_text(json.dumps(data, indent=1, default=str) + "\n"))
+
+    def press(self, item: DatasetItem, devices: list[str], progress=None) -> None:
+        """Sweep one item (resuming its parts, as a sweep does), write its table, record it as done."""
+        path = self.item_path(item)
+        parts = Parts(path, item.plan)
+        done = set(parts.open())
+        run_local(item.plan, parts, [i for i in range(len(item.plan.chunks)) if i not in done], devices, progress)
+        write_table(path, parts.gather())
+        parts.remove()
+        self.done[item.name] = {"key": item.key(), "sha256": file_sha256(path), "scene": item.scene,
+                                "lesion": None if item.lesion is None else item.lesion.as_dict()}
+        self._write_manifest()
+
+    def gather(self) -> dict:
+        """The dataset table: every item's rows, in item order (InputError for a table damaged since)."""
+        parts = []
+        for item in self.items:
+            path = self.item_path(item)
+            if not self._finished(item):
+                raise InputError(f"{path}: missing or damaged; run the same command again to press it again")
+            parts.append(item.columns(read_table(path)))
+        return {c: np.concatenate([p[c] for p in parts]) for c in DATASET_COLUMNS}
+
+
+def press_dataset(folder: DatasetFolder, todo: list[DatasetItem], devices: list[str], progress=None, on_item=None) -> None:
+    """Press the items `todo` one after another (each a sweep on `devices`); on_item(item) after each."""
+    for item in todo:
+        folder.press(item, devices, progress)
+        if on_item is not None:
+            on_item(item)
+
+
+# -- the table ---------------------------------------------------------------------------------
+def write_dataset_table(path, columns: dict) -> Path:
+    """The dataset table, atomically: .npz (one array per column, plus "schema": JSON text of
+    column -> {dtype, unit, meaning}; np.load reads it without pickle) or .csv (a header row)."""
+    path = Path(path)
+    cols = {c: np.asarray(columns[c]).astype(SCHEMA[c][0] if SCHEMA[c][0] != "str" else str) for c in DATASET_COLUMNS}
+    if path.suffix.lower() == ".npz":
+        schema = {c: {"dtype": d, "unit": u, "meaning": m} for c, (d, u, m) in SCHEMA.items()}
+
+        def write(tmp):
+            with open(tmp, "wb") as f:
+                np.savez(f, schema=np.array(json.dumps({"format": FORMAT, "columns": schema})), **cols)
+
+    else:
+
+        def write(tmp):
+            with open(tmp, "w", encoding="utf-8") as f:
+                f.write(",".join(DATASET_COLUMNS) + "\n")
+                for row in zip(*(cols[c] for c in DATASET_COLUMNS)):
+                    f.write(",".join(_cell(c, x) for c, x in zip(DATASET_COLUMNS, row)) + "\n")
+
+    atomic_write(path, write)
+    return path
+
+
+def _cell(column: str, x) -> str:
+    kind = SCHEMA[column][0]
+    if kind == "str":
+        return str(x)  # scene names: file stems, commas replaced by plan_items
+    return str(int(x)) if kind == "int64" else repr(float(x))
+
+
+def read_dataset_table(path) -> dict:
+    """The columns of a dataset table (.npz or .csv) as NumPy arrays of the schema's dtypes."""
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        with np.load(path, allow_pickle=False) as z:
+            missing = [c for c in DATASET_COLUMNS if c not in z.files]
+            if missing:
+                raise InputError(f"{path}: not a dataset table (no column {missing[0]!r})")
+            return {c: z[c] for c in DATASET_COLUMNS}
+    with open(path, encoding="utf-8") as f:
+        header = f.readline().strip().split(",")
+        rows = [line.rstrip("\n").split(",") for line in f if line.strip()]
+    if tuple(header) != DATASET_COLUMNS:
+        raise InputError(f"{path}: not a dataset table (header {header})")
+    raw = list(zip(*rows)) if rows else [()] * len(header)
+    return {c: np.array(v, dtype=SCHEMA[c][0] if SCHEMA[c][0] != "str" else str) for c, v in zip(header, raw)}
+
+
+def draw_maps(folder: DatasetFolder) -> list[Path]:
+    """Force maps (export.sweep_png): each scene's baseline (or its first item), or every item."""
+    from ..export.sweep_png import plot_sweep
+
+    if folder.spec.maps == "none":
+        return []
+    (folder.dir / "maps").mkdir(exist_ok=True)
+    drawn, written = set(), []
+    for item in folder.items:
+        if folder.spec.maps == "scene" and item.scene in drawn:
+            continue
+        drawn.add(item.scene)
+        name = item.scene if folder.spec.maps == "scene" else item.name
+        what = "no lesion" if item.lesion is None else f"lesion {item.lesion_id} ({item.lesion.radius * 1e3:g} mm, x{item.lesion.stiffness_factor:g})"
+        title = f"{item.scene}, {what}: stiffness under a {item.plan.depth * 1e3:g} mm press"
+        written.append(plot_sweep(item.plan.mesh, read_table(folder.item_path(item)), folder.dir / "maps" / f"{name}.png", title=title))
+    return written
+
+
+def finish_dataset(folder: DatasetFolder) -> dict:
+    """Gather the items into table.npz (and table.csv when the spec asks), draw the maps; returns the table."""
+    columns = folder.gather()
+    write_dataset_table(folder.dir / "table.npz", columns)
+    if folder.spec.csv:
+        write_dataset_table(folder.dir / "table.csv", columns)
+    draw_maps(folder)
+    return columns

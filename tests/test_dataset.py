@@ -1,0 +1,161 @@
+"""`almsdm sweep --dataset`: several scenes and a lesion grid in one run, one table, resumable."""
+
+import json
+
+import numpy as np
+import pytest
+
+from almsdm_warp.batch import dataset as ds
+from almsdm_warp.batch import sweep as sw
+from almsdm_warp.cli.main import main
+from almsdm_warp.protocol.palpation import Palpation
+from almsdm_warp.scene.loader import resolve_scene_or_mesh
+from almsdm_warp.tissue.lesion import Lesion
+from conftest import SCENES
+
+POINTS = 6
+SPEC = f"""
+[dataset]
+scenes = ["stomach", "{SCENES / 'liver.vtu'}"]
+points = {POINTS}
+dt_ms = 0.25  # one explicit step a frame even in the 6x lesion (see the palpation check below)
+chunk = 3
+maps = "none"
+csv = true
+[press]
+ramp_s = 0.05
+hold_s = 0.05
+settle_s = 0.05
+[lesions]
+count = 1
+depth_mm = 5.0
+radii_mm = [15.0]
+stiffness_factors = [3.0, 6.0]
+"""
+
+
+def spec_file(folder, text=SPEC):
+    path = folder / "spec.toml"
+    path.write_text(text)
+    return path
+
+
+def run(spec, out):
+    return main(["sweep", "--dataset", str(spec), "--out", str(out)])
+
+
+@pytest.fixture(scope="module")
+def whole(tmp_path_factory):
+    """The dataset of SPEC in one run: (its folder, its table)."""
+    folder = tmp_path_factory.mktemp("whole")
+    assert run(spec_file(folder), folder / "out") == 0
+    return folder / "out", ds.read_dataset_table(folder / "out" / "table.npz")
+
+
+def test_one_table_of_every_item_and_point(whole):
+    out, table = whole
+    # 2 scenes x (baseline + 1 centre x 1 radius x 2 factors) items of POINTS points each
+    assert len(table["vertex"]) == 2 * 3 * POINTS
+    assert table["scene"].tolist() == ["stomach"] * 3 * POINTS + ["liver"] * 3 * POINTS
+    np.testing.assert_array_equal(table["lesion_id"], np.tile(np.repeat([0, 1, 2], POINTS), 2))
+    np.testing.assert_array_equal(table["point"], np.tile(np.arange(POINTS), 6))
+    base = table["lesion_id"] == 0
+    assert np.isnan(table["lesion_x_mm"][base]).all() and (table["lesion_factor"][base] == 1.0).all()
+    np.testing.assert_array_equal(np.unique(table["lesion_factor"][~base]), [3.0, 6.0])
+    # every item of a scene presses the same points; the CSV copy holds the same numbers
+    for scene in ("stomach", "liver"):
+        xyz = np.column_stack([table[c][table["scene"] == scene] for c in ("x_mm", "y_mm", "z_mm")]).reshape(3, POINTS, 3)
+        np.testing.assert_array_equal(xyz[0], xyz[1])
+        np.testing.assert_array_equal(xyz[0], xyz[2])
+    text = ds.read_dataset_table(out / "table.csv")
+    for c in ds.DATASET_COLUMNS:
+        np.testing.assert_array_equal(text[c], table[c])
+    with np.load(out / "table.npz", allow_pickle=False) as z:  # numpy alone reads it, schema included
+        schema = json.loads(z["schema"].item())["columns"]
+    assert list(schema) == list(ds.DATASET_COLUMNS) and schema["peak_force_N"]["unit"] == "N"
+    assert table["scene"].dtype.kind == "U" and table["vertex"].dtype == np.int64
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "items", "table.csv", "table.npz"]
+
+
+def test_lesion_stiffens_the_points_over_it_as_one_palpation_finds(whole):
+    _, table = whole
+    scene = resolve_scene_or_mesh("stomach")
+    mesh = scene.load_mesh()
+    rows = (table["scene"] == "stomach") & (table["lesion_id"] == 2)
+    centre = np.array([table[f"lesion_{a}_mm"][rows][0] for a in "xyz"]) * 1e-3
+    radius = table["lesion_radius_mm"][rows][0] * 1e-3
+    xyz = np.column_stack([table[c][rows] for c in ("x_mm", "y_mm", "z_mm")]) * 1e-3
+    over = np.flatnonzero(np.linalg.norm(xyz - centre, axis=1) < radius)
+    assert len(over) >= 1
+    k = over[0]
+    base = table["peak_force_N"][(table["scene"] == "stomach") & (table["lesion_id"] == 0)]
+    assert table["peak_force_N"][rows][k] > 2.0 * base[k]
+    # beyond the lesion and four rings of ~10 mm edges, the region holds no stiffened spring: the same force
+    far = np.linalg.norm(xyz - centre, axis=1) > radius + 0.06
+    assert far.sum() >= 1
+    np.testing.assert_array_equal(table["peak_force_N"][rows][far], base[far])
+    # the same press, one palpation at a time, on a model stiffened by the lesion the table names
+    lesion = Lesion(tuple(centre), radius, 6.0)
+    edge_scale, anchor_scale = lesion.scales(mesh)
+    palpation = Palpation(mesh, scene.tissue, rings=int(table["rings"][rows][k]), dt=0.25e-3, device="cpu",
+                          edge_scale=edge_scale, anchor_scale=anchor_scale)
+    palpation.touch(int(table["vertex"][rows][k]))
+    assert palpation.substeps == 1
+    result = palpation.press(depth=scene.press.depth, ramp=0.05, hold=0.05, settle=0.05)
+    np.testing.assert_allclose(table["peak_force_N"][rows][k], result.peak_force_N, rtol=1e-5)
+
+
+def test_interrupted_dataset_resumes_to_the_same_table(whole, tmp_path, monkeypatch, capsys):
+    out = tmp_path / "out"
+    real_write = sw.Parts.write
+    calls = []
+
+    def write_then_stop(self, i, columns):  # stop in the third item, after its first chunk
+        if len(calls) == 5:
+            raise KeyboardInterrupt
+        calls.append(i)
+        real_write(self, i, columns)
+
+    monkeypatch.setattr(sw.Parts, "write", write_then_stop)
+    assert run(spec_file(tmp_path), out) == 130
+    assert not (out / "table.npz").exists()
+    assert sorted(p.name for p in (out / "items").iterdir()) == ["stomach_L000.npz", "stomach_L001.npz", "stomach_L002.npz.parts"]
+    assert not list(out.rglob(".*.tmp"))  # nothing half-written
+    monkeypatch.setattr(sw.Parts, "write", real_write)
+    capsys.readouterr()
+    assert run(spec_file(tmp_path), out) == 0
+    assert "2 item(s) already in" in capsys.readouterr().out
+    assert (out / "table.csv").read_text() == (whole[0] / "table.csv").read_text()
+    assert not list((out / "items").glob("*.parts"))
+
+
+def test_a_changed_spec_is_not_resumed_into_the_old_folder(whole, tmp_path, capsys):
+    changed = spec_file(tmp_path, SPEC.replace("radii_mm = [15.0]", "radii_mm = [16.0]"))
+    before = sorted(p.name for p in (whole[0] / "items").iterdir())
+    assert run(changed, whole[0]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "different spec" in err and "[lesions]" in err and len(err.splitlines()) == 1
+    assert sorted(p.name for p in (whole[0] / "items").iterdir()) == before
+
+
+@pytest.mark.parametrize("edit, words", [
+    (("points = 6", "points = 6\npoint_count = 3"), "unknown key 'point_count' in [dataset]"),
+    (("radii_mm = [15.0]", "radii_mm = [-2.0]"), "radii_mm value must be > 0"),
+    (("radii_mm = [15.0]", "radii_mm = [1.0]"), "holds no vertex and no spring"),  # 1 mm at 5 mm under a shell
+    (("[lesions]", "[lesion]"), "unknown section 'lesion'"),
+])
+def test_a_bad_spec_exits_2_with_one_line(tmp_path, capsys, edit, words):
+    assert run(spec_file(tmp_path, SPEC.replace(*edit)), tmp_path / "out") == 2
+    captured = capsys.readouterr()
+    assert words in captured.err and len(captured.err.strip().splitlines()) == 1
+    assert "Traceback" not in captured.err
+    assert not (tmp_path / "out").exists()
+
+
+def test_sweep_options_the_spec_decides_are_refused_beside_it(tmp_path, capsys):
+    spec = spec_file(tmp_path)
+    assert main(["sweep", "stomach", "--dataset", str(spec), "--out", str(tmp_path / "out")]) == 2
+    assert main(["sweep", "--dataset", str(spec), "--depth-mm", "5", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "SCENE is decided by the dataset spec" in err[0] and "--depth-mm is decided" in err[1]
+    assert not (tmp_path / "out").exists()
