@@ -22,7 +22,7 @@ wp.set_module_options({"enable_backward": False})
 from .arrays import CGArrays, ProbeArrays, ProbeSphereArrays, TissueArrays
 from .block_cg import filter_normal, solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
-from .probe_contact import sphere_contact_reaction, sphere_normal
+from .probe_contact import sphere_contact_reaction, sphere_holds, sphere_normal
 
 CONTACT_SLACK = 1.0e-5
 """A vertex within radius x (1 + this) of the centre is on the sphere (float32 positions)."""
@@ -103,11 +103,9 @@ def integrate_region_implicit(
             n_c = wp.vec3(0.0)
             contact = wp.vec3(0.0)
             if sphere.probe_surface[v] != 0:
-                n_p, l_p = sphere_normal(x + dt * u, centre)
-                n, l = sphere_normal(x, centre)
-                if l_p < radius or (l < radius * (1.0 + CONTACT_SLACK) and wp.dot(f, n) < 0.0):
+                held, n, dv_n = sphere_holds(x, u, f, centre, radius, CONTACT_SLACK, dt)
+                if held:
                     n_c = n
-                    dv_n = (radius - wp.dot(n, x - centre)) / dt - wp.dot(n, u)
                     cg.dv[i] = filter_normal(cg.dv[i], n) + dv_n * n
                     b = filter_normal(b, n)
                     contact = sphere_contact_reaction(f, n)

@@ -32,3 +32,28 @@ def sphere_contact_reaction(f: wp.vec3, n: wp.vec3):
     # the tissue's force on the probe at a contact vertex: the normal part of the internal force f,
     # pushing only (a one-sided contact never pulls)
     return wp.min(wp.dot(f, n), 0.0) * n
+
+
+@wp.func
+def sphere_project(x_in: wp.vec3, x_out: wp.vec3, u_out: wp.vec3, f: wp.vec3, centre: wp.vec3, radius: float, dt: float):
+    # the explicit step's contact: a vertex the step left inside the sphere goes onto its surface
+    # along the sphere's normal (its velocity the step's new displacement over dt); returns
+    # (position, velocity, the contact reaction from its internal force f, whether it touched)
+    n, l = sphere_normal(x_out, centre)
+    if l < radius:
+        x1 = centre + radius * n
+        return x1, (x1 - x_in) / dt, sphere_contact_reaction(f, n), True
+    return x_out, u_out, wp.vec3(0.0), False
+
+
+@wp.func
+def sphere_holds(x: wp.vec3, u: wp.vec3, f: wp.vec3, centre: wp.vec3, radius: float, slack: float, dt: float):
+    # the implicit step's contact test: a vertex is held where its predicted position x + dt u is
+    # inside the sphere, or where it is on the sphere (within radius x (1 + slack)) while its internal
+    # force f pushes the probe; returns (held, the sphere's normal at x, the normal velocity change
+    # that ends the step on the sphere)
+    n_p, l_p = sphere_normal(x + dt * u, centre)
+    n, l = sphere_normal(x, centre)
+    held = l_p < radius or (l < radius * (1.0 + slack) and wp.dot(f, n) < 0.0)
+    dv_n = (radius - wp.dot(n, x - centre)) / dt - wp.dot(n, u)
+    return held, n, dv_n
