@@ -354,7 +354,7 @@ class BatchPalpation:
         r16 = lambda x: -(-max(int(x), 1) // 16) * 16
         cv, cf, ce, cs = r16(max_vertices), r16(max_free), r16(max_entries), r16(max_springs)
         # CSR offsets and codes are int16 in shared memory
-        if per_thread > 16 or max(cv, ce) > 32767 or bkf.shared_bytes_fast(cv, cf, cs, self._max_degree) > bk.SHARED_BYTES_MAX:
+        if per_thread > 16 or max(cv, ce) > 32767 or bkf.shared_bytes_fast(cv, cf, cs, self._max_degree, threads if self.probe_radius > 0 else 0) > bk.SHARED_BYTES_MAX:
             return None
         return threads, max(per_thread, 1), cv, cf, cs, self._max_degree
 
