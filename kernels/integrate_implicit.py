@@ -22,7 +22,7 @@ wp.set_module_options({"enable_backward": False})
 from .arrays import CGArrays, ProbeArrays, ProbeSphereArrays, TissueArrays
 from .block_cg import filter_normal, solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
-from .probe_contact import sphere_contact_reaction, sphere_holds, sphere_normal
+from .probe_contact import onto_sphere, sphere_contact_reaction, sphere_holds
 
 CONTACT_SLACK = 1.0e-5
 """A vertex within radius x (1 + this) of the centre is on the sphere (float32 positions)."""
@@ -141,9 +141,7 @@ def integrate_region_implicit(
             if constrained != 0:
                 if wp.length_sq(cg.normal[i]) > 0.0:
                     # exactly on the sphere (the solve held it on the tangent plane)
-                    n1, l1 = sphere_normal(x1, centre)
-                    x1 = centre + radius * n1
-                    u1 = (x1 - x) / dt
+                    x1, u1 = onto_sphere(x, x1, centre, radius, dt)
             q_out[v] = x1
             qd_out[v] = u1
     cg.stats[0] = float(iterations)

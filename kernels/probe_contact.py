@@ -35,14 +35,22 @@ def sphere_contact_reaction(f: wp.vec3, n: wp.vec3):
 
 
 @wp.func
+def onto_sphere(x_in: wp.vec3, x_out: wp.vec3, centre: wp.vec3, radius: float, dt: float):
+    # x_out put on the sphere's surface along its normal; the velocity that takes x_in there in dt
+    n, l = sphere_normal(x_out, centre)
+    x1 = centre + radius * n
+    return x1, (x1 - x_in) / dt
+
+
+@wp.func
 def sphere_project(x_in: wp.vec3, x_out: wp.vec3, u_out: wp.vec3, f: wp.vec3, centre: wp.vec3, radius: float, dt: float):
     # the explicit step's contact: a vertex the step left inside the sphere goes onto its surface
     # along the sphere's normal (its velocity the step's new displacement over dt); returns
     # (position, velocity, the contact reaction from its internal force f, whether it touched)
     n, l = sphere_normal(x_out, centre)
     if l < radius:
-        x1 = centre + radius * n
-        return x1, (x1 - x_in) / dt, sphere_contact_reaction(f, n), True
+        x1, u1 = onto_sphere(x_in, x_out, centre, radius, dt)
+        return x1, u1, sphere_contact_reaction(f, n), True
     return x_out, u_out, wp.vec3(0.0), False
 
 
