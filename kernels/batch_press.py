@@ -80,18 +80,9 @@ def substep_explicit(
 
 @wp.func
 def contact_sphere(
-    nf: int,
-    region_vertex: wp.array2d(dtype=wp.int32),
-    b: int,
-    probe_surface: wp.array(dtype=wp.int32),
-    particle_mass: wp.array(dtype=wp.float32),
-    centre: wp.vec3,
-    radius: float,
-    dt: float,
-    q_in: wp.array(dtype=wp.vec3),
-    qd_in: wp.array(dtype=wp.vec3),
-    q_out: wp.array(dtype=wp.vec3),
-    qd_out: wp.array(dtype=wp.vec3),
+    nf: int, region_vertex: wp.array2d(dtype=wp.int32), b: int, probe_surface: wp.array(dtype=wp.int32),
+    particle_mass: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, dt: float,
+    q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3), q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
 ):
     # the sphere after the step (one thread, local order, as the one-palpation contact pass): each
     # free surface vertex inside it onto its surface; returns the sum of the contact reactions

@@ -52,6 +52,21 @@ def shared_bytes_fast(vertex_capacity: int, free_capacity: int, spring_capacity:
     return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + max_degree * free_capacity) + 16 * spring_capacity + 116 + sphere
 
 
+@wp.func
+def record_force_fast(f: wp.vec3, hold: bool, p64: wp.array(dtype=wp.float64), pv: wp.array(dtype=wp.vec4)):
+    # the feedback force's records in shared memory: the largest squared magnitude (p64[7]) and its
+    # force (pv[0]); the force at the end of the hold (pv[2])
+    fx = wp.float64(f[0])
+    fy = wp.float64(f[1])
+    fz = wp.float64(f[2])
+    mag2 = fx * fx + fy * fy + fz * fz
+    if mag2 > p64[7]:
+        p64[7] = mag2
+        store_xyz(pv, 0, f)
+    if hold:
+        store_xyz(pv, 2, f)
+
+
 @functools.cache
 def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_capacity: int, spring_capacity: int, max_degree: int = 16,
                       sphere: bool = False):
@@ -248,15 +263,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                         part += c
                 elif i == 0 and s < press_steps:
                     # the feedback force, then displacement control (lane 0; its state in shared memory)
-                    fx = wp.float64(f[0])
-                    fy = wp.float64(f[1])
-                    fz = wp.float64(f[2])
-                    mag2 = fx * fx + fy * fy + fz * fz
-                    if mag2 > p64[7]:
-                        p64[7] = mag2
-                        store_xyz(pv, 0, f)
-                    if s == press_steps - 1:
-                        store_xyz(pv, 2, f)
+                    record_force_fast(f, s == press_steps - 1, p64, pv)
                     tf = load4(pv, 1)
                     target = wp.vec3(tf[0], tf[1], tf[2])
                     if s < ramp_steps:
@@ -298,15 +305,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                     f = wp.vec3(0.0)
                     for l in range(wp.min(T, nf)):
                         f += load_xyz(parts, l)
-                    fx = wp.float64(f[0])
-                    fy = wp.float64(f[1])
-                    fz = wp.float64(f[2])
-                    mag2 = fx * fx + fy * fy + fz * fz
-                    if mag2 > p64[7]:
-                        p64[7] = mag2
-                        store_xyz(pv, 0, f)
-                    if s == press_steps - 1:
-                        store_xyz(pv, 2, f)
+                    record_force_fast(f, s == press_steps - 1, p64, pv)
         for i in range(lane, n, T):
             av = load4(qa, i)
             bv = load2(qb, i)

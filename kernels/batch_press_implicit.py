@@ -14,13 +14,27 @@ vertex's springs in mesh CSR order), so a palpation of the batch gives the same 
 import warp as wp
 
 from .arrays import BatchCGArrays, BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
-from .block_cg import filter_normal, solve_block_cg
+from .block_cg import solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
 from .integrate_implicit import CONTACT_SLACK
-from .probe_contact import onto_sphere, sphere_contact_reaction, sphere_holds
+from .probe_contact import onto_sphere, sphere_constrain
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def record_force(press: BatchPress, b: int, step: int, f: wp.vec3):
+    # palpation b's feedback force at `step`: its largest magnitude (float64, as the host takes it) and the hold's
+    fx = wp.float64(f[0])
+    fy = wp.float64(f[1])
+    fz = wp.float64(f[2])
+    mag = wp.sqrt(fx * fx + fy * fy + fz * fz)
+    if mag > press.peak_force[b]:
+        press.peak_force[b] = mag
+        press.peak_reaction[b] = f
+    if step == press.press_steps - 1:
+        press.hold_reaction[b] = f
 
 
 @wp.kernel
@@ -90,16 +104,7 @@ def step_batch_implicit(
             if j == driven:
                 correction += B * dv_driven  # -A_ic dv_c, with A_ic = -B
         if i == 0 and driven == 0:
-            # the feedback force: internal forces on the probe's vertex
-            fx = wp.float64(f[0])
-            fy = wp.float64(f[1])
-            fz = wp.float64(f[2])
-            mag = wp.sqrt(fx * fx + fy * fy + fz * fz)
-            if mag > press.peak_force[b]:
-                press.peak_force[b] = mag
-                press.peak_reaction[b] = f
-            if step == press.press_steps - 1:
-                press.hold_reaction[b] = f
+            record_force(press, b, step, f)  # the feedback force: internal forces on the probe's vertex
         cg.diag[b, i] = D
         cg.diag_inv[b, i] = wp.inverse(D)
         rhs = dt * (f - dt * Kv) + correction
@@ -109,12 +114,9 @@ def step_batch_implicit(
             # a vertex the sphere holds: its normal velocity prescribed, so that the step ends on the sphere
             n_c = wp.vec3(0.0)
             if probe.probe_surface[v] != 0:
-                held, n, dv_n = sphere_holds(x, u, f, target, probe.radius, CONTACT_SLACK, dt)
-                if held:
-                    n_c = n
-                    cg.dv[b, i] = filter_normal(cg.dv[b, i], n) + dv_n * n
-                    rhs = filter_normal(rhs, n)
-                    reaction += sphere_contact_reaction(f, n)
+                n_c, dv_w, rhs, contact = sphere_constrain(x, u, f, rhs, cg.dv[b, i], target, probe.radius, CONTACT_SLACK, dt)
+                cg.dv[b, i] = dv_w
+                reaction += contact
             cg.normal[b, i] = n_c
         cg.r[b, i] = rhs
         b_norm2 += wp.dot(rhs, rhs)
@@ -126,16 +128,7 @@ def step_batch_implicit(
     )
 
     if constrained != 0:
-        # the feedback force: the sum of the contact reactions
-        fx = wp.float64(reaction[0])
-        fy = wp.float64(reaction[1])
-        fz = wp.float64(reaction[2])
-        mag = wp.sqrt(fx * fx + fy * fy + fz * fz)
-        if mag > press.peak_force[b]:
-            press.peak_force[b] = mag
-            press.peak_reaction[b] = reaction
-        if step == press.press_steps - 1:
-            press.hold_reaction[b] = reaction
+        record_force(press, b, step, reaction)  # the feedback force: the sum of the contact reactions
 
     # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
     for i in range(free_n):

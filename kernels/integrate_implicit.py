@@ -20,9 +20,9 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .arrays import CGArrays, ProbeArrays, ProbeSphereArrays, TissueArrays
-from .block_cg import filter_normal, solve_block_cg
+from .block_cg import solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
-from .probe_contact import onto_sphere, sphere_contact_reaction, sphere_holds
+from .probe_contact import onto_sphere, sphere_constrain
 
 CONTACT_SLACK = 1.0e-5
 """A vertex within radius x (1 + this) of the centre is on the sphere (float32 positions)."""
@@ -103,13 +103,9 @@ def integrate_region_implicit(
             n_c = wp.vec3(0.0)
             contact = wp.vec3(0.0)
             if sphere.probe_surface[v] != 0:
-                held, n, dv_n = sphere_holds(x, u, f, centre, radius, CONTACT_SLACK, dt)
-                if held:
-                    n_c = n
-                    cg.dv[i] = filter_normal(cg.dv[i], n) + dv_n * n
-                    b = filter_normal(b, n)
-                    contact = sphere_contact_reaction(f, n)
-                    reaction += contact
+                n_c, dv_w, b, contact = sphere_constrain(x, u, f, b, cg.dv[i], centre, radius, CONTACT_SLACK, dt)
+                cg.dv[i] = dv_w
+                reaction += contact
             cg.normal[i] = n_c
             sphere.probe_contact[v] = contact
         cg.r[i] = b

@@ -9,6 +9,8 @@ leaves one contact vertex and the paper's probe).
 
 import warp as wp
 
+from .block_cg import filter_normal
+
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
@@ -65,3 +67,15 @@ def sphere_holds(x: wp.vec3, u: wp.vec3, f: wp.vec3, centre: wp.vec3, radius: fl
     held = l_p < radius or (l < radius * (1.0 + slack) and wp.dot(f, n) < 0.0)
     dv_n = (radius - wp.dot(n, x - centre)) / dt - wp.dot(n, u)
     return held, n, dv_n
+
+
+@wp.func
+def sphere_constrain(x: wp.vec3, u: wp.vec3, f: wp.vec3, rhs: wp.vec3, dv: wp.vec3, centre: wp.vec3, radius: float, slack: float, dt: float):
+    # the implicit step's contact at one vertex: where the sphere holds it (sphere_holds), the warm
+    # start dv gets the prescribed normal velocity change and the right-hand side rhs keeps only its
+    # tangential part (Baraff & Witkin's filter); returns (the held normal or zero, dv, rhs, the
+    # contact reaction)
+    held, n, dv_n = sphere_holds(x, u, f, centre, radius, slack, dt)
+    if held:
+        return n, filter_normal(dv, n) + dv_n * n, filter_normal(rhs, n), sphere_contact_reaction(f, n)
+    return wp.vec3(0.0), dv, rhs, wp.vec3(0.0)
