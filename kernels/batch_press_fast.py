@@ -125,10 +125,8 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
         peak_reaction: wp.array(dtype=wp.vec3),
         hold_reaction: wp.array(dtype=wp.vec3),
         scratch: wp.array(dtype=wp.vec4),
-        probe_surface: wp.array(dtype=wp.int32),
-        contact_local: wp.array(dtype=wp.int32),
-        radius: float,
-        radius64: wp.float64,
+        # the sphere's (read by its variant only): who may touch, each contact vertex's local index, R [m]
+        probe_surface: wp.array(dtype=wp.int32), contact_local: wp.array(dtype=wp.int32), radius: float, radius64: wp.float64,
     ):
         tid = wp.tid()
         b = tid // T
