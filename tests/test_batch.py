@@ -165,20 +165,22 @@ def supported(stomach):
     return Material(**MATERIAL), z, [int(v) for v in order[[300, 700, 1000]]]
 
 
-def _sphere_batch(stomach, supported, device, **kw):
+def _sphere_batch(stomach, supported, device, radius=0.004, **kw):
     material, z, contacts = supported
-    return BatchPalpation(stomach, material, rings=3, device=device, probe_radius=0.004, fixed_below=z, dt=DT, **kw).touch(contacts)
+    return BatchPalpation(stomach, material, rings=3, device=device, probe_radius=radius, fixed_below=z, dt=DT, **kw).touch(contacts)
 
 
-@pytest.mark.parametrize("kernel,integrator", [("exact", "explicit"), ("fast", "explicit"), (None, "implicit")])
-def test_batch_sphere_supports_material_equal_palpation(device, stomach, supported, kernel, integrator):
+@pytest.mark.parametrize("kernel,integrator,radius", [("exact", "explicit", 0.004), ("fast", "explicit", 0.004),
+                                                      (None, "implicit", 0.004), ("exact", "explicit", 0.0)])
+def test_batch_sphere_supports_material_equal_palpation(device, stomach, supported, kernel, integrator, radius):
+    # radius 0: the paper's driven vertex on the same material and supports
     material, z, contacts = supported
-    bp = _sphere_batch(stomach, supported, device, kernel=kernel, integrator=integrator)
+    bp = _sphere_batch(stomach, supported, device, radius, kernel=kernel, integrator=integrator)
     res = bp.press(**SPHERE_PRESS)
     held = stomach.vertices[:, 2] < z
     assert bp.substeps == 1 and any(held[bp.region(b)].any() for b in range(len(contacts)))
     for b, v in enumerate(contacts):
-        pal = Palpation(stomach, material, rings=3, device=device, integrator=integrator, probe_radius=0.004, fixed_below=z, dt=DT)
+        pal = Palpation(stomach, material, rings=3, device=device, integrator=integrator, probe_radius=radius, fixed_below=z, dt=DT)
         pal.touch(v)
         ref = pal.press(**SPHERE_PRESS)
         # the same region and free set (supported vertices moved after the free ones, as the solver has them)
