@@ -167,3 +167,17 @@ def struct_from(struct, source, **values):
     for name in struct.vars:
         setattr(out, name, values[name] if name in values else getattr(source, name))
     return out
+
+
+@wp.struct
+class BatchSphere:
+    """A batch's spherical probe (one radius for every palpation) and each palpation's contact vertex."""
+
+    radius: float
+    """Radius [m] as the contact test reads it (float32); 0: the paper's probe, no sphere."""
+    radius64: wp.float64
+    """Radius [m] in float64, as the host computes the sphere's centre."""
+    probe_surface: wp.array(dtype=wp.int32)
+    """1 for each mesh vertex the sphere may touch (a surface vertex), [particle_count]."""
+    contact_local: wp.array(dtype=wp.int32)
+    """Local index of each palpation's contact vertex in its region (0 without a sphere), [B]."""

@@ -21,9 +21,10 @@ import functools
 
 import warp as wp
 
-from .arrays import BatchPress, BatchRegionArrays, TissueArrays
+from .arrays import BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
 from .block_memory import SHARED_BYTES_MAX, block_sync, work_array
 from .forces import add_spring_force, anchor_force
+from .probe_contact import sphere_project
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -77,11 +78,34 @@ def substep_explicit(
     return reaction
 
 
+@wp.func
+def contact_sphere(
+    nf: int, region_vertex: wp.array2d(dtype=wp.int32), b: int, probe_surface: wp.array(dtype=wp.int32),
+    particle_mass: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, dt: float,
+    q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3), q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
+):
+    # the sphere after the step (one thread, local order, as the one-palpation contact pass): each
+    # free surface vertex inside it onto its surface; returns the sum of the contact reactions
+    total = wp.vec3(0.0)
+    for i in range(nf):
+        if probe_surface[region_vertex[b, i]] != 0:
+            f = particle_mass[i] * (qd_out[i] - qd_in[i]) / dt  # the internal force of the step
+            x1, u1, c, touched = sphere_project(q_in[i], q_out[i], qd_out[i], f, centre, radius, dt)
+            if touched:
+                q_out[i] = x1
+                qd_out[i] = u1
+                total += c
+    return total
+
+
 @functools.cache
-def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
+def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool, sphere: bool = False):
     """The batch press kernel for regions of up to `vertex_capacity` vertices and `entry_capacity`
-    CSR entries of free vertices; working arrays in shared memory on CUDA when `shared`."""
+    CSR entries of free vertices; working arrays in shared memory on CUDA when `shared`. `sphere`:
+    the probe is a sphere (BatchSphere; no vertex driven, a contact pass after each pressed step),
+    a variant of its own so that the paper's probe runs none of it."""
     cv, ce = int(vertex_capacity), int(entry_capacity)
+    SPHERE = bool(sphere)
     w_q_a = work_array("q_a", wp.vec3, cv, shared)
     w_qd_a = work_array("qd_a", wp.vec3, cv, shared)
     w_q_b = work_array("q_b", wp.vec3, cv, shared)
@@ -103,6 +127,7 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
         tissue: TissueArrays,
         anchor_scale: float,
         press: BatchPress,
+        probe: BatchSphere,
         step_begin: int,
         step_count: int,
         scratch_vec3: wp.array(dtype=wp.vec3),
@@ -155,6 +180,9 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
         dt = press.dt
         rest0 = wp.vec3d(rest[0])
         direction = press.press_direction[b]
+        if wp.static(SPHERE):
+            # the sphere's centre at rest: touching the surface at the contact vertex
+            rest0 = wp.vec3d(rest[probe.contact_local[b]]) - direction * probe.radius64
         peak = press.peak_force[b]
         peak_f = press.peak_reaction[b]
         for s in range(step_begin, step_begin + step_count):
@@ -165,10 +193,22 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool):
                 # the probe's target, in float64 as the host computes it, then float32
                 frac = wp.min(wp.float64(s + 1) / wp.float64(press.ramp_steps), wp.float64(1.0))
                 target = wp.vec3(rest0 + direction * press.depth * frac)
+            driven = pressed
+            if wp.static(SPHERE):
+                driven = 0
             if (s - step_begin) % 2 == 0:
-                f = substep_explicit(lane, threads, nf, off, nbr, ke, kd, l0, rest, mass, ka, kda, anchor_scale, pressed, target, dt, q_a, qd_a, q_b, qd_b)
+                f = substep_explicit(lane, threads, nf, off, nbr, ke, kd, l0, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_a, qd_a, q_b, qd_b)
             else:
-                f = substep_explicit(lane, threads, nf, off, nbr, ke, kd, l0, rest, mass, ka, kda, anchor_scale, pressed, target, dt, q_b, qd_b, q_a, qd_a)
+                f = substep_explicit(lane, threads, nf, off, nbr, ke, kd, l0, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_b, qd_b, q_a, qd_a)
+            if wp.static(SPHERE):
+                if pressed != 0:
+                    block_sync()
+                    if lane == 0:
+                        rv = regions.region_vertex
+                        if (s - step_begin) % 2 == 0:
+                            f = contact_sphere(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_a, qd_a, q_b, qd_b)
+                        else:
+                            f = contact_sphere(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_b, qd_b, q_a, qd_a)
             if lane == 0 and pressed != 0:
                 fx = wp.float64(f[0])
                 fy = wp.float64(f[1])
@@ -213,12 +253,12 @@ def shared_bytes(vertex_capacity: int, entry_capacity: int) -> int:
 def press_batch(batch, step_begin, step_count):
     """Advance every palpation of `batch` (an almsdm_warp.batch.batch_palpation.BatchPalpation) `step_count` steps."""
     m, r, p = batch.model, batch.regions, batch
-    kernel = press_kernel(p.vertex_capacity, p.entry_capacity, p.shared)
+    kernel = press_kernel(p.vertex_capacity, p.entry_capacity, p.shared, p.probe_radius > 0)
     wp.launch(
         kernel,
         dim=p.batch_size * p.threads,
         block_dim=p.threads,
-        inputs=[p.threads, r.arrays, m.arrays, 1.0, p.press_arrays, int(step_begin), int(step_count), p.scratch_vec3, p.scratch_float, p.scratch_int],
+        inputs=[p.threads, r.arrays, m.arrays, 1.0, p.press_arrays, p.sphere_arrays, int(step_begin), int(step_count), p.scratch_vec3, p.scratch_float, p.scratch_int],
         outputs=[p.q_state, p.qd_state],
         device=m.device,
     )

@@ -31,6 +31,7 @@ import warp as wp
 
 from .block_memory import add_entry16, block_sync, cpu_blocks, load2, load4, load_xyz, rsqrt_approx, shared_array, store_xyz, work_array
 from .forces import EPS_LENGTH, anchor_force, spring_force_along
+from .probe_contact import sphere_project
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -43,18 +44,40 @@ MAX_REGISTERS = 80
 """Registers a thread (12 blocks of 64 threads an SM): 9.55e8 region-steps/s against 9.23e8 at 64 on an H200."""
 
 
-def shared_bytes_fast(vertex_capacity: int, free_capacity: int, spring_capacity: int, max_degree: int = 16) -> int:
+def shared_bytes_fast(vertex_capacity: int, free_capacity: int, spring_capacity: int, max_degree: int = 16, sphere_threads: int = 0) -> int:
     """Shared memory a block of the fast kernel takes [bytes]: packed state per vertex, constants
-    and transposed int16 codes per free vertex, a force per spring, the probe's records."""
-    return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + max_degree * free_capacity) + 16 * spring_capacity + 116
+    and transposed int16 codes per free vertex, a force per spring, the probe's records; with a
+    sphere, each of `sphere_threads` threads' sum of contact reactions and the sphere's centre."""
+    sphere = 16 * sphere_threads + 16 if sphere_threads else 0
+    return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + max_degree * free_capacity) + 16 * spring_capacity + 116 + sphere
+
+
+@wp.func
+def record_force_fast(f: wp.vec3, hold: bool, p64: wp.array(dtype=wp.float64), pv: wp.array(dtype=wp.vec4)):
+    # the feedback force's records in shared memory: the largest squared magnitude (p64[7]) and its
+    # force (pv[0]); the force at the end of the hold (pv[2])
+    fx = wp.float64(f[0])
+    fy = wp.float64(f[1])
+    fz = wp.float64(f[2])
+    mag2 = fx * fx + fy * fy + fz * fz
+    if mag2 > p64[7]:
+        p64[7] = mag2
+        store_xyz(pv, 0, f)
+    if hold:
+        store_xyz(pv, 2, f)
 
 
 @functools.cache
-def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_capacity: int, spring_capacity: int, max_degree: int = 16):
+def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_capacity: int, spring_capacity: int, max_degree: int = 16,
+                      sphere: bool = False):
     """The fast kernel for blocks of `threads` threads with `per_thread` springs each, regions of up
     to `vertex_capacity` vertices, `free_capacity` free ones of degree up to `max_degree`, and
-    `spring_capacity` springs (compile-time sizes: registers are unrolled, shared arrays static)."""
+    `spring_capacity` springs (compile-time sizes: registers are unrolled, shared arrays static).
+    `sphere`: the probe is a sphere (no vertex driven; after each pressed step every free surface
+    vertex inside it goes onto it and the feedback force is the sum of the contact reactions), a
+    variant of its own, so that the paper's probe runs none of it."""
     T, P, cv, cf, cs, cd = int(threads), int(per_thread), int(vertex_capacity), int(free_capacity), int(spring_capacity), max(int(max_degree), 1)
+    SPHERE = bool(sphere)
     w_qa = work_array("oqa4", wp.vec4, cv, True)  # x, y, z, vx
     w_qb = shared_array("oqb2", wp.vec2, cv)  # vy, vz
     w_rest = work_array("orest4", wp.vec4, cf, True)  # rest position, anchor stiffness
@@ -64,7 +87,8 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
     w_code = shared_array("ocodet16", wp.int16, cd * cf)
     w_f = work_array("of4", wp.vec4, cs, True)
     w_p64 = work_array("op64", wp.float64, 8, True)
-    w_pv = work_array("opv4", wp.vec4, 3, True)
+    w_pv = work_array("opv4", wp.vec4, 4 if SPHERE else 3, True)  # peak, full-depth target and 1/dt, hold; the centre
+    w_part = work_array("opart4", wp.vec4, T, True)  # (sphere) each thread's sum of contact reactions
     vec_i = wp.types.vector(length=P, dtype=wp.int32)
     vec_f = wp.types.vector(length=P, dtype=wp.float32)
 
@@ -101,6 +125,8 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
         peak_reaction: wp.array(dtype=wp.vec3),
         hold_reaction: wp.array(dtype=wp.vec3),
         scratch: wp.array(dtype=wp.vec4),
+        # the sphere's (read by its variant only): who may touch, each contact vertex's local index, R [m]
+        probe_surface: wp.array(dtype=wp.int32), contact_local: wp.array(dtype=wp.int32), radius: float, radius64: wp.float64,
     ):
         tid = wp.tid()
         b = tid // T
@@ -149,6 +175,9 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
         kao = -anchor_scale * anchor_ke[vo]
         kdo = -anchor_scale * anchor_kd[vo]
         dto = dt / particle_mass[vo]
+        so = int(0)
+        if wp.static(SPHERE):
+            so = probe_surface[vo]
         # this lane's springs (each spring of the region once), in registers for the whole launch
         ends = vec_i(0)
         ke = vec_f(0.0)
@@ -166,6 +195,9 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
         if lane == 0:
             # the probe's constants and running records (only lane 0 reads them)
             rest0 = wp.vec3d(q_rest[region_vertex[b, 0]])
+            if wp.static(SPHERE):
+                # the sphere's centre at rest: touching the surface at the contact vertex
+                rest0 = wp.vec3d(q_rest[region_vertex[b, contact_local[b]]]) - press_direction[b] * radius64
             dd = press_direction[b] * depth
             for a in range(3):
                 p64[a] = rest0[a]
@@ -178,6 +210,16 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
             pv[2] = wp.vec4(hold_reaction[b][0], hold_reaction[b][1], hold_reaction[b][2], 0.0)
         block_sync()
         for s in range(step_begin, step_begin + step_count):
+            if wp.static(SPHERE):
+                if lane == 0 and s < press_steps:
+                    # the sphere's centre this step, read by every thread after the barrier
+                    tc = load4(pv, 1)
+                    if s < ramp_steps:
+                        r0 = wp.vec3d(p64[0], p64[1], p64[2])
+                        d0 = wp.vec3d(p64[3], p64[4], p64[5])
+                        store_xyz(pv, 3, wp.vec3(r0 + d0 * (wp.float64(s + 1) * p64[6])))
+                    else:
+                        store_xyz(pv, 3, wp.vec3(tc[0], tc[1], tc[2]))
             # (A) each spring: elastic force along the edge, eqs. (4)-(5), and damping along it, eq. (6)
             for m in range(P):
                 sp = lane + m * T
@@ -199,22 +241,27 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
             block_sync()
             # (B) each free vertex: anchor, eq. (3), then its springs in mesh CSR order; the owned
             # vertex first (registers), then any beyond the block's threads (shared memory)
+            part = wp.vec3(0.0)
+            centre = wp.vec3(0.0)
+            if wp.static(SPHERE):
+                if s < press_steps:
+                    centre = load_xyz(pv, 3)
             if own:
                 i = lane
                 f = anchor_force(xo, uo, ro, kao, kdo, -1.0)  # the constants are stored negated
                 for k in range(deg):
                     f = add_entry16(f, fe, code, k * cf + i)
-                if i == 0 and s < press_steps:
+                if wp.static(SPHERE):
+                    # every free vertex steps; then the sphere's contact (kernels/probe_contact.py)
+                    x0 = xo
+                    uo = uo + f * dto
+                    xo = xo + dt * uo
+                    if s < press_steps and so != 0:
+                        xo, uo, c, touched = sphere_project(x0, xo, uo, f, centre, radius, dt)
+                        part += c
+                elif i == 0 and s < press_steps:
                     # the feedback force, then displacement control (lane 0; its state in shared memory)
-                    fx = wp.float64(f[0])
-                    fy = wp.float64(f[1])
-                    fz = wp.float64(f[2])
-                    mag2 = fx * fx + fy * fy + fz * fz
-                    if mag2 > p64[7]:
-                        p64[7] = mag2
-                        store_xyz(pv, 0, f)
-                    if s == press_steps - 1:
-                        store_xyz(pv, 2, f)
+                    record_force_fast(f, s == press_steps - 1, p64, pv)
                     tf = load4(pv, 1)
                     target = wp.vec3(tf[0], tf[1], tf[2])
                     if s < ramp_steps:
@@ -240,9 +287,23 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                     f = add_entry16(f, fe, code, k * cf + i)
                 u1 = u + f * dtm[i]
                 x1 = x + dt * u1
+                if wp.static(SPHERE):
+                    if s < press_steps and probe_surface[region_vertex[b, i]] != 0:
+                        x1, u1, c, touched = sphere_project(x, x1, u1, f, centre, radius, dt)
+                        part += c
                 qa[i] = wp.vec4(x1[0], x1[1], x1[2], u1[0])
                 qb[i] = wp.vec2(u1[1], u1[2])
+            if wp.static(SPHERE):
+                store_xyz(w_part(scratch, 0), lane, part)
             block_sync()
+            if wp.static(SPHERE):
+                if lane == 0 and s < press_steps:
+                    # the feedback force: the sum of the contact reactions (each thread's, in thread order)
+                    parts = w_part(scratch, 0)
+                    f = wp.vec3(0.0)
+                    for l in range(wp.min(T, nf)):
+                        f += load_xyz(parts, l)
+                    record_force_fast(f, s == press_steps - 1, p64, pv)
         for i in range(lane, n, T):
             av = load4(qa, i)
             bv = load2(qb, i)
@@ -262,7 +323,7 @@ def press_batch_fast(batch, step_begin, step_count):
     threads = p.fast_plan[0]
     with cpu_blocks(m.device):
         wp.launch(
-            press_kernel_fast(*p.fast_plan),
+            press_kernel_fast(*p.fast_plan, sphere=p.probe_radius > 0),
             dim=p.batch_size * threads,
             block_dim=threads,
             inputs=[
@@ -271,6 +332,7 @@ def press_batch_fast(batch, step_begin, step_count):
                 m.particle_q_rest, m.particle_mass, m.anchor_ke, m.anchor_kd, 1.0, m.spring_ke, m.spring_kd, m.spring_rest_length,
                 p.press_direction, p.depth, p.ramp_steps, p.press_steps, p.dt, int(step_begin), int(step_count),
             ],
-            outputs=[p.q_state, p.qd_state, p.peak_force, p.peak_reaction, p.hold_reaction, p.scratch_wide],
+            outputs=[p.q_state, p.qd_state, p.peak_force, p.peak_reaction, p.hold_reaction, p.scratch_wide,
+                     p.probe_surface, p.contact_local, p.sphere_arrays.radius, p.sphere_arrays.radius64],
             device=m.device,
         )

@@ -1,8 +1,9 @@
 """Ring regions for a batch of palpations, built on the device in one launch: B breadth-first searches.
 
 Each palpation b gets compacted arrays of fixed capacity: its region's vertices in local order
-(ring after ring, each ring sorted by vertex id: the order of ``Region``), the number of free
-vertices (all but the fixed outermost non-empty ring) and, for each free vertex, its CSR
+(ring after ring from its seeds, each ring sorted by vertex id: the order of ``Region.build`` and
+``Region.build_seeds``), the number of free vertices (all but the fixed outermost non-empty ring,
+less the supported vertices, which are moved to just after the free ones) and, for each free vertex, its CSR
 neighbours in mesh CSR order as local indices with their mesh edge ids (the step's topology,
 built once per region). One thread per palpation: a region of a few hundred vertices at most,
 so membership is a linear search of the region built so far, and no per-mesh-vertex array is
@@ -32,20 +33,47 @@ def find_local(region_vertex: wp.array2d(dtype=wp.int32), b: int, count: int, u:
     return -1
 
 
+@wp.func
+def hold_supports(region_vertex: wp.array2d(dtype=wp.int32), b: int, nf: int, support: wp.array(dtype=wp.int32)):
+    # the supported vertices leave the free set: moved, in order, to just after the free ones (the
+    # others keep their order, as SolverBase.without_supports does); returns the free count
+    w = int(0)
+    for i in range(nf):
+        v = region_vertex[b, i]
+        if support[v] == 0:
+            # rotate [w, i] right by one: v to w, the held vertices between keep their order
+            for k in range(i, w, -1):
+                region_vertex[b, k] = region_vertex[b, k - 1]
+            region_vertex[b, w] = v
+            w += 1
+    return w
+
+
 @wp.kernel
-def build_batch_regions(mesh: MeshArrays, seeds: wp.array(dtype=wp.int32), rings: int, regions: BatchRegionArrays):
+def build_batch_regions(
+    mesh: MeshArrays,
+    seed_offsets: wp.array(dtype=wp.int32),
+    seeds: wp.array(dtype=wp.int32),
+    rings: int,
+    support: wp.array(dtype=wp.int32),
+    regions: BatchRegionArrays,
+):
     b = wp.tid()
     capacity = regions.region_vertex.shape[1]
     entry_capacity = regions.local_neighbour.shape[1]
-    seed = seeds[b]
-    # ring 0 is the contact vertex itself
-    regions.region_vertex[b, 0] = seed
-    regions.ring_offsets[b, 0] = 0
-    regions.ring_offsets[b, 1] = 1
-    count = int(1)
-    begin = int(0)
-    end = int(1)
+    # ring 0: the palpation's seeds (the contact vertex, or a sphere's patch), sorted by vertex id
+    count = int(0)
     flags = int(0)
+    for k in range(seed_offsets[b], seed_offsets[b + 1]):
+        if count < capacity:
+            regions.region_vertex[b, count] = seeds[k]
+            count += 1
+        else:
+            flags = flags | 1
+    regions.ring_offsets[b, 0] = 0
+    regions.ring_offsets[b, 1] = count
+    begin = int(0)
+    end = count
     outer = int(0)
     for r in range(1, rings + 1):
         # ring r: the neighbours of ring r - 1 not yet inside (breadth-first)
@@ -70,6 +98,8 @@ def build_batch_regions(mesh: MeshArrays, seeds: wp.array(dtype=wp.int32), rings
     nf = count
     if outer > 0:
         nf = regions.ring_offsets[b, outer]
+    if support.shape[0] > 1:
+        nf = hold_supports(regions.region_vertex, b, nf, support)
     regions.region_count[b] = count
     regions.free_count[b] = nf
     # local topology of the free vertices: neighbours in mesh CSR order, as local indices
@@ -106,9 +136,14 @@ def build_batch_regions(mesh: MeshArrays, seeds: wp.array(dtype=wp.int32), rings
     regions.status[b] = flags
 
 
-def build_regions(dmesh, seeds, rings, arrays):
-    """Build every palpation's region around `seeds` (one launch; `arrays` holds the outputs)."""
-    wp.launch(build_batch_regions, dim=len(seeds), inputs=[dmesh.arrays, seeds, rings, arrays.arrays], device=dmesh.device)
+def build_regions(dmesh, seed_offsets, seeds, rings, support, arrays):
+    """Build every palpation's region (one launch; `arrays` holds the outputs): ring 0 of palpation b
+    is seeds[seed_offsets[b]:seed_offsets[b + 1]] (sorted, unique); `support`: 1 for each held mesh
+    vertex, which leaves the free set (a one-element array: none held)."""
+    wp.launch(
+        build_batch_regions, dim=len(seed_offsets) - 1, inputs=[dmesh.arrays, seed_offsets, seeds, rings, support, arrays.arrays],
+        device=dmesh.device,
+    )
 
 
 @wp.kernel

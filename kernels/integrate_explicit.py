@@ -21,7 +21,7 @@ import warp as wp
 
 from .arrays import ProbeArrays, ProbeSphereArrays
 from .forces import add_spring_force, anchor_force
-from .probe_contact import sphere_contact_reaction, sphere_normal
+from .probe_contact import sphere_project
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -103,13 +103,12 @@ def constrain_sphere_explicit(
         v = free_vertex[i]
         contact = wp.vec3(0.0)
         if sphere.probe_surface[v] != 0:
-            n, l = sphere_normal(q_out[v], centre)
-            if l < radius:
-                f = particle_mass[v] * (qd_out[v] - qd_in[v]) / dt  # the internal force of the step
-                x1 = centre + radius * n
+            f = particle_mass[v] * (qd_out[v] - qd_in[v]) / dt  # the internal force of the step
+            x1, u1, c, touched = sphere_project(q_in[v], q_out[v], qd_out[v], f, centre, radius, dt)
+            if touched:
                 q_out[v] = x1
-                qd_out[v] = (x1 - q_in[v]) / dt
-                contact = sphere_contact_reaction(f, n)
+                qd_out[v] = u1
+                contact = c
                 total += contact
         sphere.probe_contact[v] = contact
     probe.probe_reaction[0] = total

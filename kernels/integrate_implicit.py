@@ -20,9 +20,9 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 from .arrays import CGArrays, ProbeArrays, ProbeSphereArrays, TissueArrays
-from .block_cg import filter_normal, solve_block_cg
+from .block_cg import solve_block_cg
 from .forces import add_spring_force, anchor_force, spring_block
-from .probe_contact import sphere_contact_reaction, sphere_normal
+from .probe_contact import onto_sphere, sphere_constrain
 
 CONTACT_SLACK = 1.0e-5
 """A vertex within radius x (1 + this) of the centre is on the sphere (float32 positions)."""
@@ -103,15 +103,9 @@ def integrate_region_implicit(
             n_c = wp.vec3(0.0)
             contact = wp.vec3(0.0)
             if sphere.probe_surface[v] != 0:
-                n_p, l_p = sphere_normal(x + dt * u, centre)
-                n, l = sphere_normal(x, centre)
-                if l_p < radius or (l < radius * (1.0 + CONTACT_SLACK) and wp.dot(f, n) < 0.0):
-                    n_c = n
-                    dv_n = (radius - wp.dot(n, x - centre)) / dt - wp.dot(n, u)
-                    cg.dv[i] = filter_normal(cg.dv[i], n) + dv_n * n
-                    b = filter_normal(b, n)
-                    contact = sphere_contact_reaction(f, n)
-                    reaction += contact
+                n_c, dv_w, b, contact = sphere_constrain(x, u, f, b, cg.dv[i], centre, radius, CONTACT_SLACK, dt)
+                cg.dv[i] = dv_w
+                reaction += contact
             cg.normal[i] = n_c
             sphere.probe_contact[v] = contact
         cg.r[i] = b
@@ -143,9 +137,7 @@ def integrate_region_implicit(
             if constrained != 0:
                 if wp.length_sq(cg.normal[i]) > 0.0:
                     # exactly on the sphere (the solve held it on the tangent plane)
-                    n1, l1 = sphere_normal(x1, centre)
-                    x1 = centre + radius * n1
-                    u1 = (x1 - x) / dt
+                    x1, u1 = onto_sphere(x, x1, centre, radius, dt)
             q_out[v] = x1
             qd_out[v] = u1
     cg.stats[0] = float(iterations)

@@ -2,6 +2,7 @@
 
     python scripts/ab_batch_cuda.py OLD_CHECKOUT [--device cuda:0] [--batch 100000] [--rings 4]
         [--alternations 5] [--repeats 3] [--mesh scenes/stomach.obj] [--json out.json]
+        [--probe-radius-mm 5] [--youngs-modulus-kpa 5]
 
 OLD_CHECKOUT is the root of another source checkout of this project (e.g. made by
 `git worktree add /tmp/old <commit>`). Each alternation runs one subprocess on the old checkout,
@@ -11,6 +12,13 @@ to compile and load, then times `repeats` presses (10 mm over 0.1 s, held 0.2 s,
 dt from the mesh's critical step, the same for both), each between device synchronizations, and
 reports the median region-steps/s. The summary gives each side's median over the alternations
 and their ratio. A benchmark, not a test; on the CPU, `--device cpu --batch 200` runs it small.
+
+Then, in the same run, the sphere and the material on this checkout alone (the old one may have
+neither): a probe of `--probe-radius-mm` (default 5; 0 skips this part) on a membrane of Young's
+modulus `--youngs-modulus-kpa` (default 5; thickness 3 mm on a 1 kPa/mm foundation, damping ratio
+0.5; 0: the scene's per-spring constants) over its own supports-free regions, `alternations` runs
+of it, its dt from that model's critical step; the summary gives its median and its ratio to
+this checkout's paper-probe figure.
 """
 
 from __future__ import annotations
@@ -25,6 +33,17 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESS = (0.01, 0.1, 0.2, 1.0)  # depth [m], ramp, hold, settle [s]
+MEMBRANE = dict(thickness=0.003, foundation=1e6, damping_ratio=0.5)
+"""The material of the sphere case beside Young's modulus: 3 mm thick, on a 1 kPa/mm foundation [SI]."""
+
+
+def tissue_of(youngs_modulus_kpa: float):
+    """The material of the sphere case (None: the scene's per-spring constants)."""
+    if not youngs_modulus_kpa:
+        return None
+    from almsdm_warp.tissue.material import Material
+
+    return Material(youngs_modulus=youngs_modulus_kpa * 1e3, **MEMBRANE)
 
 
 def worker(args) -> None:
@@ -47,7 +66,10 @@ def worker(args) -> None:
     mesh = load_mesh(args.mesh)
     surface = np.random.default_rng(0).permutation(mesh.surface_vertices)
     vertices = np.resize(surface, args.batch).astype(np.int64)
-    bp = BatchPalpation(mesh, rings=args.rings, dt=args.dt, device=args.device).touch(vertices)
+    sphere = {}
+    if args.probe_radius_mm:  # only this checkout's run is asked for it
+        sphere = dict(tissue=tissue_of(args.youngs_modulus_kpa), probe_radius=args.probe_radius_mm * 1e-3)
+    bp = BatchPalpation(mesh, rings=args.rings, dt=args.dt, device=args.device, **sphere).touch(vertices)
     bp.press(*PRESS)  # compile and load
     times = []
     for _ in range(args.repeats):
@@ -70,13 +92,14 @@ def worker(args) -> None:
     print("AB_ROW " + json.dumps(row), flush=True)
 
 
-def run_side(checkout: Path, args, dt: float) -> dict:
+def run_side(checkout: Path, args, dt: float, sphere: bool = False) -> dict:
     env = dict(os.environ, PYTHONPATH=str(checkout))
     cmd = [
         sys.executable, str(Path(__file__).resolve()), str(checkout), "--worker", str(checkout), "--device", args.device,
         "--batch", str(args.batch), "--rings", str(args.rings), "--repeats", str(args.repeats), "--mesh", str(args.mesh),
         "--dt", repr(dt),
     ]
+    cmd += ["--probe-radius-mm", repr(args.probe_radius_mm) if sphere else "0", "--youngs-modulus-kpa", repr(args.youngs_modulus_kpa)]
     out = subprocess.run(cmd, cwd=checkout, env=env, capture_output=True, text=True)
     rows = [json.loads(line[len("AB_ROW "):]) for line in out.stdout.splitlines() if line.startswith("AB_ROW ")]
     if out.returncode != 0 or not rows:
@@ -95,6 +118,8 @@ def main(argv=None):
     ap.add_argument("--mesh", type=Path, default=ROOT / "scenes" / "stomach.obj")
     ap.add_argument("--dt", type=float, default=None, help="step [s] (default: the mesh's critical step, as a sweep takes it)")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--probe-radius-mm", type=float, default=5.0, help="the sphere case's probe [mm] on this checkout (0: none)")
+    ap.add_argument("--youngs-modulus-kpa", type=float, default=5.0, help="the sphere case's material [kPa] (0: per-spring constants)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     args.mesh = args.mesh.resolve()
@@ -104,16 +129,15 @@ def main(argv=None):
     old = args.old.resolve()
     if not (old / "almsdm_warp" / "__init__.py").exists():
         raise SystemExit(f"{old} is not a checkout of this project (no almsdm_warp/__init__.py)")
-    dt = args.dt
-    if dt is None:
-        sys.path.insert(0, str(ROOT))
-        from almsdm_warp import load_mesh
-        from almsdm_warp.batch.sweep import auto_dt
-        from almsdm_warp.sim.model import Model
-        from almsdm_warp.warp_init import init_warp
+    sys.path.insert(0, str(ROOT))
+    from almsdm_warp import load_mesh
+    from almsdm_warp.batch.sweep import auto_dt
+    from almsdm_warp.sim.model import Model
+    from almsdm_warp.warp_init import init_warp
 
-        init_warp()
-        dt = auto_dt(Model(load_mesh(args.mesh), None, "cpu"))
+    init_warp()
+    dt = args.dt if args.dt is not None else auto_dt(Model(load_mesh(args.mesh), None, "cpu"))
+    dt_sphere = args.dt if args.dt is not None else auto_dt(Model(load_mesh(args.mesh), tissue_of(args.youngs_modulus_kpa), "cpu"))
     print(f"A: {old}\nB: {ROOT}\n{args.mesh.name}, {args.rings} rings, B = {args.batch}, dt {dt * 1e3:g} ms, device {args.device}", flush=True)
     print("| alternation | A region-steps/s | B region-steps/s | B / A |")
     print("|---|---|---|---|")
@@ -129,8 +153,19 @@ def main(argv=None):
         f"median region-steps/s: A {med['A']:.4e} ({rows['A'][0]['kernel']}), B {med['B']:.4e} ({rows['B'][0]['kernel']}); "
         f"B / A {med['B'] / med['A']:.4f}; median peak force A {rows['A'][0]['peak_force_N_median']:.6f} N, B {rows['B'][0]['peak_force_N_median']:.6f} N"
     )
+    out = {"dt": dt, "median": med, "runs": rows}
+    if args.probe_radius_mm:
+        print(f"B with a {args.probe_radius_mm:g} mm sphere, E {args.youngs_modulus_kpa:g} kPa, dt {dt_sphere * 1e3:g} ms:", flush=True)
+        sphere_rows = []
+        for i in range(args.alternations):
+            sphere_rows.append(run_side(ROOT, args, dt_sphere, sphere=True))
+            print(f"| {i + 1} | | {sphere_rows[-1]['region_steps_per_s']:.4e} | |", flush=True)
+        med["B_sphere"] = statistics.median(r["region_steps_per_s"] for r in sphere_rows)
+        print(f"median region-steps/s: B sphere {med['B_sphere']:.4e} ({sphere_rows[0]['kernel']}), "
+              f"{med['B_sphere'] / med['B']:.4f} x B's paper probe; median peak force {sphere_rows[0]['peak_force_N_median']:.6f} N")
+        out.update(dt_sphere=dt_sphere, runs_sphere=sphere_rows)
     if args.json:
-        args.json.write_text(json.dumps({"dt": dt, "median": med, "runs": rows}, indent=1) + "\n")
+        args.json.write_text(json.dumps(out, indent=1) + "\n")
 
 
 if __name__ == "__main__":

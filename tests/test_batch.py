@@ -9,6 +9,7 @@ from almsdm_warp import Region
 from almsdm_warp.batch.batch_palpation import BatchPalpation
 from almsdm_warp.protocol.palpation import Palpation
 from conftest import SCENES, load_cached
+from test_probe_sphere import anchor_bed  # noqa: F401 (a fixture: the Winkler bed)
 
 SEEDS = [0, 17, 311, 500, 693, 1001]
 SHORT = dict(depth=0.01, ramp=0.05, hold=0.05, settle=0.1)  # 200 steps: ramp, hold, release, settle
@@ -144,3 +145,122 @@ def test_batch_fast_kernel_same_bits_with_fewer_threads_than_free_vertices(stoma
 def test_batch_rejects_unknown_kernel(stomach):
     with pytest.raises(ValueError, match="unknown kernel 'entries'"):
         BatchPalpation(stomach, rings=2, device="cpu", kernel="entries")
+
+
+# -- the sphere, supports and the material model --------------------------------------------------
+MATERIAL = dict(youngs_modulus=5e3, thickness=0.003, foundation=1e6, damping_ratio=0.5)
+"""A membrane on a foundation (tissue/material.py): every spring, anchor, damper and mass from E, nu, rho."""
+SPHERE_PRESS = dict(depth=0.005, ramp=0.05, hold=0.05, settle=0.1)
+DT = 5e-4
+"""Under the critical step of these regions: one substep, so that a batch's steps are Palpation's frames."""
+
+
+@pytest.fixture(scope="module")
+def supported(stomach):
+    """(material, support plane [m], contacts above it whose regions reach below it)."""
+    from almsdm_warp.tissue.material import Material
+
+    z = float(np.percentile(stomach.vertices[:, 2], 20))
+    order = np.argsort(stomach.vertices[:, 2])
+    return Material(**MATERIAL), z, [int(v) for v in order[[300, 700, 1000]]]
+
+
+def _sphere_batch(stomach, supported, device, radius=0.004, **kw):
+    material, z, contacts = supported
+    return BatchPalpation(stomach, material, rings=3, device=device, probe_radius=radius, fixed_below=z, dt=DT, **kw).touch(contacts)
+
+
+@pytest.mark.parametrize("kernel,integrator,radius", [("exact", "explicit", 0.004), ("fast", "explicit", 0.004),
+                                                      (None, "implicit", 0.004), ("exact", "explicit", 0.0)])
+def test_batch_sphere_supports_material_equal_palpation(device, stomach, supported, kernel, integrator, radius):
+    # radius 0: the paper's driven vertex on the same material and supports
+    material, z, contacts = supported
+    bp = _sphere_batch(stomach, supported, device, radius, kernel=kernel, integrator=integrator)
+    res = bp.press(**SPHERE_PRESS)
+    held = stomach.vertices[:, 2] < z
+    assert bp.substeps == 1 and any(held[bp.region(b)].any() for b in range(len(contacts)))
+    for b, v in enumerate(contacts):
+        pal = Palpation(stomach, material, rings=3, device=device, integrator=integrator, probe_radius=radius, fixed_below=z, dt=DT)
+        pal.touch(v)
+        ref = pal.press(**SPHERE_PRESS)
+        # the same region and free set (supported vertices moved after the free ones, as the solver has them)
+        np.testing.assert_array_equal(bp.region(b)[: bp.free_vertex_counts[b]], pal.solver.free_vertex.numpy()[: pal.solver.free_count])
+        got = (res.peak_force[b], res.hold_force[b], res.recovery_error[b] * 1e3)
+        want = (ref.peak_force_N, ref.force[ref.release_step - 1], ref.recovery_error_mm)
+        if kernel == "fast":  # an approximate reciprocal square root, the contact sum in another order
+            np.testing.assert_allclose(got[:2], want[:2], rtol=5e-6)
+            np.testing.assert_allclose(got[2], want[2], rtol=1e-2, atol=2e-5)
+        elif device == "cpu":  # the one-palpation loops, in the same order: the same bits
+            assert got == want
+        else:
+            np.testing.assert_allclose(got, want, rtol=2e-6, atol=1e-9)
+    assert np.all(res.peak_force > 0.05)
+
+
+def test_batch_supports_never_move(device, stomach, supported):
+    material, z, contacts = supported
+    bp = _sphere_batch(stomach, supported, device)
+    bp.press(**SPHERE_PRESS)
+    q = bp.q_state.numpy()
+    rest = stomach.vertices.astype(np.float32)
+    moved = 0
+    for b in range(len(contacts)):
+        region = bp.region(b)
+        held = stomach.vertices[region, 2] < z
+        assert not held[: bp.free_vertex_counts[b]].any()
+        local = np.flatnonzero(held)
+        np.testing.assert_array_equal(q[b, local], rest[region[local]])
+        moved += np.count_nonzero(np.any(q[b, : bp.free_vertex_counts[b]] != rest[region[: bp.free_vertex_counts[b]]], axis=1))
+    assert moved > 0
+
+
+def test_batch_sphere_patches_are_palpations(stomach, supported):
+    from almsdm_warp.batch.batch_palpation import sphere_patches
+
+    contacts = [0, 17, 311, 500, 693, 1001]
+    pal = Palpation(stomach, rings=2, device="cpu", probe_radius=0.006)
+    offsets, ids = sphere_patches(pal.model, np.array(contacts), 0.006, 0.008, chunk=4)  # chunks of 4: two of them
+    for b, v in enumerate(contacts):
+        np.testing.assert_array_equal(ids[offsets[b] : offsets[b + 1]], pal.sphere_patch(v, 0.008))
+
+
+def test_batch_sphere_on_anchors_is_winklers_foundation(device, anchor_bed):
+    # the closed form of tests/test_probe_sphere.py, two palpations at the same spot in one batch
+    from test_probe_sphere import DEPTH, R, anchor_references
+
+    mesh, tissue, area, centre = anchor_bed
+    bp = BatchPalpation(mesh, tissue, rings=2, device=device, anchor_scale=area, probe_radius=R).touch([centre, centre])
+    res = bp.press(DEPTH, ramp=0.05, hold=0.1, settle=0.002)
+    winkler, radial = anchor_references(R, DEPTH)
+    np.testing.assert_allclose(res.hold_force, radial, rtol=2e-3)
+    np.testing.assert_allclose(res.hold_force, winkler, rtol=0.03)
+
+
+def test_batch_sphere_and_support_errors(stomach, supported):
+    material, z, contacts = supported
+    with pytest.raises(ValueError, match="probe_radius must be >= 0"):
+        BatchPalpation(stomach, rings=2, device="cpu", probe_radius=-0.001)
+    low = int(np.argmin(stomach.vertices[:, 2]))
+    with pytest.raises(ValueError, match=f"vertex {low} \\(palpation 1\\) is held by the support"):
+        BatchPalpation(stomach, rings=2, device="cpu", fixed_below=z).touch([contacts[0], low])
+    bp = BatchPalpation(stomach, rings=2, device="cpu", probe_radius=0.0001).touch(contacts[:1])
+    with pytest.raises(ValueError, match="not less than its radius"):
+        bp.press(depth=0.01, ramp=0.01, hold=0.0, settle=0.01)
+
+
+def test_sweep_with_sphere_supports_and_material(tmp_path, stomach, supported, capsys):
+    # the command line's sweep presses what a batch presses (the same bits on the CPU); no supported point
+    from almsdm_warp.batch.sweep import read_table
+    from almsdm_warp.cli.main import main
+
+    material, z, _ = supported
+    out = tmp_path / "sweep.csv"
+    flags = ["--youngs-modulus-kpa", "5", "--thickness-mm", "3", "--foundation-kpa-per-mm", "1", "--damping-ratio", "0.5"]
+    assert main(["sweep", "--out", str(out), "--points", "10", "--rings", "3", "--probe-radius-mm", "4", "--fixed-below-mm",
+                 f"{z * 1e3!r}", "--depth-mm", "5", "--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.1", *flags]) == 0
+    table = read_table(out)
+    assert 0 < len(table["vertex"]) < 10 and np.all(stomach.vertices[table["vertex"], 2] >= z)
+    res = BatchPalpation(stomach, material, rings=3, device="cpu", probe_radius=0.004, fixed_below=z).touch(table["vertex"]).press(**SPHERE_PRESS)
+    np.testing.assert_array_equal(table["peak_force_N"], res.peak_force)
+    assert main(["sweep", "--out", str(tmp_path / "x.csv"), "--rings", "auto", "--probe-radius-mm", "4"]) == 2
+    assert "needs a ring count" in capsys.readouterr().err

@@ -17,14 +17,14 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import check_vertex
-from ..kernels.arrays import BatchPress, BatchRegionArrays, struct_from
+from ..kernels.arrays import BatchPress, BatchRegionArrays, BatchSphere, struct_from
 from ..kernels import batch_press as bk
 from ..kernels.block_cg import CGScratch
 from ..kernels import batch_press_fast as bkf
 from ..kernels import batch_press_implicit as bki
 from ..kernels import batch_rings as br
 from ..checks import LIMITS, fixed_substeps, substeps_for
-from ..protocol.palpation import SimulationDiverged, force_bound
+from ..protocol.palpation import PATCH_DEPTH, SimulationDiverged, check_probe_radius, force_bound
 from ..sim.model import Model
 from ..region.region import check_rings
 
@@ -36,6 +36,29 @@ BATCH_INTEGRATORS = ("explicit", "implicit")
 
 def _pow2(n: int, minimum: int = 1) -> int:
     return max(minimum, 1 << max(int(n) - 1, 0).bit_length())
+
+
+def sphere_patches(model, vertices, radius: float, depth: float, chunk: int = 1024):
+    """Each contact's sphere patch as CSR (offsets [B + 1], sorted vertex ids), by Palpation.sphere_patch's
+    rule, vectorised: the surface vertices within sqrt(2 R d) plus the mesh's longest edge of the
+    contact, facing the probe (rest normals within 90 degrees of the contact's), and the contact itself."""
+    mesh = model.mesh
+    n = mesh.vertex_count
+    surface = np.zeros(n, dtype=bool)
+    surface[mesh.surface_vertices] = True
+    normals = model.vertex_normal_rest
+    reach = math.sqrt(2.0 * radius * max(float(depth), 0.0)) + float(mesh.edge_rest_length.max(initial=0.0))
+    counts, ids = [], []
+    for begin in range(0, len(vertices), chunk):
+        v = vertices[begin : begin + chunk]
+        near = np.linalg.norm(mesh.vertices[None, :, :] - mesh.vertices[v][:, None, :], axis=2) <= reach
+        mask = near & (normals[v] @ normals.T > 0.0) & surface[None, :]
+        mask[np.arange(len(v)), v] = True
+        rows, cols = np.nonzero(mask)
+        counts.append(np.bincount(rows, minlength=len(v)))
+        ids.append(cols)
+    offsets = np.concatenate([[0], np.cumsum(np.concatenate(counts))])
+    return offsets.astype(np.int32), np.concatenate(ids).astype(np.int32)
 
 
 @dataclass
@@ -117,20 +140,32 @@ class BatchPalpation:
     vertices, 32..256).
     capacity: first guess of a region's vertex count (default: twice a regular mesh's); a build
     that overflows it is redone with twice the capacity.
-    Model keywords (edge_scale, anchor_scale) make a lesion; or pass a ready `model`.
+    probe_radius [m]: 0, the paper's probe (each contact vertex driven); > 0, a rigid sphere in
+    frictionless one-sided contact with every free surface vertex it would contain, each region
+    grown from the patch the sphere covers at the press's depth (Palpation's rule); the feedback
+    force is the sum of the contact reactions.
+    Model keywords (edge_scale, anchor_scale: a lesion; fixed_below [m]: vertices with z below it are
+    supported, left out of every free set, as Palpation does); or pass a ready `model`.
     """
 
     def __init__(
         self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
         kernel=None, threads=None, capacity=None,
-        cg_max_iterations=200, cg_tolerance=1e-6, substeps="auto", **model_kw,
+        cg_max_iterations=200, cg_tolerance=1e-6, substeps="auto", probe_radius=0.0, **model_kw,
     ):
+        self.probe_radius = check_probe_radius(probe_radius)
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
-        if self.model.support_count:
-            # the batch kernels integrate every region vertex but the outer ring: a support would move
-            raise ValueError(f"BatchPalpation does not hold supports yet: the model fixes {self.model.support_count} "
-                             f"vertices below a plane; press them one at a time with Palpation")
         self.device = self.model.device
+        held = self.model.support_mask if self.model.support_count else np.zeros(1, dtype=bool)
+        self.support = wp.array(held.astype(np.int32), dtype=wp.int32, device=self.device)
+        """1 for each supported mesh vertex (one 0 where none is), int32: the region build leaves them out of the free set."""
+        surface = np.zeros(max(self.model.particle_count, 1), dtype=np.int32)
+        if self.probe_radius > 0:
+            surface[self.model.mesh.surface_vertices] = 1
+        self.probe_surface = wp.array(surface, dtype=wp.int32, device=self.device)
+        """1 for each mesh vertex the sphere may touch (a surface vertex), int32."""
+        self.patch_depth = None
+        """Depth [m] the sphere's patches (each region's ring 0) were sized for; None: no sphere."""
         self.mesh = self.model.mesh
         self.rings = check_rings(rings)
         if self.rings < 1:
@@ -161,11 +196,18 @@ class BatchPalpation:
         self._max_degree = int(np.diff(offsets).max(initial=1))
 
     # -- regions -------------------------------------------------------------------------------
-    def touch(self, vertices) -> "BatchPalpation":
-        """Put a probe on each of `vertices` and build their regions (one launch, on the device)."""
+    def touch(self, vertices, depth=None) -> "BatchPalpation":
+        """Put a probe on each of `vertices` and build their regions (one launch, on the device). With
+        a sphere, each region's ring 0 is the patch it covers pressed `depth` [m] deep (default PATCH_DEPTH)."""
         self.vertices = self._checked_vertices(vertices)
         self.batch_size = len(self.vertices)
-        self.regions = self._build_regions(self.vertices)
+        if self.probe_radius > 0:
+            self.patch_depth = PATCH_DEPTH if depth is None else float(depth)
+            offsets, seeds = sphere_patches(self.model, self.vertices, self.probe_radius, self.patch_depth)
+        else:
+            offsets, seeds = np.arange(self.batch_size + 1, dtype=np.int32), self.vertices.astype(np.int32)
+        self.regions = self._build_regions(offsets, seeds)
+        self._find_contacts()
         self._choose_kernel()
         self.plan_substeps()
         self._allocate_states()
@@ -208,18 +250,40 @@ class BatchPalpation:
         bad = np.flatnonzero((verts < 0) | (verts >= self.mesh.vertex_count))
         if len(bad):
             check_vertex(self.mesh, int(verts[bad[0]]), f"contact vertex (palpation {bad[0]})")
+        if self.model.support_count:
+            held = np.flatnonzero(self.model.support_mask[verts])
+            if len(held):
+                raise ValueError(f"vertex {int(verts[held[0]])} (palpation {held[0]}) is held by the support "
+                                 f"(below the fixed plane): the probe cannot move it")
         return verts.astype(np.int64)
 
-    def _build_regions(self, verts) -> BatchRegions:
+    def _find_contacts(self) -> None:
+        # each contact vertex's local index (ring 0 is sorted, so a sphere's contact may be anywhere in it)
+        rv = self.regions.region_vertex.numpy()
+        local = np.argmax(rv == self.vertices[:, None], axis=1).astype(np.int32)
+        self.contact_local = wp.array(local, dtype=wp.int32, device=self.device)
+        """Local index of each palpation's contact vertex in its region, int32 [B]."""
+        self._contact_local = local
+        self.sphere_arrays = BatchSphere()
+        self.sphere_arrays.radius = self.probe_radius
+        self.sphere_arrays.radius64 = self.probe_radius
+        self.sphere_arrays.probe_surface = self.probe_surface
+        self.sphere_arrays.contact_local = self.contact_local
+
+    def _build_regions(self, seed_offsets, seeds) -> BatchRegions:
         # build at a guessed capacity; a build that overflows it is redone with twice the capacity
         n, k = self.mesh.vertex_count, self.rings
-        seeds = wp.array(verts.astype(np.int32), dtype=wp.int32, device=self.device)
+        patch = int(np.diff(seed_offsets).max(initial=1))
+        seed_offsets = wp.array(seed_offsets, dtype=wp.int32, device=self.device)
+        seeds = wp.array(seeds, dtype=wp.int32, device=self.device)
         cv = _pow2(2 * (3 * k * (k + 1) + 1), 32) if self._capacity is None else int(self._capacity)
+        if self._capacity is None and patch > 1:  # a patch grows by about its perimeter a ring
+            cv = _pow2(2 * (patch + 4 * k * (int(math.sqrt(patch)) + k)), 32)
         # CSR entries of the free vertices: ~3.6 per region vertex on a surface (60% free, degree 6)
         ce = _pow2(cv * min(self._max_degree, 4), 8)
         while True:
-            regions = BatchRegions(len(verts), cv, ce, k, self.device)
-            br.build_regions(self.model.dmesh, seeds, k, regions)
+            regions = BatchRegions(len(seed_offsets) - 1, cv, ce, k, self.device)
+            br.build_regions(self.model.dmesh, seed_offsets, seeds, k, self.support, regions)
             status = regions.status.numpy()
             if not np.any(status):
                 return regions
@@ -290,7 +354,7 @@ class BatchPalpation:
         r16 = lambda x: -(-max(int(x), 1) // 16) * 16
         cv, cf, ce, cs = r16(max_vertices), r16(max_free), r16(max_entries), r16(max_springs)
         # CSR offsets and codes are int16 in shared memory
-        if per_thread > 16 or max(cv, ce) > 32767 or bkf.shared_bytes_fast(cv, cf, cs, self._max_degree) > bk.SHARED_BYTES_MAX:
+        if per_thread > 16 or max(cv, ce) > 32767 or bkf.shared_bytes_fast(cv, cf, cs, self._max_degree, threads if self.probe_radius > 0 else 0) > bk.SHARED_BYTES_MAX:
             return None
         return threads, max(per_thread, 1), cv, cf, cs, self._max_degree
 
@@ -315,6 +379,14 @@ class BatchPalpation:
         if self.regions is None:
             raise RuntimeError("touch(vertices) first: the batch has no contacts")
         ramp_n, press_n, total = self.schedule(depth, ramp, hold, settle)
+        if self.probe_radius > 0:
+            if self.patch_depth != depth:
+                self.touch(self.vertices, depth)  # the patches the sphere covers at this depth
+                ramp_n, press_n, total = self.schedule(depth, ramp, hold, settle)
+            travel = depth / max(ramp_n, 1)
+            if travel >= self.probe_radius:
+                raise ValueError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its radius "
+                                 f"{self.probe_radius * 1e3:g} mm: it would pass through vertices; ramp longer or use a smaller dt")
         self.depth = float(depth)
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
         self.press_arrays = struct_from(BatchPress, self)
@@ -354,7 +426,7 @@ class BatchPalpation:
         """Wait for the press and read it back (the force magnitudes as Palpation's host code takes them)."""
         peak = self.peak_reaction.numpy()
         hold = self.hold_reaction.numpy()
-        q0 = self.q_state.numpy()[:, 0, :]
+        q0 = self.q_state.numpy()[np.arange(self.batch_size), self._contact_local, :]
         rest = self.mesh.vertices[self.vertices].astype(np.float32).astype(np.float64)
         # PressResult's expressions, vectorized: float32 components squared in float64 (Python's
         # x ** 2 and NumPy's agree), summed left to right; the norm of the float64 difference

@@ -103,6 +103,10 @@ class SweepPlan:
     integrator: str = "explicit"
     tol: float | None = None
     """--rings auto: the tolerance [m] the ring counts were sized to (for the record), else None."""
+    probe_radius: float = 0.0
+    """The spherical probe's radius [m] (BatchPalpation's probe_radius); 0: the paper's probe."""
+    fixed_below: float | None = None
+    """Support plane [m] (Model's fixed_below), or None."""
 
     @property
     def point_rings(self) -> np.ndarray:
@@ -115,6 +119,8 @@ class SweepPlan:
         h = hashlib.sha256()
         scalars = ["table v2 (rings column)", self.mesh.path, self.mesh.vertex_count, self.dt, self.depth]
         scalars += [self.ramp, self.hold, self.settle, self.chunk, self.integrator, self.tol]
+        if self.probe_radius or self.fixed_below is not None:
+            scalars += [self.probe_radius, self.fixed_below]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
         for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings):
             if a is not None:
@@ -133,7 +139,8 @@ class SweepPlan:
     def model(self, device):
         from ..sim.model import Model
 
-        return Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale)
+        return Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale,
+                     fixed_below=self.fixed_below)
 
     def columns(self, begin: int, end: int, results) -> dict:
         """The output columns of points begin..end from [(indices in the chunk, BatchResult)], one per ring count."""
@@ -163,7 +170,8 @@ class RingBatches:
 
         if rings not in self._batches:
             p = self.plan
-            self._batches[rings] = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator)
+            self._batches[rings] = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator,
+                                                  probe_radius=p.probe_radius)
         return self._batches[rings]
 
 
@@ -175,7 +183,7 @@ def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_
     for k in np.unique(rings):
         idx = np.flatnonzero(rings == k)
         batch = batches.get(int(k))
-        batch.touch(plan.vertices[begin:end][idx])
+        batch.touch(plan.vertices[begin:end][idx], plan.depth)
         # the progress counts frames: a launch of `steps` substeps advances it by steps / substeps frames each
         launch = None if on_launch is None else (lambda steps, n=len(idx), b=batch: on_launch(steps * n // b.substeps))
         batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=launch)

@@ -44,7 +44,8 @@ def add_parser(sub) -> None:
     p.add_argument("--png", default=None, metavar="PATH", help="also draw the organ coloured by stiffness (matplotlib)")
     p.add_argument("--max-region-steps", type=number_arg("> 0"), default=LIMITS["region_steps"], metavar="N", help=f"refuse a sweep that would take more region-steps (points x frames x substeps) than N (default {LIMITS['region_steps']:g})")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
-    add_tissue_args(p, supports=False)
+    p.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
+    add_tissue_args(p)
     add_dataset_arg(p)
     p.set_defaults(func=cmd_sweep)
 
@@ -114,32 +115,42 @@ def _plan(args, devices):
     Returns (plan, scene, the rings in words)."""
     from ..batch.sweep import SweepPlan, sample_points
     from ..batch.sweep_auto import rings_summary
+    from ..protocol.schedule import PressSchedule
     from ..scene.loader import resolve_scene_or_mesh
 
     scene = resolve_scene_or_mesh(args.scene, scale_mm=args.scale_mm or 1.0)
     mesh = scene.load_mesh()
     scene = scene_with_tissue_args(args, scene, mesh)
-    if scene.fixed_below is not None:  # the batched kernels step every region vertex but its outer ring
-        raise InputError(f"the scene {scene.name!r} has supports ([support] fixed_below_mm), which the batched sweep "
-                         f"does not hold yet; press points one at a time with almsdm palpate")
     print_notes(mesh)
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings
     tol = auto_tol(args, rings, scene)
+    radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
+    if radius > 0 and tol is not None:
+        raise InputError("a spherical probe (--probe-radius-mm, [probe] radius_mm) needs a ring count: --rings auto sizes the paper's probe's regions")
     depth = press.depth if args.depth_mm is None else args.depth_mm * 1e-3
     ramp = press.ramp if args.ramp_s is None else args.ramp_s
     hold = press.hold if args.hold_s is None else args.hold_s
     settle = press.settle if args.settle_s is None else args.settle_s
     dt = 1e-3 if args.dt_ms is None else args.dt_ms * 1e-3
     frames = check_protocol(depth, dt, ramp, hold, settle, 1, float(np.ptp(mesh.vertices, axis=0).max()))
+    travel = depth / PressSchedule.from_times(dt, ramp, hold, settle).ramp_n
+    if radius > 0 and travel >= radius:
+        raise InputError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its "
+                         f"radius {radius * 1e3:g} mm: it would pass through vertices; ramp longer or use a smaller --dt-ms")
     check_limit(args.points, "points", "--points")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
     points, vertices = sample_points(mesh, args.points)
+    if scene.fixed_below is not None:  # a supported vertex cannot be pressed
+        keep = mesh.vertices[vertices, 2] >= scene.fixed_below
+        if not keep.any():
+            raise InputError(f"every sampled point is held by the support (z below {scene.fixed_below * 1e3:g} mm)")
+        points, vertices = points[keep], vertices[keep]
     cuda = devices[0] != "cpu"
     chunk = args.chunk or (64 if not cuda else min(-(-len(vertices) // len(devices)), 16384))
     plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, dt, depth, ramp, hold, settle, points,
-                     vertices, chunk, args.integrator, tol)
+                     vertices, chunk, args.integrator, tol, radius, scene.fixed_below)
     print(mesh.summary())
     substeps = _substeps(plan)
     cost = check_region_steps(len(vertices), frames, substeps, args.max_region_steps)
