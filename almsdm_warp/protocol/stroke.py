@@ -25,7 +25,8 @@ import numpy as np
 import warp as wp
 
 from ..kernels.region_state import reset_vertices_left_behind
-from ..kernels.stroke_contact import constrain_spheres
+from ..kernels.arrays import RegionArrays, struct_from
+from ..kernels.stroke_contact import StrokeSpheres, constrain_spheres
 from ..region.region import Region
 from .palpation import GLOBAL_MODELS, Palpation, SimulationDiverged, check_probe_radius, replayer
 
@@ -59,6 +60,7 @@ class _Spheres:
         else:  # pinned host buffers, copied inside the captured graph
             self.pinned = {n: wp.zeros(count, dtype=getattr(self, n).dtype, device="cpu", pinned=True) for n in names}
             self.host = {n: a.numpy() for n, a in self.pinned.items()}
+        self.arrays = struct_from(StrokeSpheres, self)
 
     def copy_in(self):
         if not self.cpu:
@@ -130,8 +132,10 @@ class ProbeStroke(Palpation):
         if self.region is None:
             self._ring_of = np.zeros(n, dtype=np.int32)
             self._near_ring = 1 << 30
-            every = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
-            self._region_arrays = (every, n, wp.zeros(n, dtype=wp.int32, device=self.device))
+            every = RegionArrays()  # the whole mesh, ring 0
+            every.region_vertex = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
+            every.vertex_ring = wp.zeros(n, dtype=wp.int32, device=self.device)
+            self._region_arrays = (every, n)
             self.vertex = int(surface[0])
         else:
             self._ring_of = np.full(n, -1, dtype=np.int32)
@@ -245,7 +249,7 @@ class ProbeStroke(Palpation):
         self.vertex = int(region.seed)
         self._ring_of = self.host(region.vertex_ring)
         self._near_ring = max(region.outer_ring - self.margin, 1)
-        self._region_arrays = (region.region_vertex, region.vertex_count, region.vertex_ring)
+        self._region_arrays = (region.arrays, region.vertex_count)
         self._near[:] = 0
         self._fresh = True
         self._pending = None
@@ -295,13 +299,13 @@ class ProbeStroke(Palpation):
     def _launch_step(self, a, b):
         sp = self.spheres
         sp.copy_in()
-        region_vertex, count, ring = self._region_arrays
+        region, count = self._region_arrays
         solver = self.solver
         h = self.dt / self.substeps
         for _ in range(self.substeps):
             solver.step(a, b, self.control, h)
-            constrain_spheres(self.model, region_vertex, count, solver.vertex_local, solver.free_count, ring,
-                              self._near_ring, self.control.probe_surface, sp, self.radius, self.guard, h, a, b)
+            constrain_spheres(self.model, region, count, solver.vertex_local, solver.free_count, self._near_ring,
+                              self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b)
             a, b = b, a
         sp.copy_out()
 
