@@ -93,7 +93,7 @@ def read_path(path) -> tuple[np.ndarray, np.ndarray]:
     back = np.flatnonzero(np.diff(data[:, 0]) <= 0)
     if len(back):
         i = back[0] + 1
-        raise InputError(f"{p}: line {values[i][0]}: t_s must increase, got {data[i, 0]!r} after {data[i - 1, 0]!r}")
+        raise InputError(f"{p}: line {values[i][0]}: t_s must increase, got {float(data[i, 0])!r} after {float(data[i - 1, 0])!r}")
     return data[:, 0], data[:, 1:] * 1e-3
 
 
