@@ -1,0 +1,348 @@
+"""A probe that moves: rigid spheres driven along a path, the local region following their contact.
+
+`ProbeStroke.step(centres)` puts each sphere's centre where the path says and returns the tissue's
+force on each. Contact is found on the device, from the current surface, by one pass over the
+region after each integrator step (kernels/stroke_contact.py), which also flags a sphere that
+comes within `guard` of the region's outer rings. The region is then rebuilt, between two steps,
+as `rings` rings around the patches the spheres may cover soon (the surface vertices at rest
+within `radius + lead` of each centre) and every vertex still moving (the trailing wake: its
+displacement from rest above `tol`, or its speed above `tol` per `WAKE_TIME`), without touching
+the state: a vertex in both regions keeps its position and velocity, a vertex left behind is put at
+rest only once it is within `tol` of it (so no visible pop). `lead` is the hysteresis: the sphere
+slides about `lead` between two relocations.
+
+The explicit integrator's substeps are planned once, from the critical step of the whole mesh's
+free vertices, which bounds every region's (a region's stiffness is a principal submatrix of the
+mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+import warp as wp
+
+from ..kernels.region_state import reset_vertices_left_behind
+from ..kernels.stroke_contact import constrain_spheres
+from .palpation import GLOBAL_MODELS, Palpation, SimulationDiverged, check_probe_radius
+
+WAKE_TIME = 0.01
+"""[s] A vertex faster than tol / WAKE_TIME is still moving: it stays free when the region moves."""
+
+
+class StrokePath(NamedTuple):
+    """A probe's path: times [s], shape [n]; sphere centres [m], shape [n, 3]; phase of each step
+    (0 touch-down and press, 1 slide, 2 lift), shape [n], int."""
+
+    t: np.ndarray
+    centre: np.ndarray
+    phase: np.ndarray
+
+
+class _Spheres:
+    """The spheres' centres [m] in, reactions [N], contact counts and near-the-edge flags out, with host views."""
+
+    def __init__(self, count, device):
+        self.count = int(count)
+        d = device
+        self.centre = wp.zeros(count, dtype=wp.vec3, device=d)
+        self.reaction = wp.zeros(count, dtype=wp.vec3, device=d)
+        self.touching = wp.zeros(count, dtype=wp.int32, device=d)
+        self.near_edge = wp.zeros(count, dtype=wp.int32, device=d)
+        self.cpu = wp.get_device(d).is_cpu
+        names = ("centre", "reaction", "touching", "near_edge")
+        if self.cpu:
+            self.host = {n: getattr(self, n).numpy() for n in names}
+        else:  # pinned host buffers, copied inside the captured graph
+            self.pinned = {n: wp.zeros(count, dtype=getattr(self, n).dtype, device="cpu", pinned=True) for n in names}
+            self.host = {n: a.numpy() for n, a in self.pinned.items()}
+
+    def copy_in(self):
+        if not self.cpu:
+            wp.copy(self.centre, self.pinned["centre"])
+
+    def copy_out(self):
+        if not self.cpu:
+            for n in ("reaction", "touching", "near_edge"):
+                wp.copy(self.pinned[n], getattr(self, n))
+
+
+class ProbeStroke(Palpation):
+    """Rigid spheres of `probe_radius` [m] driven along a path over an organ; the region follows them.
+
+    rings: an int (the local model: `rings` rings around the spheres' patches and the wake, the
+    outer one fixed) or "global" (every vertex free, anchored: the reference). probes: how many
+    spheres (two fingers: 2). integrator, dt [s], device, fixed_below [m], tissue, substeps, capture,
+    edge_scale, anchor_scale: as Palpation's. lead [m]: how far beyond its footprint the region is
+    built around a sphere (default: twice the mesh's mean edge), margin: a sphere within `guard`
+    [m] (default: half the mean edge) of a vertex on ring (outer - margin) or beyond moves the
+    region. tol [m]: a vertex left behind goes back to rest once within tol of it.
+
+    step(centres) advances one frame of dt with the spheres at `centres` and returns their forces.
+    """
+
+    def __init__(self, mesh, tissue=None, *, probe_radius, rings=4, integrator="explicit", dt=1e-3, device=None,
+                 fixed_below=None, probes=1, lead=None, margin=2, guard=None, tol=1e-5, capture=True, substeps="auto",
+                 edge_scale=None, anchor_scale=None, **solver_kw):
+        radius = check_probe_radius(probe_radius)
+        if radius <= 0:
+            raise ValueError(f"a stroke drives rigid spheres: probe_radius must be > 0 m, got {probe_radius}")
+        if rings not in ("global",) and rings in GLOBAL_MODELS:
+            raise ValueError(f"rings must be an int >= 1 or 'global', got {rings!r}")
+        if isinstance(probes, bool) or not isinstance(probes, (int, np.integer)) or probes < 1:
+            raise ValueError(f"probes must be an int >= 1, got {probes!r}")
+        for name, value in (("lead", lead), ("guard", guard)):
+            if value is not None and not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a length >= 0 [m], got {value!r}")
+        if isinstance(margin, bool) or not isinstance(margin, (int, np.integer)) or margin < 1:
+            raise ValueError(f"margin must be an int >= 1 (rings), got {margin!r}")
+        if not (math.isfinite(tol) and tol > 0):
+            raise ValueError(f"tol must be a length > 0 [m], got {tol!r}")
+        super().__init__(mesh, tissue, rings=rings, integrator=integrator, dt=dt, device=device, capture=capture,
+                         edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below, substeps=substeps,
+                         **solver_kw)
+        self.radius = radius
+        """The spheres' radius [m] (the Control's own sphere stays off: this class constrains them)."""
+        mean_edge = float(self.mesh.edge_rest_length.mean())
+        self.lead = 2.0 * mean_edge if lead is None else float(lead)
+        self.guard = 0.5 * mean_edge if guard is None else float(guard)
+        self.margin = int(margin)
+        self.tol = float(tol)
+        self.probe_count = int(probes)
+        self.relocations = 0
+        """How many times the region moved (0 for the global model)."""
+        self.spheres = _Spheres(self.probe_count, self.device)
+        self._centre = self.spheres.host["centre"]
+        self._sphere_force = self.spheres.host["reaction"]
+        self._touching = self.spheres.host["touching"]
+        self._near = self.spheres.host["near_edge"]
+        surface = self.mesh.surface_vertices
+        self._surface = surface
+        self._surface_rest = self.mesh.vertices[surface]
+        self._normal = self.model.vertex_normal_rest
+        from scipy.spatial import cKDTree
+
+        self._tree = cKDTree(self._surface_rest)
+        n = self.model.particle_count
+        if self.region is None:
+            self._ring_of = np.zeros(n, dtype=np.int32)
+            self._near_ring = 1 << 30
+            every = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
+            self._region_arrays = (every, n, wp.zeros(n, dtype=wp.int32, device=self.device))
+            self.vertex = int(surface[0])
+        else:
+            self._ring_of = np.full(n, -1, dtype=np.int32)
+            self._near_ring = 1 << 30
+            self._region_arrays = None
+        self._started = False
+
+    # -- the API -------------------------------------------------------------------------------
+    def step(self, centres) -> np.ndarray:
+        """One frame of dt with the spheres' centres at `centres` [m] (shape [probes, 3]; a 3-vector
+        for one probe); returns the tissue's force on each sphere [N], same shape (a new array).
+
+        Raises ValueError for centres of the wrong shape or not finite, SimulationDiverged when a
+        force is not finite or beyond force_bound."""
+        c = np.asarray(centres, dtype=np.float64)
+        single = c.shape == (3,)
+        if single and self.probe_count == 1:
+            c = c.reshape(1, 3)
+        if c.shape != (self.probe_count, 3):
+            raise ValueError(f"centres must have shape ({self.probe_count}, 3) [m]"
+                             f"{' or (3,)' if self.probe_count == 1 else ''}, got {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ValueError(f"centres must be finite [m], got {c.tolist()}")
+        self._centre[:] = c
+        if self.region is not None and self._needs_move(c):
+            self.relocate(c)
+        super().step()
+        f = self._sphere_force.astype(np.float64)
+        total = float(np.abs(f).sum())
+        if not total < self._bound:
+            raise SimulationDiverged(
+                f"the {self.solver.integrator} integrator diverged: the spheres' forces {f.tolist()} N are not finite "
+                f"or more than {self._bound:.3g} N (dt {self.dt * 1e3:g} ms in {self.substeps} substep(s))"
+            )
+        return f[0] if single and self.probe_count == 1 else f
+
+    @property
+    def touching(self) -> np.ndarray:
+        """Vertices each sphere touched in the last step, shape [probes], int (0: lifted off)."""
+        return self._touching.astype(np.int64)
+
+    def region_vertex_ids(self) -> np.ndarray:
+        """Mesh ids of the region's vertices (every vertex for the global model), host copy."""
+        if self.region is None:
+            return np.arange(self.model.particle_count, dtype=np.int32)
+        return self.region.vertices()
+
+    # -- the region follows --------------------------------------------------------------------
+    def _needs_move(self, c) -> bool:
+        if not self._started:
+            return True
+        if self._near.any():
+            return True
+        for p in np.flatnonzero(self._touching == 0):
+            # lifted: a touch-down outside the region's inner rings moves it (the surface there is at rest)
+            d, k = self._tree.query(c[p])
+            if d < self.radius + self.guard:
+                ring = self._ring_of[self._surface[k]]
+                if ring < 0 or ring >= self._near_ring:
+                    return True
+        return False
+
+    def seeds(self, centres) -> np.ndarray:
+        """Ring 0 of the region around `centres`: the surface vertices at rest within radius + lead of a
+        centre, and the vertices of the current region still moving (the wake); at least the nearest
+        surface vertex of each centre."""
+        c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+        near = self._tree.query_ball_point(c, self.radius + self.lead)
+        picked = [self._surface[np.asarray(k, dtype=np.int64)] for k in near]
+        picked.append(self._surface[self._tree.query(c)[1]])
+        if self.region is not None and self.region.vertex_count:
+            verts = self.region.vertices()[: self.region.free_count]
+            q = self.state.particle_q.numpy()[verts]
+            qd = self.state.particle_qd.numpy()[verts]
+            rest = self.mesh.vertices[verts]
+            moving = (np.linalg.norm(q - rest, axis=1) > self.tol) | (np.linalg.norm(qd, axis=1) * WAKE_TIME > self.tol)
+            picked.append(verts[moving])
+        seeds = np.unique(np.concatenate(picked)).astype(np.int32)
+        if self.model.support_count:
+            seeds = seeds[~self.model.support_mask[seeds]]
+        return seeds
+
+    def relocate(self, centres) -> None:
+        """Rebuild the region around `centres` [m] and the wake, keeping every vertex's state (see the module)."""
+        seeds = self.seeds(centres)
+        if len(seeds) == 0:  # every candidate held by the support: nothing there can move
+            seeds = np.asarray([self._surface[self._tree.query(np.asarray(centres).reshape(-1, 3)[0])[1]]], dtype=np.int32)
+        region = self.region
+        old_count = region.vertex_count
+        old_vertex = wp.clone(region.region_vertex[:old_count]) if old_count else None
+        contact = int(seeds[0])
+        region.build_seeds(seeds, self.rings, contact=contact)
+        if old_count:
+            reset_vertices_left_behind(self.model, old_vertex, old_count, region, self.states)
+        self.solver.set_region(region)
+        self.plan_substeps()
+        self.vertex = contact
+        self._ring_of = region.vertex_ring.numpy().copy()
+        self._near_ring = max(region.outer_ring - self.margin, 1)
+        self._region_arrays = (region.region_vertex, region.vertex_count, region.vertex_ring)
+        self._near[:] = 0
+        if self._started:
+            self.relocations += 1
+        self._started = True
+
+    def region_critical_dt(self) -> float:
+        """The critical step [s] of every free vertex of the mesh: a bound under any region's (module doc)."""
+        if not hasattr(self, "_mesh_critical_dt"):
+            free = np.flatnonzero(~self.model.support_mask)
+            self._mesh_critical_dt = self.model.critical_dt(free, anchors=True)
+        return self._mesh_critical_dt
+
+    # -- stepping ------------------------------------------------------------------------------
+    def _launch_step(self, a, b):
+        sp = self.spheres
+        sp.copy_in()
+        region_vertex, count, ring = self._region_arrays
+        solver = self.solver
+        h = self.dt / self.substeps
+        for _ in range(self.substeps):
+            solver.step(a, b, self.control, h)
+            constrain_spheres(self.model, region_vertex, count, solver.vertex_local, solver.free_count, ring,
+                              self._near_ring, self.control.probe_surface, sp, self.radius, self.guard, h, a, b)
+            a, b = b, a
+        sp.copy_out()
+
+    def touch(self, vertex: int, depth: float | None = None) -> None:
+        raise TypeError("a ProbeStroke is driven by its spheres' centres: call step(centres), not touch()")
+
+    def press(self, *args, **kw):
+        raise TypeError("a ProbeStroke is driven by its spheres' centres: call step(centres) along a path (builtin_stroke)")
+
+    press_force = press
+
+
+def builtin_stroke(mesh, probe_radius, depth=8e-3, length=60e-3, speed=20e-3, dt=1e-3, *, vertex=None,
+                   direction=(1.0, 0.0, 0.0), clearance=2e-3, settle=0.0) -> StrokePath:
+    """The built-in stroke: touch down at `vertex` (default the top vertex, region.contact.top_vertex),
+    press `depth` [m] along the inward normal, slide `length` [m] over the surface along `direction`
+    (projected on the tangent plane), lift until `clearance` [m] above it, then hold `settle` [s];
+    at `speed` [m/s] throughout, one centre every `dt` [s].
+
+    The slide's path is the rest surface walked in small steps (each projected back on it); the
+    centre keeps at probe_radius - depth from it along the surface's normal (vertex normals
+    interpolated over the triangle: a smooth path). Returns StrokePath(t, centre, phase).
+    """
+    from ..region.contact import top_vertex
+
+    R = check_probe_radius(probe_radius)
+    for name, value in (("depth", depth), ("length", length), ("speed", speed), ("dt", dt)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be > 0, got {value!r}")
+    if not (math.isfinite(clearance) and clearance >= 0 and math.isfinite(settle) and settle >= 0):
+        raise ValueError(f"clearance and settle must be >= 0, got {clearance!r}, {settle!r}")
+    surface = RestSurface(mesh)
+    v = top_vertex(mesh) if vertex is None else int(vertex)
+    x0, n0 = surface.project(mesh.vertices[v][None, :])
+    # the slide: walk the surface in steps of at most 0.5 mm, then sample it at speed x dt
+    walk = max(int(math.ceil(length / 5e-4)), 1)
+    ds = length / walk
+    t0 = np.asarray(direction, dtype=np.float64)
+    points = [x0[0]]
+    normal = n0[0]
+    for _ in range(walk):
+        tangent = t0 - np.dot(t0, normal) * normal
+        size = np.linalg.norm(tangent)
+        if size < 1e-12:
+            raise ValueError(f"direction {tuple(direction)} is normal to the surface at the contact: no slide along it")
+        x, nn = surface.project((points[-1] + ds * tangent / size)[None, :])
+        points.append(x[0])
+        normal = nn[0]
+    points = np.asarray(points)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    press_n = max(int(round(depth / (speed * dt))), 1)
+    slide_n = max(int(round(length / (speed * dt))), 1)
+    lift_n = max(int(round((depth + clearance) / (speed * dt))), 1)
+    settle_n = int(round(settle / dt))
+    s = np.arange(1, slide_n + 1) * (arc[-1] / slide_n)
+    along = np.stack([np.interp(s, arc, points[:, k]) for k in range(3)], axis=1)
+    xs, ns = surface.project(along)
+    press_d = depth * np.arange(1, press_n + 1) / press_n
+    press = x0 + n0 * (R - press_d[:, None])
+    slide = xs + ns * (R - depth)
+    lift_d = depth - (depth + clearance) * np.arange(1, lift_n + 1) / lift_n
+    lift = xs[-1] + ns[-1] * (R - lift_d[:, None])
+    rest = np.repeat(lift[-1:], settle_n, axis=0)
+    centre = np.concatenate([press, slide, lift, rest])
+    phase = np.concatenate([np.zeros(press_n), np.ones(slide_n), np.full(lift_n + settle_n, 2)]).astype(np.int32)
+    t = np.arange(1, len(centre) + 1) * dt
+    return StrokePath(t, centre, phase)
+
+
+class RestSurface:
+    """A mesh's surface at rest: closest points (region.contact's query) and smooth normals (vertex
+    normals interpolated over the triangle)."""
+
+    def __init__(self, mesh, device="cpu"):
+        from ..region.contact import ContactQuery
+        from ..sim.model import vertex_normals
+
+        self.query = ContactQuery(mesh, device)
+        self.vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        self.triangles = np.asarray(mesh.triangles)
+        self.vertex_normal = vertex_normals(mesh.vertices, mesh.triangles)
+
+    def project(self, points):
+        """(closest points on the surface [m], their unit normals), shapes [k, 3]."""
+        from trimesh.triangles import points_to_barycentric
+
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        hit = self.query(points)
+        tri = self.triangles[hit.face]
+        bary = points_to_barycentric(self.vertices[tri], hit.point)
+        n = np.einsum("kj,kjd->kd", bary, self.vertex_normal[tri])
+        return hit.point, n / np.linalg.norm(n, axis=1, keepdims=True)
