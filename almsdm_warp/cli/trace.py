@@ -27,6 +27,9 @@ COLUMNS = ("t_s", "probe_x_mm", "probe_y_mm", "probe_z_mm", "force_x_N", "force_
 DEVICE_COLUMNS = ("device_x_mm", "device_y_mm", "device_z_mm")
 """With a coupling: the device's position, after COLUMNS (the probe columns are then the tool's)."""
 INT_COLUMNS = ("region_vertices", "relocations")
+DEFAULT_PROBE_RADIUS_MM = 10.0
+"""The sphere's radius [mm] where neither --probe-radius-mm nor the scene gives one (a fingertip; larger than the
+built-in stroke's 8 mm press: a sphere pressed deeper than its radius pokes between the vertices)."""
 MAX_PATH_STEPS = 10_000_000
 """Steps a path may take at dt (about 3 hours at 1 kHz); beyond, its times or dt are a mistake."""
 
@@ -154,7 +157,7 @@ def cmd_trace(args) -> int:
     device = get_device(args.device)
     scene, mesh = _scene(args)
     stroke = _make_stroke(args, scene, mesh, dt, device)
-    t, centre = given if given is not None else _builtin_path(stroke, scene, mesh)
+    t, centre = given if given is not None else _builtin_path(stroke, dt)
     times, centres = resample(t, centre, dt)
     src = args.path_csv or "the built-in stroke"
     print(f"path: {src}, {times[-1] - times[0]:.3g} s in {len(times)} steps of {dt * 1e3:g} ms")
@@ -197,26 +200,42 @@ def _scene(args):
 
 
 def _make_stroke(args, scene, mesh, dt, device):
-    """The path-driven probe (protocol/stroke.py) on the scene, as the flags ask."""
-    from ..protocol.stroke import Stroke
+    """The path-driven probe (protocol.stroke.ProbeStroke) on the scene, as the flags ask."""
+    from ..protocol.stroke import ProbeStroke
 
     rings = scene.rings if args.rings is None else args.rings
     if rings == "auto":
-        raise InputError("almsdm trace takes a ring count or a global model (--rings N, global, global-free), not auto")
-    radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
+        raise InputError("almsdm trace takes a ring count or the global model (--rings N or global), not auto")
+    if rings == "global-free":
+        raise InputError("--rings global-free: a stroke runs on a local region or the anchored global model (--rings global)")
+    radius = _probe_radius(args, scene)
     scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
     try:
-        return Stroke(mesh, scene.tissue, rings=rings, integrator=args.integrator, dt=dt, device=device,
-                      probe_radius=radius, edge_scale=scales[0], anchor_scale=scales[1], fixed_below=scene.fixed_below)
+        return ProbeStroke(mesh, scene.tissue, probe_radius=radius, rings=rings, integrator=args.integrator, dt=dt,
+                           device=device, edge_scale=scales[0], anchor_scale=scales[1], fixed_below=scene.fixed_below)
     except ValueError as exc:  # a parameter the stroke rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
 
 
-def _builtin_path(stroke, scene, mesh):
-    """The built-in stroke on the scene: (t [s], centre [m])."""
+def _probe_radius(args, scene) -> float:
+    """The sphere's radius [m]: --probe-radius-mm, else the scene's, else DEFAULT_PROBE_RADIUS_MM."""
+    if args.probe_radius_mm is not None:
+        if not args.probe_radius_mm > 0:
+            raise InputError(f"--probe-radius-mm must be > 0 for a stroke (a rigid sphere slides), got {args.probe_radius_mm:g}")
+        return args.probe_radius_mm * 1e-3
+    return scene.probe_radius if scene.probe_radius > 0 else DEFAULT_PROBE_RADIUS_MM * 1e-3
+
+
+def _builtin_path(stroke, dt):
+    """The built-in stroke on the scene (protocol.stroke.builtin_stroke: touch down, press 8 mm, slide
+    60 mm at 20 mm/s, lift), starting at rest at t = 0: (t [s], centre [m])."""
     from ..protocol.stroke import builtin_stroke
 
-    return builtin_stroke(stroke)
+    try:
+        path = builtin_stroke(stroke.mesh, stroke.radius, dt=dt)
+    except ValueError as exc:
+        raise InputError(f"the built-in stroke: {exc}") from exc
+    return path.t - path.t[0], path.centre
 
 
 def run_trace(args, stroke, times, centres, coupling) -> dict:
@@ -274,8 +293,7 @@ def _recorder(args, stroke):
         return None
     from ..export.usd import UsdRecorder
 
-    rec = UsdRecorder(args.usd, stroke.palpation, every=args.usd_every, probe_radius=stroke.probe_radius)
-    return rec
+    return UsdRecorder(args.usd, stroke, every=args.usd_every, probe_radius=stroke.radius)
 
 
 def _finish(args, scene, mesh, stroke, columns, src) -> None:
@@ -294,7 +312,7 @@ def _finish(args, scene, mesh, stroke, columns, src) -> None:
     if args.png:
         from ..export.trace_png import plot_trace
 
-        plot_trace(columns, args.png, title=f"{mesh.name}, {stroke.rings} {'rings' if stroke.palpation.region is not None else 'model'}")
+        plot_trace(columns, args.png, title=f"{mesh.name}, {stroke.rings} {'rings' if stroke.region is not None else 'model'}")
         print(f"wrote {args.png}")
     if args.json:
         from ..export.writers import write_output
@@ -305,7 +323,7 @@ def _finish(args, scene, mesh, stroke, columns, src) -> None:
             "mesh": mesh_json(mesh),
             "path": str(src),
             "model": {"rings": stroke.rings, "integrator": args.integrator, "dt_s": args.dt_ms * 1e-3,
-                      "probe_radius_mm": stroke.probe_radius * 1e3},
+                      "probe_radius_mm": stroke.radius * 1e3},
             "coupling": None if args.coupling_k is None else {
                 "stiffness_N_per_mm": args.coupling_k, "damping_Ns_per_m": args.coupling_b, "device_damping_Ns_per_m": args.device_b},
             "rows": len(mag),
