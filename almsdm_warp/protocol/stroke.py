@@ -25,8 +25,10 @@ import numpy as np
 import warp as wp
 
 from ..kernels.region_state import reset_vertices_left_behind
-from ..kernels.stroke_contact import constrain_spheres
-from .palpation import GLOBAL_MODELS, Palpation, SimulationDiverged, check_probe_radius
+from ..kernels.arrays import RegionArrays, struct_from
+from ..kernels.stroke_contact import StrokeSpheres, constrain_spheres
+from ..region.region import Region
+from .palpation import GLOBAL_MODELS, Palpation, SimulationDiverged, check_probe_radius, replayer
 
 WAKE_TIME = 0.01
 """[s] A vertex faster than tol / WAKE_TIME is still moving: it stays free when the region moves."""
@@ -58,6 +60,7 @@ class _Spheres:
         else:  # pinned host buffers, copied inside the captured graph
             self.pinned = {n: wp.zeros(count, dtype=getattr(self, n).dtype, device="cpu", pinned=True) for n in names}
             self.host = {n: a.numpy() for n, a in self.pinned.items()}
+        self.arrays = struct_from(StrokeSpheres, self)
 
     def copy_in(self):
         if not self.cpu:
@@ -129,14 +132,21 @@ class ProbeStroke(Palpation):
         if self.region is None:
             self._ring_of = np.zeros(n, dtype=np.int32)
             self._near_ring = 1 << 30
-            every = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
-            self._region_arrays = (every, n, wp.zeros(n, dtype=wp.int32, device=self.device))
+            every = RegionArrays()  # the whole mesh, ring 0
+            every.region_vertex = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
+            every.vertex_ring = wp.zeros(n, dtype=wp.int32, device=self.device)
+            self._region_arrays = (every, n)
             self.vertex = int(surface[0])
         else:
             self._ring_of = np.full(n, -1, dtype=np.int32)
             self._near_ring = 1 << 30
             self._region_arrays = None
+            self._spare = Region(self.model.dmesh)  # the next region is built here while this one steps
+        self._views = {}
         self._started = False
+        self._pending = None  # a relocation under way: ("seeds", seeds) then ("built", None)
+        self._warm = False  # the first step runs uncaptured: it loads the kernels outside any capture
+        self._fresh = False  # the first step after a relocation runs uncaptured; the next ones capture
 
     # -- the API -------------------------------------------------------------------------------
     def step(self, centres) -> np.ndarray:
@@ -155,9 +165,14 @@ class ProbeStroke(Palpation):
         if not np.all(np.isfinite(c)):
             raise ValueError(f"centres must be finite [m], got {c.tolist()}")
         self._centre[:] = c
-        if self.region is not None and self._needs_move(c):
-            self.relocate(c)
-        super().step()
+        if self.region is not None:
+            if not self._started:
+                self.relocate(c)
+            elif self._pending is not None:
+                self._advance_relocation()
+            elif self._needs_move(c):
+                self._pending = ("seeds", self.seeds(c))
+        self._advance()
         f = self._sphere_force.astype(np.float64)
         total = float(np.abs(f).sum())
         if not total < self._bound:
@@ -180,8 +195,6 @@ class ProbeStroke(Palpation):
 
     # -- the region follows --------------------------------------------------------------------
     def _needs_move(self, c) -> bool:
-        if not self._started:
-            return True
         if self._near.any():
             return True
         for p in np.flatnonzero(self._touching == 0):
@@ -202,9 +215,9 @@ class ProbeStroke(Palpation):
         picked = [self._surface[np.asarray(k, dtype=np.int64)] for k in near]
         picked.append(self._surface[self._tree.query(c)[1]])
         if self.region is not None and self.region.vertex_count:
-            verts = self.region.vertices()[: self.region.free_count]
-            q = self.state.particle_q.numpy()[verts]
-            qd = self.state.particle_qd.numpy()[verts]
+            verts = self.host(self.region.region_vertex)[: self.region.free_count]
+            q = self.host(self.state.particle_q)[verts]
+            qd = self.host(self.state.particle_qd)[verts]
             rest = self.mesh.vertices[verts]
             moving = (np.linalg.norm(q - rest, axis=1) > self.tol) | (np.linalg.norm(qd, axis=1) * WAKE_TIME > self.tol)
             picked.append(verts[moving])
@@ -214,27 +227,44 @@ class ProbeStroke(Palpation):
         return seeds
 
     def relocate(self, centres) -> None:
-        """Rebuild the region around `centres` [m] and the wake, keeping every vertex's state (see the module)."""
-        seeds = self.seeds(centres)
-        if len(seeds) == 0:  # every candidate held by the support: nothing there can move
-            seeds = np.asarray([self._surface[self._tree.query(np.asarray(centres).reshape(-1, 3)[0])[1]]], dtype=np.int32)
-        region = self.region
-        old_count = region.vertex_count
-        old_vertex = wp.clone(region.region_vertex[:old_count]) if old_count else None
-        contact = int(seeds[0])
-        region.build_seeds(seeds, self.rings, contact=contact)
-        if old_count:
-            reset_vertices_left_behind(self.model, old_vertex, old_count, region, self.states)
+        """Rebuild the region around `centres` [m] and the wake now, keeping every vertex's state (see
+        the module). step() spreads the same work over three steps (seeds, build, swap), each under
+        the haptic step's budget."""
+        self._pending = ("seeds", self.seeds(centres))
+        while self._pending is not None:
+            self._advance_relocation()
+
+    def _advance_relocation(self) -> None:
+        stage, seeds = self._pending
+        if stage == "seeds":
+            self._spare.build_seeds(seeds, self.rings, contact=int(seeds[0]))
+            self._pending = ("built", None)
+            return
+        old, region = self.region, self._spare
+        if old.vertex_count:
+            reset_vertices_left_behind(self.model, old.region_vertex, old.vertex_count, region, self.states)
+        self.region, self._spare = region, old
         self.solver.set_region(region)
         self.plan_substeps()
-        self.vertex = contact
-        self._ring_of = region.vertex_ring.numpy().copy()
+        self.vertex = int(region.seed)
+        self._ring_of = self.host(region.vertex_ring)
         self._near_ring = max(region.outer_ring - self.margin, 1)
-        self._region_arrays = (region.region_vertex, region.vertex_count, region.vertex_ring)
+        self._region_arrays = (region.arrays, region.vertex_count)
         self._near[:] = 0
+        self._fresh = True
+        self._pending = None
         if self._started:
             self.relocations += 1
         self._started = True
+
+    def host(self, array) -> np.ndarray:
+        """A host view of a device array: on the CPU one view kept per array (free to read), on CUDA a copy."""
+        if not self._cpu:
+            return array.numpy()
+        view = self._views.get(id(array))
+        if view is None:
+            view = self._views[id(array)] = (array, array.numpy())
+        return view[1]
 
     def region_critical_dt(self) -> float:
         """The critical step [s] of every free vertex of the mesh: a bound under any region's (module doc)."""
@@ -244,16 +274,38 @@ class ProbeStroke(Palpation):
         return self._mesh_critical_dt
 
     # -- stepping ------------------------------------------------------------------------------
+    def _advance(self) -> None:
+        # one frame: replay the graph of the current state, capturing it (one graph a step) when the
+        # region has changed; the first step ever, and the first after a relocation, run uncaptured
+        graphs = self._graphs
+        if graphs is None:
+            graphs = self._graphs = [None, None]
+        i = self._cur
+        replay = graphs[i]
+        if replay is None:
+            if not self.capture or not self._warm or self._fresh:
+                self._launch_step(self.states[i], self.states[1 - i])
+                self._cur ^= self._parity
+                self._warm, self._fresh = True, False
+                if not self._cpu:
+                    wp.synchronize_device(self.device)
+                return
+            with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
+                self._launch_step(self.states[i], self.states[1 - i])
+            replay = graphs[i] = replayer(cap.graph, self.device)
+        self._cur ^= self._parity
+        replay()
+
     def _launch_step(self, a, b):
         sp = self.spheres
         sp.copy_in()
-        region_vertex, count, ring = self._region_arrays
+        region, count = self._region_arrays
         solver = self.solver
         h = self.dt / self.substeps
         for _ in range(self.substeps):
             solver.step(a, b, self.control, h)
-            constrain_spheres(self.model, region_vertex, count, solver.vertex_local, solver.free_count, ring,
-                              self._near_ring, self.control.probe_surface, sp, self.radius, self.guard, h, a, b)
+            constrain_spheres(self.model, region, count, solver.vertex_local, solver.free_count, self._near_ring,
+                              self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b)
             a, b = b, a
         sp.copy_out()
 

@@ -18,6 +18,17 @@ def check_rings(rings) -> int:
     return int(rings)
 
 
+def check_vertices(mesh, vertices) -> np.ndarray:
+    """Vertex ids (any integer sequence) as int32, or check_vertex's error for the first one outside the mesh."""
+    ids = np.asarray(vertices).reshape(-1)
+    if ids.size and not np.issubdtype(ids.dtype, np.integer):
+        return np.asarray([check_vertex(mesh, int(v)) for v in ids.tolist()], dtype=np.int32)
+    bad = np.flatnonzero((ids < 0) | (ids >= mesh.vertex_count))
+    if len(bad):
+        check_vertex(mesh, int(ids[bad[0]]))
+    return ids.astype(np.int32)
+
+
 class Region:
     """A ring region on one device: its vertices, springs, local indices and fixed outer ring.
 
@@ -47,6 +58,8 @@ class Region:
         self.region_edge_local = wp.zeros(max(e, 1), dtype=wp.vec2i, device=d)
         """Local end points (i, j) of each region spring."""
         self.region_count = wp.zeros(1, dtype=wp.int32, device=d)
+        # the ring growth reads the counter after each ring: a view kept on the CPU (no wrapper a read)
+        self._count_view = self.region_count.numpy() if self.device.is_cpu else None
         self.arrays = struct_from(RegionArrays, self)
         """The arrays above as one struct, the argument of the ring kernels (allocated once, never replaced)."""
         # scratch: per-vertex edge counts and their scan; sort buffers (radix sort needs 2x)
@@ -108,7 +121,7 @@ class Region:
         the vertices r hops from the nearest), clearing any old region first. `contact`: the vertex
         the region is read at (`seed`; default the smallest seed), e.g. a spherical probe's contact
         in the middle of its patch."""
-        seeds = np.unique(np.asarray([check_vertex(self.dmesh.mesh, int(s)) for s in seeds], dtype=np.int32))
+        seeds = np.unique(check_vertices(self.dmesh.mesh, seeds))
         if len(seeds) == 0:
             raise ValueError("a region needs at least one seed vertex")
         rings = check_rings(rings)
@@ -154,7 +167,7 @@ class Region:
                 break
             self.rings += 1
             rk.grow_region_ring(dm, self, begin, end, self.rings)
-            new_end = int(self.region_count.numpy()[0])
+            new_end = int(self._count_view[0] if self._count_view is not None else self.region_count.numpy()[0])
             rk.sort_region_ring(self, end, new_end)
             offsets.append(new_end)
         self.ring_offsets = np.asarray(offsets, dtype=np.int64)
