@@ -109,6 +109,14 @@ def test_a_path_file_that_is_not_there_or_not_text_is_exit_2(tmp_path, capsys):
     assert "not a text file" in capsys.readouterr().err
 
 
+def test_a_path_file_is_read_in_metres_its_comments_and_blank_lines_skipped(tmp_path):
+    path = tmp_path / "p.csv"
+    path.write_text("# a stroke\nt_s, x_mm, y_mm, z_mm\n\n0.5,1,2,3\n0.75,-4,5.5,6e1\n")
+    t, c = read_path(path)
+    np.testing.assert_array_equal(t, [0.5, 0.75])
+    np.testing.assert_allclose(c, [[1e-3, 2e-3, 3e-3], [-4e-3, 5.5e-3, 60e-3]])
+
+
 def test_resample_takes_each_step_and_the_last_time():
     t, c = np.array([0.0, 0.0025]), np.array([[0.0, 0.0, 0.0], [0.0025, 0.0, -0.005]])
     times, centres = resample(t, c, 1e-3)
@@ -184,3 +192,22 @@ def test_coupling_flags(tmp_path, top_mm, capsys):
     spring = 0.5 * (tool[-1] - device[-1])  # N/mm x mm
     np.testing.assert_allclose(felt[-1], spring, atol=0.15 * np.abs(spring).max() + 0.02)
     assert felt[-1, 2] > 0.3  # the tool rides above the device: the tissue holds it up
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--rings", "auto"], "unknown value 'auto' (allowed: an integer >= 1 or 'global')"),
+        (["--rings", "global-free"], "unknown value 'global-free'"),
+        (["--probe-radius-mm", "0"], "--probe-radius-mm must be > 0"),
+        (["--usd", "t.txt"], "unknown USD suffix"),
+        (["--out", "t.json"], "unknown table suffix"),
+        (["--coupling-damping-Ns-per-m", "1"], "need --coupling-stiffness-N-per-mm"),
+    ],
+)
+def test_bad_flags_are_one_line_and_exit_2(tmp_path, capsys, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)
+    assert main(["trace", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
+    assert list(tmp_path.iterdir()) == []

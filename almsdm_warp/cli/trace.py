@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .args import GLOBAL_RINGS, add_command, add_integrator_arg, add_probe_radius_arg, add_tissue_args, count_arg, get_device
+from .args import add_command, add_integrator_arg, add_probe_radius_arg, add_tissue_args, count_arg, get_device
 from .args import number_arg, path_arg, print_notes, quiet_warp, rings_arg, scene_with_tissue_args
 
 PATH_COLUMNS = ("t_s", "x_mm", "y_mm", "z_mm")
@@ -41,7 +41,7 @@ def add_parser(sub) -> None:
         "the global model), and write the force at each reported step: " + ", ".join(COLUMNS) + ".")
     p.add_argument("scene", nargs="?", default=None, type=path_arg, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     p.add_argument("--path", dest="path_csv", default=None, type=path_arg, metavar="CSV", help="the sphere centre's path: a header t_s,x_mm,y_mm,z_mm, then rows with t_s increasing (default: the built-in stroke on the scene)")
-    p.add_argument("--rings", type=rings_arg(GLOBAL_RINGS), default=None, metavar="{N,global,global-free}", help="rings of the local region, or the global model (default: the scene's)")
+    p.add_argument("--rings", type=rings_arg(("global",)), default=None, metavar="{N,global}", help="rings of the local region, or the global model, anchored (default: the scene's)")
     add_integrator_arg(p)
     add_probe_radius_arg(p)
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="step [ms] at which the path is sampled (default 1: haptic rate)")
@@ -204,10 +204,9 @@ def _make_stroke(args, scene, mesh, dt, device):
     from ..protocol.stroke import ProbeStroke
 
     rings = scene.rings if args.rings is None else args.rings
-    if rings == "auto":
-        raise InputError("almsdm trace takes a ring count or the global model (--rings N or global), not auto")
-    if rings == "global-free":
-        raise InputError("--rings global-free: a stroke runs on a local region or the anchored global model (--rings global)")
+    if rings == "auto":  # the scene's [region] rings
+        raise InputError(f"the scene {scene.name!r} sizes its region automatically (rings = \"auto\"): almsdm trace "
+                         f"takes a ring count or the global model (--rings N or global)")
     radius = _probe_radius(args, scene)
     scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
     try:

@@ -82,7 +82,7 @@ class VirtualCoupling:
         if not margin > 0.0:
             k_max = 2.0 * (self.device_damping - self.damping) / self.period
             most = f"; at most {k_max:.4g} N/m ({k_max * 1e-3:.4g} N/mm) with this damping" if k_max > 0 else \
-                f"; the coupling damping alone already exceeds the device's"
+                "; the coupling damping alone already exceeds the device's"
             raise ValueError(
                 f"the coupling k_c {self.stiffness:g} N/m, b_c {self.damping:g} N s/m is not passive at T "
                 f"{self.period * 1e3:g} ms with a device damping b {self.device_damping:g} N s/m: passivity needs "
