@@ -11,12 +11,15 @@ around it before the sphere reaches the fixed outer ring.
 
 import warp as wp
 
-from .arrays import RegionArrays, TissueArrays, struct_of
+from .arrays import struct_of
 from .probe_contact import sphere_contact_reaction, sphere_normal
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
+
+_INT = wp.array(dtype=wp.int32)
+_VEC = wp.array(dtype=wp.vec3)
 
 StrokeSpheres = struct_of(
     "StrokeSpheres",
@@ -28,24 +31,23 @@ StrokeSpheres = struct_of(
 
 @wp.kernel
 def constrain_stroke_spheres(
-    region: RegionArrays, vertex_count: int, vertex_local: wp.array(dtype=wp.int32), free_count: int, near_ring: int,
-    surface: wp.array(dtype=wp.int32), tissue: TissueArrays, spheres: StrokeSpheres, probe_count: int,
-    radius: float, guard: float, dt: float,
-    q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3), q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
+    region_vertex: _INT, vertex_count: int, vertex_ring: _INT, near_ring: int, vertex_local: _INT, free_count: int,
+    surface: _INT, particle_mass: wp.array(dtype=wp.float32), spheres: StrokeSpheres, probe_count: int,
+    radius: float, guard: float, dt: float, q_in: _VEC, qd_in: _VEC, q_out: _VEC, qd_out: _VEC,
 ):
     for p in range(probe_count):
         spheres.reaction[p] = wp.vec3(0.0)
         spheres.touching[p] = 0
         spheres.near_edge[p] = 0
     for i in range(vertex_count):
-        v = region.region_vertex[i]
+        v = region_vertex[i]
         if surface[v] == 0:
             continue
         free = vertex_local[v] < free_count
-        outer = region.vertex_ring[v] >= near_ring
+        outer = vertex_ring[v] >= near_ring
         f = wp.vec3(0.0)
         if free:
-            f = tissue.particle_mass[v] * (qd_out[v] - qd_in[v]) / dt  # the internal force of the step
+            f = particle_mass[v] * (qd_out[v] - qd_in[v]) / dt  # the internal force of the step
         for p in range(probe_count):
             c = spheres.centre[p]
             n, l = sphere_normal(q_out[v], c)
@@ -59,16 +61,20 @@ def constrain_stroke_spheres(
                 spheres.touching[p] = spheres.touching[p] + 1
 
 
-def constrain_spheres(model, region_arrays, vertex_count, vertex_local, free_count, near_ring, surface, spheres, count,
-                      radius, guard, dt, state_in, state_out):
+def constrain_spheres(model, region_vertex, vertex_count, vertex_ring, near_ring, vertex_local, free_count, surface, spheres,
+                      count, radius, guard, dt, state_in, state_out):
     """Put the free surface vertices a step left inside the spheres (`spheres`, a StrokeSpheres of `count`)
-    on their surfaces; write each sphere's reaction [N], contact count and near-the-edge flag.
-    `region_arrays`: the region's RegionArrays (its first `vertex_count` vertices are gone over)."""
+    on their surfaces; write each sphere's reaction [N], contact count and near-the-edge flag. The
+    region's first `vertex_count` vertices (`region_vertex`, ring of each mesh vertex `vertex_ring`) are
+    gone over; those with `vertex_local` < `free_count` move.
+
+    Arrays are direct arguments, not the structs of kernels/arrays.py: a CPU graph capture walks
+    every member of a struct argument, which made capturing this step after a relocation ~3x dearer."""
     wp.launch(
         constrain_stroke_spheres,
         dim=1,
-        inputs=[region_arrays, vertex_count, vertex_local, free_count, near_ring, surface, model.arrays, spheres, count,
-                radius, guard, dt, state_in.particle_q, state_in.particle_qd],
+        inputs=[region_vertex, vertex_count, vertex_ring, near_ring, vertex_local, free_count, surface, model.particle_mass,
+                spheres, count, radius, guard, dt, state_in.particle_q, state_in.particle_qd],
         outputs=[state_out.particle_q, state_out.particle_qd],
         device=model.device,
     )

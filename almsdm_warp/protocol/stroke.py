@@ -24,8 +24,9 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
+from ..kernels import region_state
 from ..kernels.region_state import reset_vertices_left_behind
-from ..kernels.arrays import RegionArrays, struct_from
+from ..kernels.arrays import struct_from
 from ..kernels.stroke_contact import StrokeSpheres, constrain_spheres
 from ..region.region import Region
 from .palpation import GLOBAL_MODELS, Palpation, SimulationDiverged, check_probe_radius, replayer
@@ -132,16 +133,15 @@ class ProbeStroke(Palpation):
         if self.region is None:
             self._ring_of = np.zeros(n, dtype=np.int32)
             self._near_ring = 1 << 30
-            every = RegionArrays()  # the whole mesh, ring 0
-            every.region_vertex = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
-            every.vertex_ring = wp.zeros(n, dtype=wp.int32, device=self.device)
-            self._region_arrays = (every, n)
+            every = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
+            self._region_arrays = (every, n, wp.zeros(n, dtype=wp.int32, device=self.device))  # the whole mesh, ring 0
             self.vertex = int(surface[0])
         else:
             self._ring_of = np.full(n, -1, dtype=np.int32)
             self._near_ring = 1 << 30
             self._region_arrays = None
             self._spare = Region(self.model.dmesh)  # the next region is built here while this one steps
+            wp.load_module(region_state, device=self.device)  # loaded now, not by the first relocation
         self._views = {}
         self._started = False
         self._pending = None  # a relocation under way: ("seeds", seeds) then ("built", None)
@@ -249,7 +249,7 @@ class ProbeStroke(Palpation):
         self.vertex = int(region.seed)
         self._ring_of = self.host(region.vertex_ring)
         self._near_ring = max(region.outer_ring - self.margin, 1)
-        self._region_arrays = (region.arrays, region.vertex_count)
+        self._region_arrays = (region.region_vertex, region.vertex_count, region.vertex_ring)
         self._near[:] = 0
         self._fresh = True
         self._pending = None
@@ -299,12 +299,12 @@ class ProbeStroke(Palpation):
     def _launch_step(self, a, b):
         sp = self.spheres
         sp.copy_in()
-        region, count = self._region_arrays
+        region_vertex, count, ring = self._region_arrays
         solver = self.solver
         h = self.dt / self.substeps
         for _ in range(self.substeps):
             solver.step(a, b, self.control, h)
-            constrain_spheres(self.model, region, count, solver.vertex_local, solver.free_count, self._near_ring,
+            constrain_spheres(self.model, region_vertex, count, ring, self._near_ring, solver.vertex_local, solver.free_count,
                               self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b)
             a, b = b, a
         sp.copy_out()
