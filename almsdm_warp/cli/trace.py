@@ -6,6 +6,10 @@ each step of the simulation (linear interpolation in time) and the region follow
 With a virtual coupling (--coupling-stiffness-N-per-mm), the path is the haptic device's and the
 tool follows it through a spring-damper (protocol/coupling.py); the trace then holds the tool's
 position and the force sent to the device.
+
+Step k moves the probe to the path's point at time t_k and advances the tissue by dt; its row
+holds t_k, that point and the force at the end of the step (a haptic loop's order: read the
+device, step, send the force). The USD stage's time code k is the state after step k.
 """
 
 from __future__ import annotations
