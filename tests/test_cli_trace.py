@@ -88,6 +88,8 @@ def test_local_and_global_models_give_close_forces_on_a_short_stroke(tmp_path, t
         ("t_s,x_mm,y_mm,z_mm\n0,0,0,0\n1,nan,0,0\n", "line 3: x_mm must be finite"),
         ("t_s,x_mm,y_mm,z_mm\n0,0,0,0\n2,0,0,0\n1,0,0,0\n", "line 4: t_s must increase, got 1.0 after 2.0"),
         ("t_s,x_mm,y_mm,z_mm\n0,0,0,0\n0,1,0,0\n", "line 3: t_s must increase, got 0.0 after 0.0"),
+        ("t_s,x_mm,y_mm,z_mm\n0,0,0,1e300\n1,0,0,0\n", "line 2: the point [0.0, 0.0, 1e+300] mm is more than 1e+06 mm"),
+        ("t_s,x_mm,y_mm,z_mm\n0,0,0,0\n0.0005,0,0,0\n", "lasts 0.0005 s, less than one step of --dt-ms 1"),
     ],
 )
 def test_a_bad_path_file_is_one_line_and_exit_2_with_nothing_written(tmp_path, capsys, text, message):
@@ -203,6 +205,8 @@ def test_coupling_flags(tmp_path, top_mm, capsys):
         (["--usd", "t.txt"], "unknown USD suffix"),
         (["--out", "t.json"], "unknown table suffix"),
         (["--coupling-damping-Ns-per-m", "1"], "need --coupling-stiffness-N-per-mm"),
+        (["--dt-ms", "1e-308"], "the built-in stroke lasts 3.9 s: inf steps"),
+        (["--rings", "1000000"], "--rings 1000000 is more than the mesh's 1002 vertices"),
     ],
 )
 def test_bad_flags_are_one_line_and_exit_2(tmp_path, capsys, monkeypatch, args, message):

@@ -19,7 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..checks import check_ring_count
 from ..errors import InputError
+from ..mesh.validate import MAX_COORDINATE_M
 from .args import add_command, add_integrator_arg, add_probe_radius_arg, add_tissue_args, count_arg, get_device
 from .args import number_arg, path_arg, print_notes, quiet_warp, rings_arg, scene_with_tissue_args
 
@@ -34,6 +36,8 @@ INT_COLUMNS = ("region_vertices", "relocations")
 DEFAULT_PROBE_RADIUS_MM = 10.0
 """The sphere's radius [mm] where neither --probe-radius-mm nor the scene gives one (a fingertip; larger than the
 built-in stroke's 8 mm press: a sphere pressed deeper than its radius pokes between the vertices)."""
+BUILTIN_STROKE_S = 3.9
+"""The built-in stroke's duration [s]: 8 mm down, 60 mm across and 10 mm up at 20 mm/s."""
 MAX_PATH_STEPS = 10_000_000
 """Steps a path may take at dt (about 3 hours at 1 kHz); beyond, its times or dt are a mistake."""
 
@@ -97,6 +101,10 @@ def read_path(path) -> tuple[np.ndarray, np.ndarray]:
     if len(values) < 2:
         raise InputError(f"{p}: a path needs at least 2 rows, got {len(values)}")
     data = np.array([row for _, row in values], dtype=np.float64)
+    far = np.flatnonzero(np.abs(data[:, 1:]).max(axis=1) > MAX_COORDINATE_M * 1e3)
+    if len(far):
+        raise InputError(f"{p}: line {values[far[0]][0]}: the point {data[far[0], 1:].tolist()} mm is more than "
+                         f"{MAX_COORDINATE_M * 1e3:g} mm from the origin, beyond any mesh the simulator holds")
     back = np.flatnonzero(np.diff(data[:, 0]) <= 0)
     if len(back):
         i = back[0] + 1
@@ -116,15 +124,24 @@ def resample(t: np.ndarray, centre: np.ndarray, dt: float) -> tuple[np.ndarray, 
     """The path at each step: times t0, t0 + dt, ... up to the path's end (its last time too, where
     dt does not divide the duration), the centre linearly interpolated there."""
     duration = float(t[-1] - t[0])
+    check_steps(duration, dt, "the path")
     n = duration / dt
-    if n > MAX_PATH_STEPS:
-        raise InputError(f"the path lasts {duration:g} s: {n:.3g} steps of {dt * 1e3:g} ms, more than {MAX_PATH_STEPS:,}")
     k = np.arange(int(math.floor(n + 1e-9)) + 1)
     times = t[0] + k * dt
     if times[-1] < t[-1] - 1e-9 * max(1.0, abs(t[-1])):
         times = np.append(times, t[-1])
     centres = np.column_stack([np.interp(times, t, centre[:, a]) for a in range(3)])
     return times, centres
+
+
+def check_steps(duration: float, dt: float, what: str) -> None:
+    """InputError for a path of `duration` [s] that takes more than MAX_PATH_STEPS steps of dt, or
+    less than one."""
+    n = duration / dt
+    if n > MAX_PATH_STEPS:
+        raise InputError(f"{what} lasts {duration:g} s: {n:.3g} steps of {dt * 1e3:g} ms, more than {MAX_PATH_STEPS:,}")
+    if n < 1:
+        raise InputError(f"{what} lasts {duration:g} s, less than one step of --dt-ms {dt * 1e3:g}")
 
 
 def write_trace(path, columns: dict) -> Path:
@@ -211,6 +228,7 @@ def _make_stroke(args, scene, mesh, dt, device):
     if rings == "auto":  # the scene's [region] rings
         raise InputError(f"the scene {scene.name!r} sizes its region automatically (rings = \"auto\"): almsdm trace "
                          f"takes a ring count or the global model (--rings N or global)")
+    check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     radius = _probe_radius(args, scene)
     scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
     try:
@@ -234,6 +252,7 @@ def _builtin_path(stroke, dt):
     60 mm at 20 mm/s, lift), starting at rest at t = 0: (t [s], centre [m])."""
     from ..protocol.stroke import builtin_stroke
 
+    check_steps(BUILTIN_STROKE_S, dt, "the built-in stroke")  # before its arrays are made
     try:
         path = builtin_stroke(stroke.mesh, stroke.radius, dt=dt)
     except ValueError as exc:
