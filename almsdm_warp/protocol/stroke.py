@@ -170,8 +170,12 @@ class ProbeStroke(Palpation):
                 self.relocate(c)
             elif self._pending is not None:
                 self._advance_relocation()
-            elif self._needs_move(c):
-                self._pending = ("seeds", self.seeds(c))
+            else:
+                move = self._needs_move(c)
+                if move == "now":
+                    self.relocate(c)
+                elif move == "soon":
+                    self._pending = ("seeds", self.seeds(c))
         self._advance()
         f = self._sphere_force.astype(np.float64)
         total = float(np.abs(f).sum())
@@ -194,17 +198,21 @@ class ProbeStroke(Palpation):
         return self.region.vertices()
 
     # -- the region follows --------------------------------------------------------------------
-    def _needs_move(self, c) -> bool:
-        if self._near.any():
-            return True
+    def _needs_move(self, c) -> str | None:
+        # "now": a lifted sphere already touches the surface outside the region's inner rings (a jump
+        # of the path: it must find free vertices this step); "soon": a sphere nears the outer rings
+        # or the surface outside them (the move is spread over the next steps); None: neither
+        soon = bool(self._near.any())
         for p in np.flatnonzero(self._touching == 0):
             # lifted: a touch-down outside the region's inner rings moves it (the surface there is at rest)
             d, k = self._tree.query(c[p])
             if d < self.radius + self.guard:
                 ring = self._ring_of[self._surface[k]]
                 if ring < 0 or ring >= self._near_ring:
-                    return True
-        return False
+                    if d < self.radius:
+                        return "now"
+                    soon = True
+        return "soon" if soon else None
 
     def seeds(self, centres) -> np.ndarray:
         """Ring 0 of the region around `centres`: the surface vertices at rest within radius + lead of a
@@ -319,11 +327,11 @@ class ProbeStroke(Palpation):
 
 
 def builtin_stroke(mesh, probe_radius, depth=8e-3, length=60e-3, speed=20e-3, dt=1e-3, *, vertex=None,
-                   direction=(1.0, 0.0, 0.0), clearance=2e-3, settle=0.0) -> StrokePath:
+                   direction=(1.0, 0.0, 0.0), clearance=2e-3, hold=0.0, settle=0.0) -> StrokePath:
     """The built-in stroke: touch down at `vertex` (default the top vertex, region.contact.top_vertex),
-    press `depth` [m] along the inward normal, slide `length` [m] over the surface along `direction`
-    (projected on the tangent plane), lift until `clearance` [m] above it, then hold `settle` [s];
-    at `speed` [m/s] throughout, one centre every `dt` [s].
+    press `depth` [m] along the inward normal (and hold there `hold` [s]), slide `length` [m] over the
+    surface along `direction` (projected on the tangent plane), lift until `clearance` [m] above it,
+    then stay there `settle` [s]; at `speed` [m/s] throughout, one centre every `dt` [s].
 
     The slide's path is the rest surface walked in small steps (each projected back on it); the
     centre keeps at probe_radius - depth from it along the surface's normal (vertex normals
@@ -335,8 +343,9 @@ def builtin_stroke(mesh, probe_radius, depth=8e-3, length=60e-3, speed=20e-3, dt
     for name, value in (("depth", depth), ("length", length), ("speed", speed), ("dt", dt)):
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be > 0, got {value!r}")
-    if not (math.isfinite(clearance) and clearance >= 0 and math.isfinite(settle) and settle >= 0):
-        raise ValueError(f"clearance and settle must be >= 0, got {clearance!r}, {settle!r}")
+    for name, value in (("clearance", clearance), ("hold", hold), ("settle", settle)):
+        if not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"{name} must be >= 0, got {value!r}")
     surface = RestSurface(mesh)
     v = top_vertex(mesh) if vertex is None else int(vertex)
     x0, n0 = surface.project(mesh.vertices[v][None, :])
@@ -363,14 +372,14 @@ def builtin_stroke(mesh, probe_radius, depth=8e-3, length=60e-3, speed=20e-3, dt
     s = np.arange(1, slide_n + 1) * (arc[-1] / slide_n)
     along = np.stack([np.interp(s, arc, points[:, k]) for k in range(3)], axis=1)
     xs, ns = surface.project(along)
-    press_d = depth * np.arange(1, press_n + 1) / press_n
+    press_d = np.minimum(np.arange(1, press_n + int(round(hold / dt)) + 1) / press_n, 1.0) * depth
     press = x0 + n0 * (R - press_d[:, None])
     slide = xs + ns * (R - depth)
     lift_d = depth - (depth + clearance) * np.arange(1, lift_n + 1) / lift_n
     lift = xs[-1] + ns[-1] * (R - lift_d[:, None])
     rest = np.repeat(lift[-1:], settle_n, axis=0)
     centre = np.concatenate([press, slide, lift, rest])
-    phase = np.concatenate([np.zeros(press_n), np.ones(slide_n), np.full(lift_n + settle_n, 2)]).astype(np.int32)
+    phase = np.concatenate([np.zeros(len(press)), np.ones(slide_n), np.full(lift_n + settle_n, 2)]).astype(np.int32)
     t = np.arange(1, len(centre) + 1) * dt
     return StrokePath(t, centre, phase)
 

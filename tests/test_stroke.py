@@ -1,0 +1,126 @@
+"""A probe that moves: spheres driven along a path, the local region following the contact.
+
+Against independent answers: a sphere sliding over a bed of anchors (Winkler's foundation: the
+quadrature of test_probe_sphere, which a frictionless slide must not change), the global model
+(every vertex free) over the same stroke for continuity, superposition for two probes on that bed.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from almsdm_warp.mesh import primitives
+from almsdm_warp.protocol.stroke import ProbeStroke, builtin_stroke
+from almsdm_warp.tissue.params import TissueParams
+from test_probe_sphere import KAPPA, anchor_references, flat_grid
+
+R, DEPTH = 0.01, 0.0005
+"""The sphere [m] and its press [m] on the anchor bed: contact radius 3.1 mm, about 120 vertices touch."""
+
+
+@pytest.fixture(scope="module")
+def bed():
+    """A 20 mm square (spacing 0.5 mm) whose vertices hold only anchors KAPPA x area, critically damped."""
+    mesh = flat_grid(41, 20.0)
+    density, thickness = 1000.0, 0.025
+    area = mesh.vertex_masses(density, thickness) / (density * thickness)
+    tissue = TissueParams(density=density, thickness=thickness, edge_stiffness=1e-6, edge_damping=0.0,
+                          anchor_stiffness=KAPPA, anchor_damping=2.0 * math.sqrt(KAPPA * density * thickness))
+    return mesh, tissue, area
+
+
+def vertex_at(mesh, x_mm, y_mm):
+    return int(np.argmin(np.linalg.norm(mesh.vertices[:, :2] - np.array([x_mm, y_mm]) * 1e-3, axis=1)))
+
+
+def test_sliding_on_anchors_keeps_winklers_force(device, bed):
+    mesh, tissue, area = bed
+    path = builtin_stroke(mesh, R, depth=DEPTH, length=8e-3, speed=10e-3, vertex=vertex_at(mesh, -4, 0), hold=0.05)
+    stroke = ProbeStroke(mesh, tissue, probe_radius=R, rings=2, device=device, anchor_scale=area)
+    force = np.array([stroke.step(c) for c in path.centre])
+    _, radial = anchor_references(R, DEPTH)
+    held = force[np.flatnonzero(path.phase == 0)[-1], 2]
+    # pressed and held: the grid's sum of anchors against the quadrature (a midpoint rule: measured 0.09%)
+    np.testing.assert_allclose(held, radial, rtol=0.005)
+    # sliding: a frictionless sphere over a foundation pushes as it does at rest (measured within 0.31%;
+    # the grid passing under the sphere and the anchors' dampers are what is left; their drag: 1%)
+    slide = force[path.phase == 1][50:]
+    np.testing.assert_allclose(slide[:, 2], held, rtol=0.015)
+    assert np.abs(slide[:, :2]).max() < 0.03 * held
+    assert stroke.relocations >= 2  # the region moved with the sphere (the bed is 16 spacings across the slide)
+    # lifted: no vertex touches, no force
+    assert stroke.touching[0] == 0 and np.all(force[-1] == 0.0)
+
+
+def test_two_probes_superpose_on_anchors(device, bed):
+    mesh, tissue, area = bed
+    one = builtin_stroke(mesh, R, depth=DEPTH, length=2e-3, speed=10e-3, vertex=vertex_at(mesh, -4.5, 0), hold=0.05)
+    two = builtin_stroke(mesh, R, depth=DEPTH, length=2e-3, speed=10e-3, vertex=vertex_at(mesh, 4.5, 0), hold=0.05,
+                         direction=(-1.0, 0.0, 0.0))
+    pair = ProbeStroke(mesh, tissue, probe_radius=R, rings=2, device=device, anchor_scale=area, probes=2)
+    single = ProbeStroke(mesh, tissue, probe_radius=R, rings=2, device=device, anchor_scale=area)
+    for a, b in zip(one.centre, two.centre):
+        f2 = pair.step(np.stack([a, b]))
+        f1 = single.step(a)
+    # the bed's vertices do not touch each other (springs 1e-6 N/m): each sphere feels only its own
+    # anchors, as it would alone, and the two mirror each other
+    np.testing.assert_allclose(f2[0], f1, rtol=1e-4, atol=1e-9)
+    np.testing.assert_allclose(f2[1] * [-1, 1, 1], f2[0], rtol=1e-3, atol=1e-6)
+    assert f1[2] > 0.5 * anchor_references(R, DEPTH)[1] or np.all(f1 == 0)
+    assert set(pair.touching.tolist()) == {0}  # both lifted at the end
+
+
+def test_stroke_follows_the_global_model_and_recontacts(device):
+    # a stroke over a sphere of the paper's tissue, a lift, and a touch-down elsewhere: the local model
+    # against the global one (every vertex free), step by step
+    mesh = primitives.icosphere(40.0, 3)
+    path = builtin_stroke(mesh, R, depth=8e-3, length=30e-3, speed=40e-3, settle=0.05)
+    far = int(np.argmax(mesh.vertices[:, 1]))  # on the equator, 90 degrees from the stroke
+    again = builtin_stroke(mesh, R, depth=5e-3, length=1e-3, speed=40e-3, vertex=far, direction=(0.0, 0.0, 1.0))
+    centres = np.concatenate([path.centre, again.centre])
+    runs = {}
+    for rings in (3, "global"):
+        stroke = ProbeStroke(mesh, probe_radius=R, rings=rings, device=device)
+        force, move, relocated = np.zeros((len(centres), 3)), np.zeros(len(centres)), []
+        q0 = stroke.positions()
+        for k, c in enumerate(centres):
+            before = stroke.relocations
+            force[k] = stroke.step(c)
+            q = stroke.positions()
+            move[k] = np.linalg.norm(q - q0, axis=1).max()
+            q0 = q
+            if stroke.relocations != before:
+                relocated.append(k)
+        runs[rings] = force, move, relocated, stroke
+    f, move, relocated, stroke = runs[3]
+    g, move_g, _, _ = runs["global"]
+    assert len(relocated) >= 3 and relocated[-1] >= len(path.t)  # moved while sliding, and to the new touch
+    rms = np.sqrt(np.mean(np.sum((f - g) ** 2, axis=1)) / np.mean(np.sum(g**2, axis=1)))
+    assert rms < 0.02
+    for k in relocated[:-1]:  # no jump of the force where the region moved while pressing
+        assert np.linalg.norm(f[k] - f[k - 1]) < 0.05 * np.linalg.norm(f[k])
+        assert np.linalg.norm(f[k + 1] - f[k]) < 0.05 * np.linalg.norm(f[k + 1])
+    assert move.max() < 1e-4 and move.max() < move_g.max() + 1e-5  # no vertex pops, at a relocation or elsewhere
+    lifted = np.flatnonzero(path.phase == 2)[-1]
+    assert np.all(f[lifted] == 0.0) and np.all(g[lifted] == 0.0)
+    pressed = len(path.t) + np.flatnonzero(again.phase == 1)[-1]  # the new touch, pressed 5 mm
+    np.testing.assert_allclose(np.linalg.norm(f[pressed]), np.linalg.norm(g[pressed]), rtol=0.02)
+    assert np.linalg.norm(f[pressed]) > 0.5
+
+
+def test_bad_input_names_the_value(bed):
+    mesh, tissue, area = bed
+    with pytest.raises(ValueError, match="probe_radius"):
+        ProbeStroke(mesh, tissue, probe_radius=0.0)
+    with pytest.raises(ValueError, match="probes"):
+        ProbeStroke(mesh, tissue, probe_radius=R, probes=0)
+    with pytest.raises(ValueError, match="rings"):
+        ProbeStroke(mesh, tissue, probe_radius=R, rings="global-free")
+    stroke = ProbeStroke(mesh, tissue, probe_radius=R, probes=2, device="cpu")
+    with pytest.raises(ValueError, match=r"shape \(2, 3\)"):
+        stroke.step([0.0, 0.0, 0.01])
+    with pytest.raises(ValueError, match="finite"):
+        stroke.step([[0.0, 0.0, math.nan], [0.0, 0.0, 0.01]])
+    with pytest.raises(ValueError, match="speed"):
+        builtin_stroke(mesh, R, speed=0.0)
