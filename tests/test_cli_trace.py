@@ -215,3 +215,33 @@ def test_bad_flags_are_one_line_and_exit_2(tmp_path, capsys, monkeypatch, args, 
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_lesion_under_the_stroke_shows_as_a_force_rise(tmp_path):
+    # a stroke from 40 mm off the lesion of stomach_lesion.toml straight over it; the same path on
+    # the plain stomach is the reference: the force rises over the lesion, and not where the
+    # sphere's contact (about sqrt(2 R d) = 11 mm across) is clear of it
+    from almsdm_warp.protocol.stroke import builtin_stroke
+    from almsdm_warp.scene.loader import load_scene
+
+    scene = load_scene(SCENES / "stomach_lesion.toml")
+    mesh = scene.load_mesh()
+    surface = mesh.surface_vertices
+    x = mesh.vertices[surface]
+    hit = x[np.argmin(np.linalg.norm(x - np.asarray(scene.lesion.center), axis=1))]
+    start = surface[np.argmin(np.abs(np.linalg.norm(x - hit, axis=1) - 40e-3))]
+    p = builtin_stroke(mesh, R_MM * 1e-3, depth=6e-3, length=50e-3, speed=50e-3, vertex=int(start),
+                       direction=hit - mesh.vertices[start])
+    path = write_path(tmp_path / "p.csv", np.column_stack([p.t, p.centre * 1e3]))
+    force = {}
+    for name in ("stomach_lesion", "stomach"):
+        out = tmp_path / f"{name}.csv"
+        assert main(["trace", name, "--path", str(path), "--out", str(out), "--probe-radius-mm", str(R_MM)]) == 0
+        force[name] = np.linalg.norm(read_csv(out)[1][:, 4:7], axis=1)
+    d = np.linalg.norm(p.centre - hit, axis=1)
+    slide = p.phase == 1
+    over, away = slide & (d < 10e-3), slide & (d > scene.lesion.radius + 12e-3)
+    assert over.sum() > 10 and away.sum() > 10
+    rise = force["stomach_lesion"][over].mean() / force["stomach"][over].mean()
+    assert rise > 2.0  # 5x stiffer tissue under the sphere
+    np.testing.assert_allclose(force["stomach_lesion"][away].mean(), force["stomach"][away].mean(), rtol=0.05)
