@@ -14,6 +14,7 @@ device, step, send the force). The USD stage's time code k is the state after st
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 
@@ -265,17 +266,17 @@ def run_trace(args, stroke, times, centres, coupling) -> dict:
     coupling where there is one); the trace's columns at every `--report-every`th step and the last."""
     from ..protocol.palpation import SimulationDiverged
 
-    n = len(times)
-    rows = sorted(set(range(0, n, args.report_every)) | {n - 1})
-    out = np.zeros((len(rows), 7))
-    dev = np.zeros((len(rows), 3))
-    ints = np.zeros((len(rows), 2), dtype=np.int64)
+    n, every = len(times), args.report_every
+    count = (n - 1) // every + 1 + ((n - 1) % every > 0)  # every Nth step and the last
+    out = np.zeros((count, 7))
+    dev = np.zeros((count, 3))
+    ints = np.zeros((count, 2), dtype=np.int64)
     recorder = _recorder(args, stroke)
     force = np.zeros(3)
     if coupling is not None:
         coupling.reset(centres[0])
     r = 0
-    with recorder if recorder is not None else _Null():
+    with recorder if recorder is not None else contextlib.nullcontext():
         for k in range(n):
             if coupling is None:
                 tool = centres[k]
@@ -288,7 +289,7 @@ def run_trace(args, stroke, times, centres, coupling) -> dict:
                 raise InputError(f"at t = {times[k]:.4g} s: {exc}") from exc
             if recorder is not None and (k % args.usd_every == 0 or k == n - 1):
                 recorder.frame(k, probe_center=tool, force=force)
-            if r < len(rows) and rows[r] == k:
+            if k % every == 0 or k == n - 1:
                 felt = force if coupling is None else coupling.device_force
                 out[r] = (times[k], *(np.asarray(tool) * 1e3), *felt)
                 dev[r] = centres[k] * 1e3
@@ -301,16 +302,8 @@ def run_trace(args, stroke, times, centres, coupling) -> dict:
     return columns
 
 
-class _Null:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
-
-
 def _recorder(args, stroke):
-    """The USD recorder of --usd (frame 0, the rest shape, recorded), else None."""
+    """The USD recorder of --usd (time code k: the state after step k), else None."""
     if not args.usd:
         return None
     from ..export.usd import UsdRecorder
