@@ -196,22 +196,24 @@ def test_coupling_flags(tmp_path, top_mm, capsys):
     assert felt[-1, 2] > 0.3  # the tool rides above the device: the tissue holds it up
 
 
-@pytest.mark.parametrize(
-    "args, message",
-    [
-        (["--rings", "auto"], "unknown value 'auto' (allowed: an integer >= 1 or 'global')"),
-        (["--rings", "global-free"], "unknown value 'global-free'"),
-        (["--probe-radius-mm", "0"], "--probe-radius-mm must be > 0"),
-        (["--usd", "t.txt"], "unknown USD suffix"),
-        (["--out", "t.json"], "unknown table suffix"),
-        (["--coupling-damping-Ns-per-m", "1"], "need --coupling-stiffness-N-per-mm"),
-        (["--dt-ms", "1e-308"], "the built-in stroke lasts 3.9 s: inf steps"),
-        (["--rings", "1000000"], "--rings 1000000 is more than the mesh's 1002 vertices"),
-    ],
-)
-def test_bad_flags_are_one_line_and_exit_2(tmp_path, capsys, monkeypatch, args, message):
+BAD_FLAGS = {
+    "--rings auto": "unknown value 'auto' (allowed: an integer >= 1 or 'global')",
+    "--rings global-free": "unknown value 'global-free'",
+    "--probe-radius-mm 0": "--probe-radius-mm must be > 0",
+    "--usd t.txt": "unknown USD suffix",
+    "--out t.json": "unknown table suffix",
+    "--coupling-damping-Ns-per-m 1": "need --coupling-stiffness-N-per-mm",
+    "--dt-ms 1e-308": "the built-in stroke lasts 3.9 s: inf steps",
+    "--rings 1000000": "--rings 1000000 is more than the mesh's 1002 vertices",
+}
+"""Flags a trace refuses -> what its one line says."""
+
+
+@pytest.mark.parametrize("flags", list(BAD_FLAGS))
+def test_bad_flags_are_one_line_and_exit_2(tmp_path, capsys, monkeypatch, flags):
     monkeypatch.chdir(tmp_path)
-    assert main(["trace", *args]) == 2
+    message = BAD_FLAGS[flags]
+    assert main(["trace", *flags.split()]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
     assert list(tmp_path.iterdir()) == []
