@@ -29,7 +29,7 @@ from ..kernels.region_state import reset_vertices_left_behind
 from ..kernels.arrays import struct_from
 from ..kernels.stroke_contact import StrokeSpheres, constrain_spheres
 from ..region.region import Region
-from .palpation import GLOBAL_MODELS, Palpation, SimulationDiverged, check_probe_radius, replayer
+from .palpation import Palpation, SimulationDiverged, check_probe_radius, replayer
 
 WAKE_TIME = 0.01
 """[s] A vertex faster than tol / WAKE_TIME is still moving: it stays free when the region moves."""
@@ -93,7 +93,7 @@ class ProbeStroke(Palpation):
         radius = check_probe_radius(probe_radius)
         if radius <= 0:
             raise ValueError(f"a stroke drives rigid spheres: probe_radius must be > 0 m, got {probe_radius}")
-        if rings not in ("global",) and rings in GLOBAL_MODELS:
+        if isinstance(rings, str) and rings != "global":
             raise ValueError(f"rings must be an int >= 1 or 'global', got {rings!r}")
         if isinstance(probes, bool) or not isinstance(probes, (int, np.integer)) or probes < 1:
             raise ValueError(f"probes must be an int >= 1, got {probes!r}")
@@ -125,7 +125,6 @@ class ProbeStroke(Palpation):
         surface = self.mesh.surface_vertices
         self._surface = surface
         self._surface_rest = self.mesh.vertices[surface]
-        self._normal = self.model.vertex_normal_rest
         from scipy.spatial import cKDTree
 
         self._tree = cKDTree(self._surface_rest)
