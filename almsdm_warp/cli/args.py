@@ -203,6 +203,18 @@ MATERIAL_FLAGS = {
 Any of them switches the run to the material model (tissue/material.py) with the scene's values as defaults."""
 
 
+def add_integrator_arg(parser) -> None:
+    """--integrator, the names of solvers.INTEGRATORS (palpate, trace)."""
+    from ..solvers import INTEGRATORS
+
+    parser.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
+
+
+def add_probe_radius_arg(parser) -> None:
+    """--probe-radius-mm [mm] (palpate, trace)."""
+    parser.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
+
+
 def add_tissue_args(parser, supports: bool = True) -> None:
     """The material flags and (with `supports`) --fixed-below-mm, in their own group."""
     group = parser.add_argument_group("tissue as a material (any of these replaces the scene's per-spring constants)")

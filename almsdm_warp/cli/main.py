@@ -3,7 +3,8 @@
 reports a process the signal ended), every temporary file removed on the way out.
 
 Commands: ``palpate`` (the default: press the probe into a scene, report force, recovery and
-speed), ``touch`` (print the ring regions at the contact), ``sweep``, ``bench`` and ``evaluate``.
+speed), ``touch`` (print the ring regions at the contact), ``sweep``, ``trace`` (a probe moved along a
+path), ``bench`` and ``evaluate``.
 Each command's module adds its parser (``add_parser``) and runs it; this one only dispatches.
 """
 
@@ -24,11 +25,11 @@ EXIT_INTERRUPTED = 128 + signal.SIGINT
 EXIT_TERMINATED = 128 + signal.SIGTERM
 """143: SIGTERM (a batch system's or `kill`'s request to stop)."""
 
-COMMANDS = ("palpate", "touch", "evaluate", "sweep", "bench")
+COMMANDS = ("palpate", "touch", "evaluate", "sweep", "trace", "bench")
 """The subcommands, each a module of this package with add_parser(sub), in the order `almsdm --help` lists them."""
 OUTPUTS = ("json", "usd", "png", "out")
 """The arguments that name an output file (as argparse stores them); checked to be distinct."""
-INPUTS = ("scene", "mesh", "extra_json")
+INPUTS = ("scene", "mesh", "extra_json", "path_csv")
 """The arguments that name an input file, which no output may replace."""
 FOLDER_OUTPUTS = {"evaluate": ("out",)}
 """Outputs that are folders, not files: left out of the distinct-file check."""

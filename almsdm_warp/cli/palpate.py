@@ -11,10 +11,11 @@ import numpy as np
 from ..checks import check_protocol, check_ring_count
 from ..errors import InputError
 from ..protocol.schedule import PressSchedule
-from ..solvers import INTEGRATORS
 from .args import (
     AUTO_TOL_MM,
     GLOBAL_RINGS,
+    add_integrator_arg,
+    add_probe_radius_arg,
     add_tissue_args,
     auto_tol,
     check_contact,
@@ -49,13 +50,13 @@ def add_parser(sub) -> None:
     palpate.add_argument("scene", nargs="?", default=None, type=path_arg, metavar="MESH_OR_SCENE", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     palpate.add_argument("--rings", type=rings_arg(), default=None, metavar="{N,auto,global,global-free}", help="rings of the local region (outermost fixed), auto (sized to --tol-mm), or a global model (default: the scene's)")
     palpate.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: grow the region until its fixed ring would move less than this [mm] (default 0.1)")
-    palpate.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
+    add_integrator_arg(palpate)
     palpate.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="frame [ms], at which the force is reported (default 1); the explicit integrator takes it in substeps under 0.9 x its critical step")
     palpate.add_argument("--depth-mm", "--depth", dest="depth_mm", type=number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
     palpate.add_argument("--ramp-s", type=number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
     palpate.add_argument("--hold-s", type=number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
     palpate.add_argument("--settle-s", type=number_arg(">= 0"), default=None, metavar="S", help="settle window after release [s] (default: the scene's)")
-    palpate.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
+    add_probe_radius_arg(palpate)
     palpate.add_argument("--presses", type=count_arg, default=1, metavar="N", help="presses at the same spot (default 1)")
     palpate.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default 1; 10 for cm, 1000 for m)")
     where = palpate.add_mutually_exclusive_group()

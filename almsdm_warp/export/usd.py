@@ -209,8 +209,9 @@ class UsdRecorder:
         if k == total:
             self._base += total
 
-    def frame(self, step: int) -> None:
-        """Record the palpation's current state at time code `step` (steps taken so far)."""
+    def frame(self, step: int, probe_center=None, force=None) -> None:
+        """Record the palpation's current state at time code `step` (steps taken so far). A probe
+        that moves on its own path (almsdm trace) gives its sphere's centre [m] and force [N] here."""
         pal = self.pal
         code = self._Usd.TimeCode(float(step))
         q_dev = pal.state.particle_q
@@ -219,7 +220,7 @@ class UsdRecorder:
         q = q_dev.numpy()
         n = self.normals.vertex_normal.numpy()
         with np.errstate(all="ignore"):  # a diverging run is recorded as it is, then discarded
-            self._write_frame(code, q, n)
+            self._write_frame(code, q, n, probe_center, force)
         self._frames += 1
         self._unsaved += 1
         self._last_code = max(step, self._last_code or 0)
@@ -228,7 +229,7 @@ class UsdRecorder:
             self.stage.SetEndTimeCode(self._last_code)
             self._save()  # crate layers save incrementally: the written samples leave memory
 
-    def _write_frame(self, code, q, n):
+    def _write_frame(self, code, q, n, probe_center=None, force=None):
         Vt = self._Vt
         pal = self.pal
         pts = (q[self.point_vertex] * 1e3).astype(np.float32)
@@ -243,13 +244,18 @@ class UsdRecorder:
         if len(ends):
             w = self._curve_width / 2
             self._curve_extent.Set(Vt.Vec3fArray.FromNumpy(np.stack([ends.min(axis=0) - w, ends.max(axis=0) + w])), code)
-        # the probe: its tip on the contact vertex while it presses, at the rest surface once lifted
         in_contact = pal.probe_mode != PROBE_OFF
-        tip = q[pal.vertex].astype(np.float64) if in_contact else pal.rest_position()
-        outward = -np.asarray(pal.inward_normal(), dtype=np.float64)  # per frame: the probe may have moved
-        center = (tip + outward * self.probe_radius) * 1e3
+        if probe_center is not None:  # a probe on a path: where the path put it
+            center = np.asarray(probe_center, dtype=np.float64) * 1e3
+        else:  # a press: its tip on the contact vertex while it presses, at the rest surface once lifted
+            tip = q[pal.vertex].astype(np.float64) if in_contact else pal.rest_position()
+            outward = -np.asarray(pal.inward_normal(), dtype=np.float64)  # per frame: the probe may have moved
+            center = (tip + outward * self.probe_radius) * 1e3
         self._translate.Set(tuple(float(c) for c in center), code)
-        f = np.asarray(pal.feedback_force, dtype=np.float64) if in_contact else np.zeros(3)
+        if force is not None:
+            f = np.asarray(force, dtype=np.float64)
+        else:
+            f = np.asarray(pal.feedback_force, dtype=np.float64) if in_contact else np.zeros(3)
         self._force.Set(tuple(float(c) for c in f), code)
         self._force_mag.Set(float(np.linalg.norm(f)), code)
 
