@@ -11,6 +11,7 @@ import trimesh
 from helpers import load_script
 
 from almsdm_warp.errors import InputError
+from almsdm_warp.tissue.material import Material
 from almsdm_warp.tissue.params import TissueParams
 from almsdm_warp.scene.loader import (
     PressParams,
@@ -113,23 +114,35 @@ def test_liver_tets_positive_boundary_closed_volume_matches(make_scenes):
 
 # -- the scene files -----------------------------------------------------------------------
 def test_shipped_scenes_load_in_si_units():
-    assert scene_names() == ["liver", "stomach", "stomach_lesion"]
+    assert scene_names() == ["liver", "paper_liver", "paper_stomach", "stomach", "stomach_lesion"]
     assert scenes_dir() == SCENES
     stomach = load_scene(default_scene_path())
     assert stomach.path == SCENES / "stomach.toml" and stomach.mesh_path == SCENES / "stomach.obj"
     assert stomach.name == "stomach"
     assert stomach.scale_mm == 1.0 and stomach.rings == 4
-    assert stomach.press.depth == 0.01 and stomach.tissue.thickness == pytest.approx(0.025)
     assert (stomach.press.ramp, stomach.press.hold, stomach.press.settle) == (0.1, 0.2, 1.0)
-    assert stomach.tissue.density == 1000.0
-    assert stomach.tissue.edge_stiffness == 62.0 and stomach.tissue.anchor_stiffness == 124.0
-    assert stomach.tissue.edge_damping == 0.02 and stomach.tissue.anchor_damping == 0.1
-    # the defaults are the stomach scene's
-    assert TissueParams() == stomach.tissue and PressParams() == stomach.press
-    assert stomach.as_dict()["press"]["depth_mm"] == 10.0
-    assert stomach.as_dict()["tissue"]["thickness_mm"] == 25.0
+    assert stomach.press.depth == 0.01 and PressParams() == stomach.press
+    # the default scenes: a material from the literature (docs/calibration.md) and a 10 mm fingertip
+    assert stomach.tissue == Material(youngs_modulus=1.85e3, poisson_ratio=0.45, density=1058.0, thickness=4e-3,
+                                      foundation=0.1 / 1e-6, rayleigh_alpha=20.0)  # kPa/mm -> Pa/m as the loader
+    assert stomach.probe_radius == 0.01 and stomach.fixed_below is None
+    assert stomach.as_dict()["tissue"]["thickness_mm"] == pytest.approx(4.0)
     liver = load_scene(default_scene_path("liver"))
-    assert liver.mesh_path == SCENES / "liver.vtu"
+    assert liver.mesh_path == SCENES / "liver.vtu" and liver.probe_radius == 0.01
+    assert liver.tissue == Material(youngs_modulus=5.2e3, poisson_ratio=0.45, density=1060.0, rayleigh_alpha=20.0)
+    assert liver.fixed_below == pytest.approx(-0.02)  # a tet material has no anchors: a support holds it
+    lesion = load_scene(default_scene_path("stomach_lesion"))
+    assert lesion.tissue == stomach.tissue and lesion.lesion is not None
+    # the paper's preset: its constants, the defaults of a scene that gives no [tissue]
+    paper = load_scene(default_scene_path("paper_stomach"))
+    assert paper.mesh_path == stomach.mesh_path and paper.probe_radius == 0.0
+    assert paper.tissue.density == 1000.0 and paper.tissue.thickness == pytest.approx(0.025)
+    assert paper.tissue.edge_stiffness == 62.0 and paper.tissue.anchor_stiffness == 124.0
+    assert paper.tissue.edge_damping == 0.02 and paper.tissue.anchor_damping == 0.1
+    assert TissueParams() == paper.tissue and paper.as_dict()["tissue"]["thickness_mm"] == 25.0
+    paper_liver = load_scene(default_scene_path("paper_liver"))
+    assert paper_liver.mesh_path == liver.mesh_path and paper_liver.tissue.edge_stiffness == 47.0
+    assert paper_liver.fixed_below is None and paper_liver.probe_radius == 0.0
 
 
 def test_resolve_scene_or_mesh():
@@ -141,7 +154,7 @@ def test_resolve_scene_or_mesh():
     assert bare.tissue == TissueParams() and bare.press == PressParams() and bare.rings == 4
     with pytest.raises(InputError, match="no such file"):
         resolve_scene_or_mesh("no_such_mesh.obj")
-    with pytest.raises(InputError, match="liver, stomach"):
+    with pytest.raises(InputError, match="liver, paper_liver, paper_stomach, stomach"):
         resolve_scene_or_mesh("kidney")
     with pytest.raises(InputError, match="no scene named 'kidney'"):
         default_scene_path("kidney")

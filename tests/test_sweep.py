@@ -151,7 +151,7 @@ def test_sweep_on_ray_gives_the_same_file(tmp_path):
 def test_sweep_implicit_matches_the_batch(tmp_path, stomach):
     # the command's implicit sweep is BatchPalpation's implicit press at the same points
     out = tmp_path / "imp.npz"
-    assert main(["sweep", "--points", "6", "--rings", "2", "--integrator", "implicit", "--out", str(out), *FAST]) == 0
+    assert main(["sweep", "paper_stomach", "--points", "6", "--rings", "2", "--integrator", "implicit", "--out", str(out), *FAST]) == 0
     table = sw.read_table(out)
     from almsdm_warp.batch.batch_palpation import BatchPalpation
 
@@ -228,8 +228,9 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     from almsdm_warp.tissue.params import TissueParams
 
     press = ["--points", "6", "--ramp-s", "0.1", "--hold-s", "0.2", "--settle-s", "0.01", "--dt-ms", "1"]
-    assert main(["sweep", *press, "--rings", "auto", "--tol-mm", "0.1", "--out", str(tmp_path / "auto.npz")]) == 0
-    assert main(["sweep", *press, "--rings", "8", "--out", str(tmp_path / "eight.csv")]) == 0
+    # the paper's preset: the reference below is its constants (TissueParams)
+    assert main(["sweep", "paper_stomach", *press, "--rings", "auto", "--tol-mm", "0.1", "--out", str(tmp_path / "auto.npz")]) == 0
+    assert main(["sweep", "paper_stomach", *press, "--rings", "8", "--out", str(tmp_path / "eight.csv")]) == 0
     auto, eight = sw.read_table(tmp_path / "auto.npz"), sw.read_table(tmp_path / "eight.csv")
     for c in ("x_mm", "y_mm", "z_mm", "vertex"):
         np.testing.assert_array_equal(auto[c], eight[c])
@@ -247,7 +248,7 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     np.testing.assert_allclose(auto["peak_force_N"], eight["peak_force_N"], rtol=0.01)
     np.testing.assert_allclose(auto["peak_force_N"], peaks, rtol=0.01)
     # a scene's [region] rings = "auto", tol_mm = 0.1: the same sweep
-    text = (SCENES / "stomach.toml").read_text().replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
+    text = (SCENES / "paper_stomach.toml").read_text().replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
     (tmp_path / "auto.toml").write_text(text.replace("\nrings = 4 ", '\nrings = "auto"\ntol_mm = 0.1\n# '))
     assert main(["sweep", str(tmp_path / "auto.toml"), *press, "--out", str(tmp_path / "scene.npz")]) == 0
     by_scene = sw.read_table(tmp_path / "scene.npz")

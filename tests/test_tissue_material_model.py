@@ -128,7 +128,8 @@ def test_paper_is_the_default_model(tmp_path):
     scene = load_scene(write_scene(tmp_path, "edge_stiffness_N_per_m = 50.0\n"))
     assert isinstance(scene.tissue, TissueParams) and scene.tissue.edge_stiffness == 50.0
     assert scene.as_dict()["tissue"]["model"] == "paper"
-    assert load_scene(SCENES / "stomach.toml").tissue == TissueParams()  # the shipped scenes stay on the preset
+    assert load_scene(SCENES / "paper_stomach.toml").tissue == TissueParams()  # the paper preset
+    assert isinstance(load_scene(SCENES / "stomach.toml").tissue, Material)  # the default scene: a material
 
 
 @pytest.mark.parametrize(
@@ -149,3 +150,4 @@ def test_material_scene_errors_name_the_file_and_key(tmp_path, tissue, message):
     path = write_scene(tmp_path, tissue)
     with pytest.raises(InputError, match=rf"^{path}: .*{message}"):
         load_scene(path)
+

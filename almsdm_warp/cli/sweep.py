@@ -119,6 +119,9 @@ def _plan(args, devices):
         raise InputError(f"the scene {scene.name!r} has supports ([support] fixed_below_mm), which the batched sweep "
                          f"does not hold yet; press points one at a time with almsdm palpate")
     print_notes(mesh)
+    if scene.probe_radius > 0:  # the batched kernels drive one vertex a palpation
+        print(f"note: the batched sweep presses with the paper's probe (the contact vertex driven), not the scene's "
+              f"{scene.probe_radius * 1e3:g} mm sphere", file=sys.stderr)
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings
     tol = auto_tol(args, rings, scene)
