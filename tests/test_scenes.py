@@ -123,10 +123,10 @@ def test_shipped_scenes_load_in_si_units():
     assert (stomach.press.ramp, stomach.press.hold, stomach.press.settle) == (0.1, 0.2, 1.0)
     assert stomach.press.depth == 0.01 and PressParams() == stomach.press
     # the default scenes: a material from the literature (docs/calibration.md) and a 10 mm fingertip
-    assert stomach.tissue == Material(youngs_modulus=1.85e3, poisson_ratio=0.45, density=1058.0, thickness=4e-3,
+    assert stomach.tissue == Material(youngs_modulus=1.85e3, poisson_ratio=0.45, density=1058.0, thickness=3e-3,
                                       foundation=0.1 / 1e-6, rayleigh_alpha=20.0)  # kPa/mm -> Pa/m as the loader
     assert stomach.probe_radius == 0.01 and stomach.fixed_below is None
-    assert stomach.as_dict()["tissue"]["thickness_mm"] == pytest.approx(4.0)
+    assert stomach.as_dict()["tissue"]["thickness_mm"] == pytest.approx(3.0)
     liver = load_scene(default_scene_path("liver"))
     assert liver.mesh_path == SCENES / "liver.vtu" and liver.probe_radius == 0.01
     assert liver.tissue == Material(youngs_modulus=5.2e3, poisson_ratio=0.45, density=1060.0, rayleigh_alpha=20.0)

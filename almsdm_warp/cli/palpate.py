@@ -191,6 +191,7 @@ def _resolve(args) -> _Run:
 def _build(args, run: _Run):
     """Say what is pressed, then make the palpation (adaptive for rings "auto") and touch the contact."""
     from ..protocol.palpation import Palpation
+    from ..tissue.material import holding_notes
 
     mesh, scene = run.mesh, run.scene
     print(mesh.summary())
@@ -219,6 +220,7 @@ def _build(args, run: _Run):
             pal.touch(run.vertex)
     except ValueError as exc:  # a parameter Palpation rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
+    pal.notes[:0] = holding_notes(scene.tissue, mesh.is_volume, scene.fixed_below is not None)
     return pal
 
 

@@ -119,9 +119,6 @@ def _plan(args, devices):
         raise InputError(f"the scene {scene.name!r} has supports ([support] fixed_below_mm), which the batched sweep "
                          f"does not hold yet; press points one at a time with almsdm palpate")
     print_notes(mesh)
-    if scene.probe_radius > 0:  # the batched kernels drive one vertex a palpation
-        print(f"note: the batched sweep presses with the paper's probe (the contact vertex driven), not the scene's "
-              f"{scene.probe_radius * 1e3:g} mm sphere", file=sys.stderr)
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings
     tol = auto_tol(args, rings, scene)
@@ -155,6 +152,9 @@ def _plan(args, devices):
     )
     print(f"cost: {cost:.3g} region-steps ({len(vertices)} points x {frames} frames x at most {substeps} substep(s); "
           f"limit {args.max_region_steps:.3g}, --max-region-steps)")
+    if scene.probe_radius > 0:  # the batched kernels drive one vertex a palpation
+        print(f"note: the batched sweep presses with the paper's probe (the contact vertex driven), not the scene's "
+              f"{scene.probe_radius * 1e3:g} mm sphere", file=sys.stderr)
     return plan, scene, rings_text
 
 

@@ -256,6 +256,34 @@ def springs_for_mesh(mesh, source, **options) -> TissueSprings:
     return springs_from_material(source, mesh.vertices, mesh.triangles, mesh.tetrahedra, mesh.edges, **options)
 
 
+def holding_notes(tissue, is_volume: bool, supported: bool) -> list[str]:
+    """What keeps a press on this tissue from coming back to rest, one line each (empty: nothing).
+
+    A tet mesh on a material has no anchors (a foundation acts on a surface), nor has a surface with
+    no foundation: with no support only the
+    local region's fixed outer ring holds the body, and a region grown from a sphere's patch can be
+    most of a lobe, a cantilever on that ring whose lowest mode is below 1 Hz (the shipped liver:
+    0.67 Hz, docs/calibration.md, "A tet liver with nothing under it"). Without mass-proportional
+    damping nothing slows such a mode (a damping ratio damps each spring's own, much faster, mode),
+    so the organ swings for seconds after the probe lets go. `tissue` of another kind (the paper's
+    constants, with an anchor on every vertex): no notes.
+    """
+    if not isinstance(tissue, Material):
+        return []
+    notes = []
+    unheld = (is_volume or tissue.foundation <= 0.0) and not supported  # no anchors, no support
+    if unheld:
+        what = "a tet mesh" if is_volume else "a surface with no foundation"
+        notes.append(f"{what} on a material has no anchors and no support: only the region's fixed outer ring "
+                     "holds it, and the body may swing on that ring after a press; give a support "
+                     "([support] fixed_below_mm, --fixed-below-mm)")
+    undamped = tissue.damping_ratio <= 0.0 and tissue.rayleigh_beta <= 0.0
+    if tissue.rayleigh_alpha <= 0.0 and (undamped or unheld):
+        notes.append("the material has no mass-proportional damping (rayleigh_alpha_per_s, --rayleigh-alpha-per-s): "
+                     "its slow modes are undamped and a press may not settle within its window")
+    return notes
+
+
 def material_as_dict(material: Material) -> dict:
     """The material in a scene file's keys and units (kPa, mm, kPa/mm), for JSON records."""
     return {key: getattr(material, attr) * factor for key, (attr, _kind, factor, _rule) in MATERIAL_KEYS.items()}
