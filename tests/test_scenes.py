@@ -124,12 +124,12 @@ def test_shipped_scenes_load_in_si_units():
     assert stomach.press.depth == 0.01 and PressParams() == stomach.press
     # the default scenes: a material from the literature (docs/calibration.md) and a 10 mm fingertip
     assert stomach.tissue == Material(youngs_modulus=1.85e3, poisson_ratio=0.45, density=1058.0, thickness=3e-3,
-                                      foundation=0.1 / 1e-6, rayleigh_alpha=20.0)  # kPa/mm -> Pa/m as the loader
+                                      foundation=0.1 / 1e-6, rayleigh_alpha=60.0)  # kPa/mm -> Pa/m as the loader
     assert stomach.probe_radius == 0.01 and stomach.fixed_below is None
     assert stomach.as_dict()["tissue"]["thickness_mm"] == pytest.approx(3.0)
     liver = load_scene(default_scene_path("liver"))
     assert liver.mesh_path == SCENES / "liver.vtu" and liver.probe_radius == 0.01
-    assert liver.tissue == Material(youngs_modulus=5.2e3, poisson_ratio=0.45, density=1060.0, rayleigh_alpha=20.0)
+    assert liver.tissue == Material(youngs_modulus=5.2e3, poisson_ratio=0.45, density=1060.0, rayleigh_alpha=60.0)
     assert liver.fixed_below == pytest.approx(-0.02)  # a tet material has no anchors: a support holds it
     lesion = load_scene(default_scene_path("stomach_lesion"))
     assert lesion.tissue == stomach.tissue and lesion.lesion is not None

@@ -191,6 +191,7 @@ def test_sweep_bad_input(tmp_path, monkeypatch, capsys, args, message):
 def test_lesion_scene_and_its_errors(tmp_path):
     from almsdm_warp.errors import InputError
     from almsdm_warp.sim.model import Model
+    from almsdm_warp.tissue.params import TissueParams
     from almsdm_warp.scene.loader import load_scene
 
     scene = resolve_scene_or_mesh("stomach_lesion")
@@ -198,14 +199,16 @@ def test_lesion_scene_and_its_errors(tmp_path):
     assert lesion.center == (-0.027, 0.056, 0.0) and lesion.radius == 0.018 and lesion.stiffness_factor == 5.0
     assert scene.as_dict()["lesion"]["radius_mm"] == 18.0
     mesh = scene.load_mesh()
-    edge_scale, anchor_scale = lesion.scales(mesh)
-    model = Model(mesh, scene.tissue, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale)
+    # on the paper's constants (the scene's is a material: tests/test_tissue_material_model.py)
+    paper = TissueParams()
+    edge_scale, anchor_scale = lesion.scales(mesh, paper)
+    model = Model(mesh, paper, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale)
     inside = np.linalg.norm(mesh.vertices - np.array(lesion.center), axis=1) <= lesion.radius
     assert 0 < inside.sum() < 100
-    np.testing.assert_allclose(model.anchor_ke.numpy(), np.where(inside, 5.0, 1.0) * scene.tissue.anchor_stiffness, rtol=1e-6)
+    np.testing.assert_allclose(model.anchor_ke.numpy(), np.where(inside, 5.0, 1.0) * paper.anchor_stiffness, rtol=1e-6)
     mid = mesh.vertices[mesh.edges].mean(axis=1)
     stiff_edges = np.linalg.norm(mid - np.array(lesion.center), axis=1) <= lesion.radius
-    np.testing.assert_allclose(model.spring_ke.numpy(), np.where(stiff_edges, 5.0, 1.0) * scene.tissue.edge_stiffness, rtol=1e-6)
+    np.testing.assert_allclose(model.spring_ke.numpy(), np.where(stiff_edges, 5.0, 1.0) * paper.edge_stiffness, rtol=1e-6)
     assert resolve_scene_or_mesh("stomach").lesion is None
     for table, message in [
         ("center_mm = [0, 0]\nradius_mm = 5", "center_mm must be 3 finite numbers"),

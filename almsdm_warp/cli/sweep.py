@@ -130,7 +130,7 @@ def _plan(args, devices):
     frames = check_protocol(depth, dt, ramp, hold, settle, 1, float(np.ptp(mesh.vertices, axis=0).max()))
     check_limit(args.points, "points", "--points")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
-    scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
+    scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
     points, vertices = sample_points(mesh, args.points)
     cuda = devices[0] != "cpu"
     chunk = args.chunk or (64 if not cuda else min(-(-len(vertices) // len(devices)), 16384))

@@ -148,9 +148,10 @@ class TissueSprings:
     """m_i [kg], shape [vertex_count], float64."""
 
 
-def edge_element_measure(vertices, edges, triangles, tetrahedra=None) -> np.ndarray:
+def edge_element_measure(vertices, edges, triangles, tetrahedra=None, weights=None) -> np.ndarray:
     """Sum of the volumes of the tets around each edge [m^3], or of the triangle areas [m^2] for a
-    surface mesh (no tets), shape [edge_count]. `edges` rows are (i, j) with i < j."""
+    surface mesh (no tets), shape [edge_count]; each element's times its `weights` entry where given
+    (shape [element_count]: a per-element modulus factor). `edges` rows are (i, j) with i < j."""
     e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     measure = np.zeros(len(e), dtype=np.float64)
     if tetrahedra is not None and len(tetrahedra):
@@ -161,6 +162,8 @@ def edge_element_measure(vertices, edges, triangles, tetrahedra=None) -> np.ndar
         local, size = np.array([[0, 1], [1, 2], [0, 2]]), triangle_areas(vertices, el)
     if len(el) == 0:
         return measure
+    if weights is not None:
+        size = size * np.asarray(weights, dtype=np.float64)
     pairs = np.sort(el[:, local].reshape(-1, 2), axis=1)
     n = len(vertices)
     key, pair_key = e[:, 0] * n + e[:, 1], pairs[:, 0] * n + pairs[:, 1]
@@ -172,11 +175,15 @@ def edge_element_measure(vertices, edges, triangles, tetrahedra=None) -> np.ndar
     return measure
 
 
-def vertex_areas(vertices, triangles) -> np.ndarray:
-    """Each vertex's share of the surface [m^2]: a third of each triangle at it, shape [vertex_count]."""
+def vertex_areas(vertices, triangles, weights=None) -> np.ndarray:
+    """Each vertex's share of the surface [m^2]: a third of each triangle at it, shape [vertex_count];
+    each triangle's times its `weights` entry where given (shape [triangle_count])."""
     tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     areas = np.zeros(len(vertices), dtype=np.float64)
-    np.add.at(areas, tri.reshape(-1), np.repeat(triangle_areas(vertices, tri) / 3.0, 3))
+    share = triangle_areas(vertices, tri) / 3.0
+    if weights is not None:
+        share = share * np.asarray(weights, dtype=np.float64)
+    np.add.at(areas, tri.reshape(-1), np.repeat(share, 3))
     return areas
 
 
