@@ -296,3 +296,32 @@ def test_scene_files_relative_to_their_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     scene = load_scene("elsewhere/s.toml")
     assert scene.mesh_path == folder / "stomach.obj" and scene.mesh_path.is_absolute()
+
+
+@pytest.mark.parametrize("name, probe_mm", [("stomach", None), ("liver", None), ("stomach_lesion", (-27.0, 56.0, 0.0))])
+def test_default_scenes_press_at_haptic_rate_with_either_integrator(name, probe_mm):
+    """Each default scene's own press (its material, sphere, support, lesion) at dt 1 ms: the explicit
+    integrator (with the substeps it plans) agrees with the implicit one, an independent scheme, on the
+    peak force within 3%, and both come back within 1% of the depth (the protocol's recovery criterion)."""
+    from almsdm_warp.protocol import Palpation
+    from almsdm_warp.region.contact import top_vertex
+
+    scene = load_scene(default_scene_path(name))
+    mesh = scene.load_mesh()
+    if probe_mm is None:
+        vertex = top_vertex(mesh)
+    else:
+        surface = mesh.surface_vertices
+        vertex = int(surface[np.argmin(np.linalg.norm(mesh.vertices[surface] - np.array(probe_mm) * 1e-3, axis=1))])
+    scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
+    p = scene.press
+    peaks = {}
+    for integrator in ("explicit", "implicit"):
+        pal = Palpation(mesh, scene.tissue, rings=scene.rings, integrator=integrator, dt=1e-3, device="cpu",
+                        probe_radius=scene.probe_radius, fixed_below=scene.fixed_below,
+                        edge_scale=scales[0], anchor_scale=scales[1])
+        pal.touch(vertex, p.depth)
+        result = pal.press(p.depth, p.ramp, p.hold, p.settle)
+        assert result.recovery_error_mm < 0.01 * p.depth * 1e3, integrator
+        peaks[integrator] = result.peak_force_N
+    assert peaks["explicit"] == pytest.approx(peaks["implicit"], rel=0.03)
