@@ -19,7 +19,7 @@ import numpy as np
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scenes", nargs="*", default=["stomach", "liver"])
+    ap.add_argument("scenes", nargs="*", default=["paper_stomach", "paper_liver"])
     ap.add_argument("--seeds", type=int, default=12)
     ap.add_argument("--target-N", type=float, nargs="*", default=None, help="target force per scene [N]")
     args = ap.parse_args(argv)
@@ -28,7 +28,7 @@ def main(argv=None):
     from almsdm_warp.warp_init import init_warp
 
     init_warp()
-    targets = args.target_N or [{"stomach": 2.402, "liver": 2.312}.get(s, 2.4) for s in args.scenes]
+    targets = args.target_N or [{"paper_stomach": 2.402, "paper_liver": 2.312}.get(s, 2.4) for s in args.scenes]
     print("| scene | rings | hold-end force median [min-max] (N) | global (N) | target (N) | stiffness scale to target | critical dt whole mesh / 4-ring region (ms) |")
     print("|---|---|---|---|---|---|---|")
     for name, target in zip(args.scenes, targets):

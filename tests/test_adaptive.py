@@ -207,7 +207,7 @@ def test_auto_command_line(tmp_path):
     """--rings auto --tol-mm: the ring count and its reason in the summary line and the JSON, the
     count of each press; bad combinations exit 2 with nothing written."""
     out = tmp_path / "auto.json"
-    assert main(["--rings", "auto", "--tol-mm", "0.05", "--presses", "2", "--settle-s", "0.3", "--json", str(out)]) == 0
+    assert main(["paper_stomach", "--rings", "auto", "--tol-mm", "0.05", "--presses", "2", "--settle-s", "0.3", "--json", str(out)]) == 0
     data = json.loads(out.read_text())
     model = data["model"]
     assert model["rings"] == "auto" and model["tol_mm"] == pytest.approx(0.05)

@@ -25,7 +25,7 @@ def palpate(tmp_path_factory, *args):
     return _runs[args]
 
 
-SHORT = ("--settle-s", "0.3")
+SHORT = ("paper_stomach", "--settle-s", "0.3")  # the paper's preset: the figures below are its calibration's
 
 
 def test_no_arguments_runs_palpate_on_the_default_stomach(tmp_path, monkeypatch, capsys):
@@ -267,7 +267,7 @@ def test_json_output_gets_the_mode_of_a_new_file(tmp_path):
 def test_palpate_feels_the_lesion_of_a_lesion_scene(tmp_path_factory):
     # the same press at the lesion's centre: every spring and anchor there is stiffer (x5 inside the
     # sphere), so the force grows, by at most the factor (the static force is linear in a common scale)
-    args = ("--probe-mm", "-27", "56", "0", "--integrator", "implicit", *SHORT)
+    args = ("--probe-mm", "-27", "56", "0", "--integrator", "implicit", "--settle-s", "0.3")
     plain = palpate(tmp_path_factory, "stomach", *args)
     hard = palpate(tmp_path_factory, "stomach_lesion", *args)
     assert plain["contact"]["vertex"] == hard["contact"]["vertex"]
@@ -278,7 +278,7 @@ def test_palpate_feels_the_lesion_of_a_lesion_scene(tmp_path_factory):
 def _auto_scene(tmp_path, tol_line="tol_mm = 0.03\n"):
     from conftest import SCENES
 
-    text = (SCENES / "stomach.toml").read_text()
+    text = (SCENES / "paper_stomach.toml").read_text()  # auto rings size a one-vertex probe's region
     text = text.replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
     text = text.replace("\nrings = 4 ", f'\nrings = "auto"\n{tol_line}# was: rings = 4 ')
     path = tmp_path / "auto.toml"
@@ -291,7 +291,7 @@ def test_auto_rings_from_a_scene_are_the_flags(tmp_path_factory):
     short = ("--ramp-s", "0.05", "--hold-s", "0.1", "--settle-s", "0.05", "--dt-ms", "0.5")
     scene = _auto_scene(tmp_path_factory.mktemp("scene"))
     by_scene = palpate(tmp_path_factory, scene, *short)
-    by_flags = palpate(tmp_path_factory, "--rings", "auto", "--tol-mm", "0.03", *short)
+    by_flags = palpate(tmp_path_factory, "paper_stomach", "--rings", "auto", "--tol-mm", "0.03", *short)
     assert by_scene["model"]["rings"] == "auto" and by_scene["model"]["tol_mm"] == pytest.approx(0.03)
     assert by_scene["model"]["rings_chosen"] == by_flags["model"]["rings_chosen"] >= 3  # docs/adaptive.md: 4, 4, 3
     for key in ("rings_chosen", "auto_reason", "auto_events", "region_vertices"):
@@ -300,7 +300,7 @@ def test_auto_rings_from_a_scene_are_the_flags(tmp_path_factory):
     # flags override the scene: a fixed ring count drops its tol_mm; --tol-mm replaces it
     fixed = palpate(tmp_path_factory, scene, "--rings", "2", *short)
     assert fixed["model"]["rings"] == 2 and "tol_mm" not in fixed["model"]
-    assert fixed["presses"] == palpate(tmp_path_factory, "--rings", "2", *short)["presses"]
+    assert fixed["presses"] == palpate(tmp_path_factory, "paper_stomach", "--rings", "2", *short)["presses"]
     loose = palpate(tmp_path_factory, scene, "--tol-mm", "1", *short)
     assert loose["model"]["tol_mm"] == 1.0 and loose["model"]["rings_chosen"] < by_scene["model"]["rings_chosen"]
 

@@ -25,7 +25,7 @@ TOML_VALUES = ["nan", "-nan", "inf", "-inf", "0", "0.0", "-0.0", "-1", "-1e-300"
 
 
 def scene_text(name):
-    return (SCENES / f"{name}.toml").read_text()
+    return (SCENES / f"paper_{name}.toml").read_text()  # the paper model: KEYS edits its [tissue] keys
 
 
 def set_value(text, section, key, value):

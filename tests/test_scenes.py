@@ -11,6 +11,7 @@ import trimesh
 from helpers import load_script
 
 from almsdm_warp.errors import InputError
+from almsdm_warp.tissue.material import Material
 from almsdm_warp.tissue.params import TissueParams
 from almsdm_warp.scene.loader import (
     PressParams,
@@ -113,23 +114,35 @@ def test_liver_tets_positive_boundary_closed_volume_matches(make_scenes):
 
 # -- the scene files -----------------------------------------------------------------------
 def test_shipped_scenes_load_in_si_units():
-    assert scene_names() == ["liver", "stomach", "stomach_lesion"]
+    assert scene_names() == ["liver", "paper_liver", "paper_stomach", "stomach", "stomach_lesion"]
     assert scenes_dir() == SCENES
     stomach = load_scene(default_scene_path())
     assert stomach.path == SCENES / "stomach.toml" and stomach.mesh_path == SCENES / "stomach.obj"
     assert stomach.name == "stomach"
     assert stomach.scale_mm == 1.0 and stomach.rings == 4
-    assert stomach.press.depth == 0.01 and stomach.tissue.thickness == pytest.approx(0.025)
     assert (stomach.press.ramp, stomach.press.hold, stomach.press.settle) == (0.1, 0.2, 1.0)
-    assert stomach.tissue.density == 1000.0
-    assert stomach.tissue.edge_stiffness == 62.0 and stomach.tissue.anchor_stiffness == 124.0
-    assert stomach.tissue.edge_damping == 0.02 and stomach.tissue.anchor_damping == 0.1
-    # the defaults are the stomach scene's
-    assert TissueParams() == stomach.tissue and PressParams() == stomach.press
-    assert stomach.as_dict()["press"]["depth_mm"] == 10.0
-    assert stomach.as_dict()["tissue"]["thickness_mm"] == 25.0
+    assert stomach.press.depth == 0.01 and PressParams() == stomach.press
+    # the default scenes: a material from the literature (docs/calibration.md) and a 10 mm fingertip
+    assert stomach.tissue == Material(youngs_modulus=1.85e3, poisson_ratio=0.45, density=1058.0, thickness=3e-3,
+                                      foundation=0.1 / 1e-6, rayleigh_alpha=60.0)  # kPa/mm -> Pa/m as the loader
+    assert stomach.probe_radius == 0.01 and stomach.fixed_below is None
+    assert stomach.as_dict()["tissue"]["thickness_mm"] == pytest.approx(3.0)
     liver = load_scene(default_scene_path("liver"))
-    assert liver.mesh_path == SCENES / "liver.vtu"
+    assert liver.mesh_path == SCENES / "liver.vtu" and liver.probe_radius == 0.01
+    assert liver.tissue == Material(youngs_modulus=5.2e3, poisson_ratio=0.45, density=1060.0, rayleigh_alpha=60.0)
+    assert liver.fixed_below == pytest.approx(-0.02)  # a tet material has no anchors: a support holds it
+    lesion = load_scene(default_scene_path("stomach_lesion"))
+    assert lesion.tissue == stomach.tissue and lesion.lesion is not None
+    # the paper's preset: its constants, the defaults of a scene that gives no [tissue]
+    paper = load_scene(default_scene_path("paper_stomach"))
+    assert paper.mesh_path == stomach.mesh_path and paper.probe_radius == 0.0
+    assert paper.tissue.density == 1000.0 and paper.tissue.thickness == pytest.approx(0.025)
+    assert paper.tissue.edge_stiffness == 62.0 and paper.tissue.anchor_stiffness == 124.0
+    assert paper.tissue.edge_damping == 0.02 and paper.tissue.anchor_damping == 0.1
+    assert TissueParams() == paper.tissue and paper.as_dict()["tissue"]["thickness_mm"] == 25.0
+    paper_liver = load_scene(default_scene_path("paper_liver"))
+    assert paper_liver.mesh_path == liver.mesh_path and paper_liver.tissue.edge_stiffness == 47.0
+    assert paper_liver.fixed_below is None and paper_liver.probe_radius == 0.0
 
 
 def test_resolve_scene_or_mesh():
@@ -141,7 +154,7 @@ def test_resolve_scene_or_mesh():
     assert bare.tissue == TissueParams() and bare.press == PressParams() and bare.rings == 4
     with pytest.raises(InputError, match="no such file"):
         resolve_scene_or_mesh("no_such_mesh.obj")
-    with pytest.raises(InputError, match="liver, stomach"):
+    with pytest.raises(InputError, match="liver, paper_liver, paper_stomach, stomach"):
         resolve_scene_or_mesh("kidney")
     with pytest.raises(InputError, match="no scene named 'kidney'"):
         default_scene_path("kidney")
@@ -283,3 +296,32 @@ def test_scene_files_relative_to_their_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     scene = load_scene("elsewhere/s.toml")
     assert scene.mesh_path == folder / "stomach.obj" and scene.mesh_path.is_absolute()
+
+
+@pytest.mark.parametrize("name, probe_mm", [("stomach", None), ("liver", None), ("stomach_lesion", (-27.0, 56.0, 0.0))])
+def test_default_scenes_press_at_haptic_rate_with_either_integrator(name, probe_mm):
+    """Each default scene's own press (its material, sphere, support, lesion) at dt 1 ms: the explicit
+    integrator (with the substeps it plans) agrees with the implicit one, an independent scheme, on the
+    peak force within 3%, and both come back within 1% of the depth (the protocol's recovery criterion)."""
+    from almsdm_warp.protocol import Palpation
+    from almsdm_warp.region.contact import top_vertex
+
+    scene = load_scene(default_scene_path(name))
+    mesh = scene.load_mesh()
+    if probe_mm is None:
+        vertex = top_vertex(mesh)
+    else:
+        surface = mesh.surface_vertices
+        vertex = int(surface[np.argmin(np.linalg.norm(mesh.vertices[surface] - np.array(probe_mm) * 1e-3, axis=1))])
+    scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
+    p = scene.press
+    peaks = {}
+    for integrator in ("explicit", "implicit"):
+        pal = Palpation(mesh, scene.tissue, rings=scene.rings, integrator=integrator, dt=1e-3, device="cpu",
+                        probe_radius=scene.probe_radius, fixed_below=scene.fixed_below,
+                        edge_scale=scales[0], anchor_scale=scales[1])
+        pal.touch(vertex, p.depth)
+        result = pal.press(p.depth, p.ramp, p.hold, p.settle)
+        assert result.recovery_error_mm < 0.01 * p.depth * 1e3, integrator
+        peaks[integrator] = result.peak_force_N
+    assert peaks["explicit"] == pytest.approx(peaks["implicit"], rel=0.03)

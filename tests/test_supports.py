@@ -133,7 +133,8 @@ def test_scene_support_section(tmp_path):
     scene = load_scene(liver_scene(tmp_path, "[support]\nfixed_below_mm = -5.0\n"))
     assert scene.fixed_below == pytest.approx(-5e-3)
     assert scene.as_dict()["support"] == {"fixed_below_mm": pytest.approx(-5.0)}
-    assert load_scene(SCENES / "liver.toml").fixed_below is None
+    assert load_scene(SCENES / "paper_liver.toml").fixed_below is None
+    assert load_scene(SCENES / "liver.toml").fixed_below == pytest.approx(-0.02)  # a tet material needs a support
     for text, message in (("[support]\nfixed_below = 1.0\n", r"unknown key 'fixed_below' in \[support\]"),
                           ("[support]\nfixed_below_mm = nan\n", r"\[support\] fixed_below_mm must be finite"),
                           ('[support]\nfixed_below_mm = "low"\n', r"\[support\] fixed_below_mm must be a number")):
@@ -176,7 +177,7 @@ def test_cli_impossible_material_or_support_is_one_line_exit_2(args, message, tm
 
 
 def test_cli_surface_material_needs_a_thickness(tmp_path):
-    code, _stdout, err = run_main(["palpate", "--youngs-modulus-kpa", "10"])
+    code, _stdout, err = run_main(["palpate", "paper_stomach", "--youngs-modulus-kpa", "10"])  # its constants give no thickness
     assert code == 2 and "surface mesh: the material model needs a membrane --thickness-mm > 0" in err
 
 

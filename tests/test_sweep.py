@@ -151,7 +151,7 @@ def test_sweep_on_ray_gives_the_same_file(tmp_path):
 def test_sweep_implicit_matches_the_batch(tmp_path, stomach):
     # the command's implicit sweep is BatchPalpation's implicit press at the same points
     out = tmp_path / "imp.npz"
-    assert main(["sweep", "--points", "6", "--rings", "2", "--integrator", "implicit", "--out", str(out), *FAST]) == 0
+    assert main(["sweep", "paper_stomach", "--points", "6", "--rings", "2", "--integrator", "implicit", "--out", str(out), *FAST]) == 0
     table = sw.read_table(out)
     from almsdm_warp.batch.batch_palpation import BatchPalpation
 
@@ -191,6 +191,7 @@ def test_sweep_bad_input(tmp_path, monkeypatch, capsys, args, message):
 def test_lesion_scene_and_its_errors(tmp_path):
     from almsdm_warp.errors import InputError
     from almsdm_warp.sim.model import Model
+    from almsdm_warp.tissue.params import TissueParams
     from almsdm_warp.scene.loader import load_scene
 
     scene = resolve_scene_or_mesh("stomach_lesion")
@@ -198,14 +199,16 @@ def test_lesion_scene_and_its_errors(tmp_path):
     assert lesion.center == (-0.027, 0.056, 0.0) and lesion.radius == 0.018 and lesion.stiffness_factor == 5.0
     assert scene.as_dict()["lesion"]["radius_mm"] == 18.0
     mesh = scene.load_mesh()
-    edge_scale, anchor_scale = lesion.scales(mesh)
-    model = Model(mesh, scene.tissue, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale)
+    # on the paper's constants (the scene's is a material: tests/test_tissue_material_model.py)
+    paper = TissueParams()
+    edge_scale, anchor_scale = lesion.scales(mesh, paper)
+    model = Model(mesh, paper, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale)
     inside = np.linalg.norm(mesh.vertices - np.array(lesion.center), axis=1) <= lesion.radius
     assert 0 < inside.sum() < 100
-    np.testing.assert_allclose(model.anchor_ke.numpy(), np.where(inside, 5.0, 1.0) * scene.tissue.anchor_stiffness, rtol=1e-6)
+    np.testing.assert_allclose(model.anchor_ke.numpy(), np.where(inside, 5.0, 1.0) * paper.anchor_stiffness, rtol=1e-6)
     mid = mesh.vertices[mesh.edges].mean(axis=1)
     stiff_edges = np.linalg.norm(mid - np.array(lesion.center), axis=1) <= lesion.radius
-    np.testing.assert_allclose(model.spring_ke.numpy(), np.where(stiff_edges, 5.0, 1.0) * scene.tissue.edge_stiffness, rtol=1e-6)
+    np.testing.assert_allclose(model.spring_ke.numpy(), np.where(stiff_edges, 5.0, 1.0) * paper.edge_stiffness, rtol=1e-6)
     assert resolve_scene_or_mesh("stomach").lesion is None
     for table, message in [
         ("center_mm = [0, 0]\nradius_mm = 5", "center_mm must be 3 finite numbers"),
@@ -228,8 +231,9 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     from almsdm_warp.tissue.params import TissueParams
 
     press = ["--points", "6", "--ramp-s", "0.1", "--hold-s", "0.2", "--settle-s", "0.01", "--dt-ms", "1"]
-    assert main(["sweep", *press, "--rings", "auto", "--tol-mm", "0.1", "--out", str(tmp_path / "auto.npz")]) == 0
-    assert main(["sweep", *press, "--rings", "8", "--out", str(tmp_path / "eight.csv")]) == 0
+    # the paper's preset: the reference below is its constants (TissueParams)
+    assert main(["sweep", "paper_stomach", *press, "--rings", "auto", "--tol-mm", "0.1", "--out", str(tmp_path / "auto.npz")]) == 0
+    assert main(["sweep", "paper_stomach", *press, "--rings", "8", "--out", str(tmp_path / "eight.csv")]) == 0
     auto, eight = sw.read_table(tmp_path / "auto.npz"), sw.read_table(tmp_path / "eight.csv")
     for c in ("x_mm", "y_mm", "z_mm", "vertex"):
         np.testing.assert_array_equal(auto[c], eight[c])
@@ -247,7 +251,7 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     np.testing.assert_allclose(auto["peak_force_N"], eight["peak_force_N"], rtol=0.01)
     np.testing.assert_allclose(auto["peak_force_N"], peaks, rtol=0.01)
     # a scene's [region] rings = "auto", tol_mm = 0.1: the same sweep
-    text = (SCENES / "stomach.toml").read_text().replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
+    text = (SCENES / "paper_stomach.toml").read_text().replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
     (tmp_path / "auto.toml").write_text(text.replace("\nrings = 4 ", '\nrings = "auto"\ntol_mm = 0.1\n# '))
     assert main(["sweep", str(tmp_path / "auto.toml"), *press, "--out", str(tmp_path / "scene.npz")]) == 0
     by_scene = sw.read_table(tmp_path / "scene.npz")

@@ -24,7 +24,7 @@ DEPTH = 0.01
 
 @pytest.fixture(scope="module")
 def stomach():
-    scene = resolve_scene_or_mesh(None)
+    scene = resolve_scene_or_mesh("paper_stomach")  # the paper's constants: the critical steps below are theirs
     return scene, scene.load_mesh()
 
 
@@ -181,7 +181,7 @@ def test_sweep_past_the_critical_step_writes_a_finite_table(tmp_path, capsys):
     from almsdm_warp.batch.sweep import read_table
 
     out = tmp_path / "t.csv"
-    assert main(["sweep", "--out", str(out), "--points", "4", "--dt-ms", "2", "--settle-s", "0.1"]) == 0
+    assert main(["sweep", "paper_stomach", "--out", str(out), "--points", "4", "--dt-ms", "2", "--settle-s", "0.1"]) == 0
     stdout = capsys.readouterr().out
     assert "cost: " in stdout and "x at most 2 substep(s)" in stdout, stdout
     table = read_table(out)
@@ -200,7 +200,7 @@ def test_a_sweep_that_diverges_writes_nothing(tmp_path, monkeypatch, capsys):
 
     monkeypatch.setattr(BatchPalpation, "finish_press", one_inf)
     out = tmp_path / "t.csv"
-    assert main(["sweep", "--out", str(out), "--points", "4", "--settle-s", "0.05"]) == 2
+    assert main(["sweep", "paper_stomach", "--out", str(out), "--points", "4", "--settle-s", "0.05"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "peak_force_N is not finite" in err and "nothing is written" in err, err
     assert list(tmp_path.iterdir()) == []

@@ -192,6 +192,7 @@ def _resolve(args) -> _Run:
 def _build(args, run: _Run):
     """Say what is pressed, then make the palpation (adaptive for rings "auto") and touch the contact."""
     from ..protocol.palpation import Palpation
+    from ..tissue.material import holding_notes
 
     mesh, scene = run.mesh, run.scene
     print(mesh.summary())
@@ -204,7 +205,7 @@ def _build(args, run: _Run):
         f"contact: vertex {run.vertex} at {np.round(run.point * 1e3, 2).tolist()} mm; press {run.depth * 1e3:g} mm "
         f"(ramp {run.ramp:g} s, hold {run.hold:g} s, settle {run.settle:g} s) x {args.presses}"
     )
-    scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
+    scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
     lesion = dict(zip(("edge_scale", "anchor_scale"), scales), fixed_below=scene.fixed_below)
     try:
         if run.tol is not None:
@@ -220,6 +221,7 @@ def _build(args, run: _Run):
             pal.touch(run.vertex)
     except ValueError as exc:  # a parameter Palpation rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
+    pal.notes[:0] = holding_notes(scene.tissue, mesh.is_volume, scene.fixed_below is not None)
     return pal
 
 

@@ -140,7 +140,7 @@ def _plan(args, devices):
                          f"radius {radius * 1e3:g} mm: it would pass through vertices; ramp longer or use a smaller --dt-ms")
     check_limit(args.points, "points", "--points")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
-    scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
+    scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
     points, vertices = sample_points(mesh, args.points)
     if scene.fixed_below is not None:  # a supported vertex cannot be pressed
         keep = mesh.vertices[vertices, 2] >= scene.fixed_below
@@ -167,6 +167,9 @@ def _plan(args, devices):
     )
     print(f"cost: {cost:.3g} region-steps ({len(vertices)} points x {frames} frames x at most {substeps} substep(s); "
           f"limit {args.max_region_steps:.3g}, --max-region-steps)")
+    if scene.probe_radius > 0:  # the batched kernels drive one vertex a palpation
+        print(f"note: the batched sweep presses with the paper's probe (the contact vertex driven), not the scene's "
+              f"{scene.probe_radius * 1e3:g} mm sphere", file=sys.stderr)
     return plan, scene, rings_text
 
 

@@ -41,7 +41,7 @@ def run_anatomy(settings, device, tasks, folder=None) -> dict:
             tasks.step(f"anatomy: {file} (absent)", _weight(file))
             continue
         mesh = load_mesh(path, scale=scale_mm)
-        tissue = shipped_scene("liver" if mesh.is_volume else "stomach")[0].tissue
+        tissue = shipped_scene("paper_liver" if mesh.is_volume else "paper_stomach")[0].tissue  # anchored: no support needed
         vertex = top_vertex(mesh)
         row = {"file": file, "scale_mm": scale_mm, "vertices": mesh.vertex_count, "volume": mesh.is_volume, "edges": mesh.edge_count}
         local = Palpation(mesh, tissue, rings=4, integrator="implicit", dt=DT, device=device)

@@ -11,6 +11,15 @@ from .common import DEPTH, DT, HOLD, RAMP, press_curve, shipped_scene, time_per_
 
 RECOVERY_RINGS = (1, 2, 3, 4, "global-free")
 
+PAPER_PRESETS = {"stomach": "paper_stomach", "liver": "paper_liver"}
+"""Organ -> the shipped scene on the paper's constants that its experiments run on (the default
+scenes are on a material from the literature; docs/calibration.md)."""
+
+
+def paper_scene(organ):
+    """(Scene, its mesh) of an organ's paper preset."""
+    return shipped_scene(PAPER_PRESETS[organ])
+
 TABLE1_ROWS = (
     # (label, scene, rings, integrator, the paper's row it stands beside)
     ("stomach, 4 rings", "stomach", 4, "explicit", "local surface"),
@@ -38,7 +47,7 @@ def run_recovery(settings, device, tasks) -> dict:
     the contact vertex's residual after each, for rings 1..4 and the unanchored global model."""
     from ..protocol.palpation import Palpation, SimulationDiverged
 
-    scene, mesh = shipped_scene("stomach")
+    scene, mesh = paper_scene("stomach")
     vertex = top_vertex(mesh)
     rows, curves = [], {}
     for rings in RECOVERY_RINGS:
@@ -75,7 +84,7 @@ def run_table1(settings, device, tasks) -> dict:
 
     rows = []
     for label, name, rings, integrator, paper in TABLE1_ROWS:
-        scene, mesh = shipped_scene(name)
+        scene, mesh = paper_scene(name)
         pal = Palpation(mesh, scene.tissue, rings=rings, integrator=integrator, dt=DT, device=device)
         pal.touch(top_vertex(mesh))
         r = pal.press(DEPTH, RAMP, HOLD, settings.settle_s)
@@ -122,7 +131,7 @@ def run_table2(settings, device, tasks, normals=None) -> dict:
 
     rows = []
     for label, name, rings, integrator, paper in TABLE2_ROWS:
-        scene, mesh = shipped_scene(name)
+        scene, mesh = paper_scene(name)
         pal = Palpation(mesh, scene.tissue, rings=rings, integrator=integrator, dt=DT, device=device)
         pal.touch(top_vertex(mesh))
         step_s = time_per_step(pal, settings.timing_budget_s)

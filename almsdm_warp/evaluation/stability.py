@@ -51,7 +51,7 @@ def run_stability(settings, device, tasks) -> dict:
     from .common import shipped_scene
     from ..protocol.palpation import Palpation
 
-    scene, mesh = shipped_scene("stomach")
+    scene, mesh = shipped_scene("paper_stomach")  # the paper's constants, scaled
     vertex = top_vertex(mesh)
     cells, critical = [], {}
     for scale in settings.stability_scales:

@@ -44,8 +44,9 @@ def header_lines(r) -> list[str]:
         "",
         "Protocol (DESIGN.md): the contact vertex (the highest surface vertex unless said) is driven 10 mm along "
         "the inward normal over 0.1 s, held 0.2 s, released; feedback force = reaction on the driven vertex. "
-        "dt = 1 ms unless said. Stomach = the project's 1002-vertex surface scene, liver = its 700-vertex tet scene "
-        "(docs/calibration.md). Regenerate: `almsdm evaluate` (full) or `almsdm evaluate --quick`.",
+        "dt = 1 ms unless said. Stomach = the project's 1002-vertex surface scene, liver = its 700-vertex tet scene; "
+        "the paper's experiments run on their paper presets (paper_stomach, paper_liver: the paper's constants, "
+        "calibrated), the rest on the default scenes (a material, docs/calibration.md). Regenerate: `almsdm evaluate` (full) or `almsdm evaluate --quick`.",
         "",
     ]
 

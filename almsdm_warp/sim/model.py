@@ -14,7 +14,7 @@ import warp as wp
 from ..errors import InputError
 from ..kernels.arrays import ProbeArrays, ProbeSphereArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
-from ..tissue.material import Material, springs_for_mesh
+from ..tissue.material import Material, damping, springs_for_mesh
 from ..tissue.params import TissueParams
 
 PROBE_OFF = 0
@@ -51,7 +51,8 @@ class Model:
         edge and vertex by tissue.material.springs_for_mesh).
 
         edge_scale [edge_count] and anchor_scale [vertex_count]: optional multipliers of stiffness
-        and damping per spring and per anchor (a stiffer lesion, say), on top of either tissue.
+        per spring and per anchor (a stiffer lesion, `Lesion.scales`), on top of either tissue; the
+        paper's dampers scale with them, a material's follow the scaled springs by its damping law.
         fixed_below [m]: every vertex with z below it is supported (fixed); support: vertex ids, also
         fixed. anchors: keep the anchor springs k_i (True), drop them (False), or None: dropped on a
         supported tet mesh (the support holds it), kept otherwise; the vertex dampers d_i stay (with
@@ -75,7 +76,12 @@ class Model:
             raise ValueError(f"vertex {bad} has mass {mass[bad]:.3g} kg: it belongs to no element with area or volume")
         es = np.ones(e) if edge_scale is None else np.asarray(edge_scale, dtype=np.float64)
         an = np.ones(n) if anchor_scale is None else np.asarray(anchor_scale, dtype=np.float64)
-        ke, kd, ka, da = ke * es, kd * es, ka * an * float(bool(anchors)), da * an
+        if isinstance(t, Material):  # the dampers follow the scaled springs by the material's law
+            ke, ka = ke * es, ka * an
+            kd, da = damping(t, self.mesh.edges, ke, ka, mass)
+        else:
+            ke, kd, ka, da = ke * es, kd * es, ka * an, da * an
+        ka = ka * float(bool(anchors))
         d = self.device
         self.particle_mass_host = mass
         self.particle_mass = wp.array(mass, dtype=wp.float32, device=d)

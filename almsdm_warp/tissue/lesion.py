@@ -1,8 +1,19 @@
 """A lesion: a sphere of stiffer tissue in an organ (a scene's ``[lesion]`` table).
 
-Springs whose midpoint lies inside the sphere, and anchors of vertices inside it, are
-`stiffness_factor` times stiffer (stiffness and damping both: the same tissue, denser), through
-Model's `edge_scale` and `anchor_scale`. A sweep over the organ then shows it as the stiffest spot.
+On a material (``model = "material"``) the lesion is a stiffer material: each element (tet, or
+triangle of a membrane) whose centroid lies inside the sphere has Young's modulus (and, on a surface,
+foundation modulus: the tissue under the wall) `stiffness_factor` times higher, and every spring is
+derived from the elements around it, each with its own E (tissue.material: k_ij = E_net sum(f_t V_t)
+/ l_ij^2, an anchor from its triangles' f_t A_t / 3). An edge half inside gets the volume-weighted
+stiffness, so refining the mesh converges to the sphere. Model's dampers follow the scaled springs by
+the material's damping law.
+
+On the paper's constants: springs whose midpoint lies inside the sphere, and anchors of vertices
+inside it, are `stiffness_factor` times stiffer (stiffness and damping both: the same tissue,
+denser).
+
+Either way `Lesion.scales` gives Model's `edge_scale` and `anchor_scale`. A sweep over the organ
+then shows the lesion as the stiffest spot.
 """
 
 from __future__ import annotations
@@ -14,6 +25,7 @@ import numpy as np
 
 from ..checks import check_limit
 from ..errors import InputError
+from .material import Material, edge_element_measure, vertex_areas
 
 KEYS = ("center_mm", "radius_mm", "stiffness_factor")
 
@@ -32,10 +44,28 @@ class Lesion:
         d = np.asarray(vertices, dtype=np.float64) - np.asarray(self.center, dtype=np.float64)
         return np.einsum("ij,ij->i", d, d) <= self.radius**2
 
-    def scales(self, mesh):
-        """(edge_scale [edge_count], anchor_scale [vertex_count]) for Model: the factor inside, 1 outside."""
+    def element_factor(self, vertices: np.ndarray, elements: np.ndarray) -> np.ndarray:
+        """Modulus factor of each element (rows of vertex ids): `stiffness_factor` where its centroid
+        [m] is inside the sphere, else 1, shape [element_count]."""
+        el = np.asarray(elements, dtype=np.int64)
+        centroid = np.asarray(vertices, dtype=np.float64)[el].mean(axis=1) if len(el) else np.zeros((0, 3))
+        return np.where(self.vertex_inside(centroid), self.stiffness_factor, 1.0)
+
+    def scales(self, mesh, tissue=None):
+        """(edge_scale [edge_count], anchor_scale [vertex_count]) for Model: on a Material (`tissue`),
+        each spring's and anchor's stiffness with the per-element E over the uniform one (module
+        docstring); otherwise the factor on springs whose midpoint, and anchors whose vertex, is inside."""
         v = mesh.vertices
         e = mesh.edges
+        if isinstance(tissue, Material):
+            volume = mesh.tetrahedra is not None and len(mesh.tetrahedra) > 0
+            elements = mesh.tetrahedra if volume else mesh.triangles
+            tets = mesh.tetrahedra if volume else None
+            uniform = edge_element_measure(v, e, mesh.triangles, tets)
+            stiff = edge_element_measure(v, e, mesh.triangles, tets, weights=self.element_factor(v, elements))
+            area = vertex_areas(v, mesh.triangles)
+            area_stiff = vertex_areas(v, mesh.triangles, weights=self.element_factor(v, mesh.triangles))
+            return _ratio(stiff, uniform), _ratio(area_stiff, area)
         edge_in = self.vertex_inside(0.5 * (v[e[:, 0]] + v[e[:, 1]]))
         edge_scale = np.where(edge_in, self.stiffness_factor, 1.0)
         anchor_scale = np.where(self.vertex_inside(v), self.stiffness_factor, 1.0)
@@ -47,6 +77,11 @@ class Lesion:
             "radius_mm": self.radius * 1e3,
             "stiffness_factor": self.stiffness_factor,
         }
+
+
+def _ratio(weighted: np.ndarray, plain: np.ndarray) -> np.ndarray:
+    """weighted / plain, 1 where plain is 0 (an interior vertex has no surface share)."""
+    return np.divide(weighted, plain, out=np.ones_like(plain), where=plain > 0.0)
 
 
 def parse_lesion(table, where: str) -> Lesion:

@@ -148,9 +148,10 @@ class TissueSprings:
     """m_i [kg], shape [vertex_count], float64."""
 
 
-def edge_element_measure(vertices, edges, triangles, tetrahedra=None) -> np.ndarray:
+def edge_element_measure(vertices, edges, triangles, tetrahedra=None, weights=None) -> np.ndarray:
     """Sum of the volumes of the tets around each edge [m^3], or of the triangle areas [m^2] for a
-    surface mesh (no tets), shape [edge_count]. `edges` rows are (i, j) with i < j."""
+    surface mesh (no tets), shape [edge_count]; each element's times its `weights` entry where given
+    (shape [element_count]: a per-element modulus factor). `edges` rows are (i, j) with i < j."""
     e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     measure = np.zeros(len(e), dtype=np.float64)
     if tetrahedra is not None and len(tetrahedra):
@@ -161,6 +162,8 @@ def edge_element_measure(vertices, edges, triangles, tetrahedra=None) -> np.ndar
         local, size = np.array([[0, 1], [1, 2], [0, 2]]), triangle_areas(vertices, el)
     if len(el) == 0:
         return measure
+    if weights is not None:
+        size = size * np.asarray(weights, dtype=np.float64)
     pairs = np.sort(el[:, local].reshape(-1, 2), axis=1)
     n = len(vertices)
     key, pair_key = e[:, 0] * n + e[:, 1], pairs[:, 0] * n + pairs[:, 1]
@@ -172,11 +175,15 @@ def edge_element_measure(vertices, edges, triangles, tetrahedra=None) -> np.ndar
     return measure
 
 
-def vertex_areas(vertices, triangles) -> np.ndarray:
-    """Each vertex's share of the surface [m^2]: a third of each triangle at it, shape [vertex_count]."""
+def vertex_areas(vertices, triangles, weights=None) -> np.ndarray:
+    """Each vertex's share of the surface [m^2]: a third of each triangle at it, shape [vertex_count];
+    each triangle's times its `weights` entry where given (shape [triangle_count])."""
     tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     areas = np.zeros(len(vertices), dtype=np.float64)
-    np.add.at(areas, tri.reshape(-1), np.repeat(triangle_areas(vertices, tri) / 3.0, 3))
+    share = triangle_areas(vertices, tri) / 3.0
+    if weights is not None:
+        share = share * np.asarray(weights, dtype=np.float64)
+    np.add.at(areas, tri.reshape(-1), np.repeat(share, 3))
     return areas
 
 
@@ -254,6 +261,34 @@ def springs_for_mesh(mesh, source, **options) -> TissueSprings:
     if isinstance(source, UniformSprings):
         return springs_uniform(source, mesh.vertices, mesh.triangles, mesh.tetrahedra, mesh.edges)
     return springs_from_material(source, mesh.vertices, mesh.triangles, mesh.tetrahedra, mesh.edges, **options)
+
+
+def holding_notes(tissue, is_volume: bool, supported: bool) -> list[str]:
+    """What keeps a press on this tissue from coming back to rest, one line each (empty: nothing).
+
+    A tet mesh on a material has no anchors (a foundation acts on a surface), nor has a surface with
+    no foundation: with no support only the
+    local region's fixed outer ring holds the body, and a region grown from a sphere's patch can be
+    most of a lobe, a cantilever on that ring whose lowest mode is below 1 Hz (the shipped liver:
+    0.67 Hz, docs/calibration.md, "A tet liver with nothing under it"). Without mass-proportional
+    damping nothing slows such a mode (a damping ratio damps each spring's own, much faster, mode),
+    so the organ swings for seconds after the probe lets go. `tissue` of another kind (the paper's
+    constants, with an anchor on every vertex): no notes.
+    """
+    if not isinstance(tissue, Material):
+        return []
+    notes = []
+    unheld = (is_volume or tissue.foundation <= 0.0) and not supported  # no anchors, no support
+    if unheld:
+        what = "a tet mesh" if is_volume else "a surface with no foundation"
+        notes.append(f"{what} on a material has no anchors and no support: only the region's fixed outer ring "
+                     "holds it, and the body may swing on that ring after a press; give a support "
+                     "([support] fixed_below_mm, --fixed-below-mm)")
+    undamped = tissue.damping_ratio <= 0.0 and tissue.rayleigh_beta <= 0.0
+    if tissue.rayleigh_alpha <= 0.0 and (undamped or unheld):
+        notes.append("the material has no mass-proportional damping (rayleigh_alpha_per_s, --rayleigh-alpha-per-s): "
+                     "its slow modes are undamped and a press may not settle within its window")
+    return notes
 
 
 def material_as_dict(material: Material) -> dict:
