@@ -181,26 +181,29 @@ def test_cli_surface_material_needs_a_thickness(tmp_path):
     assert code == 2 and "surface mesh: the material model needs a membrane --thickness-mm > 0" in err
 
 
-def test_sweep_refuses_supports_it_cannot_hold(tmp_path):
-    """The batched kernels fix only each region's outer ring: a supported scene is an error, not a
-    sweep that silently moves the supported vertices."""
+def test_sweep_of_a_supported_scene_never_presses_or_moves_the_support(tmp_path):
+    """A supported scene sweeps: points below the plane are left out (a press there reads no force),
+    and every point pressed reads a force above zero."""
+    from almsdm_warp.batch.sweep import read_table
+
     out = tmp_path / "map.csv"
-    code, _stdout, err = run_main(["sweep", str(liver_scene(tmp_path, "[support]\nfixed_below_mm = -5.0\n")), "--points", "2",
+    code, _stdout, err = run_main(["sweep", str(liver_scene(tmp_path, "[support]\nfixed_below_mm = -5.0\n")), "--points", "6",
                                    "--out", str(out)])
-    assert code == 2 and "does not hold yet" in err and not out.exists()
+    assert code == 0, err
+    table = read_table(out)
+    assert np.all(table["z_mm"] >= -5.0) and np.all(table["peak_force_N"] > 0)
 
 
 def test_api_refuses_what_it_cannot_hold():
-    """A batch cannot hold supports yet, and a probe on a supported vertex would read zero force:
-    both are errors, not silent answers."""
+    """A probe on a supported vertex would read zero force: an error, in a batch as alone, not a silent answer."""
     from almsdm_warp.batch import BatchPalpation
     from almsdm_warp.mesh.primitives import tet_ball
     from almsdm_warp.protocol import Palpation
 
     mesh = tet_ball(50.0, 20.0)
     z = mesh.vertices[:, 2]
-    with pytest.raises(ValueError, match="does not hold supports"):
-        BatchPalpation(mesh, rings=2, device="cpu", fixed_below=-0.04)
+    with pytest.raises(ValueError, match="held by the support"):
+        BatchPalpation(mesh, rings=2, device="cpu", fixed_below=-0.04).touch([int(np.argmin(z))])
     pal = Palpation(mesh, rings=2, device="cpu", fixed_below=-0.04)
     with pytest.raises(ValueError, match="held by the support"):
         pal.touch(int(np.argmin(z)))

@@ -167,9 +167,6 @@ def _plan(args, devices):
     )
     print(f"cost: {cost:.3g} region-steps ({len(vertices)} points x {frames} frames x at most {substeps} substep(s); "
           f"limit {args.max_region_steps:.3g}, --max-region-steps)")
-    if scene.probe_radius > 0:  # the batched kernels drive one vertex a palpation
-        print(f"note: the batched sweep presses with the paper's probe (the contact vertex driven), not the scene's "
-              f"{scene.probe_radius * 1e3:g} mm sphere", file=sys.stderr)
     return plan, scene, rings_text
 
 
