@@ -96,10 +96,11 @@ def test_lesion_stiffens_the_points_over_it_as_one_palpation_finds(whole):
     np.testing.assert_array_equal(table["peak_force_N"][rows][far], base[far])
     # the same press, one palpation at a time, on a model stiffened by the lesion the table names
     lesion = Lesion(tuple(centre), radius, 6.0)
-    edge_scale, anchor_scale = lesion.scales(mesh)
+    edge_scale, anchor_scale = lesion.scales(mesh, scene.tissue)
     palpation = Palpation(mesh, scene.tissue, rings=int(table["rings"][rows][k]), dt=0.25e-3, device="cpu",
-                          edge_scale=edge_scale, anchor_scale=anchor_scale)
-    palpation.touch(int(table["vertex"][rows][k]))
+                          edge_scale=edge_scale, anchor_scale=anchor_scale, probe_radius=scene.probe_radius,
+                          fixed_below=scene.fixed_below)
+    palpation.touch(int(table["vertex"][rows][k]), scene.press.depth)
     assert palpation.substeps == 1
     result = palpation.press(depth=scene.press.depth, ramp=0.05, hold=0.05, settle=0.05)
     np.testing.assert_allclose(table["peak_force_N"][rows][k], result.peak_force_N, rtol=1e-5)

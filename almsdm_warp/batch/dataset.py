@@ -31,7 +31,8 @@ from ..checks import AUTO, check_limit, check_protocol, check_value, describe
 from ..errors import InputError
 from ..export.output import atomic_write, check_regular
 from ..solvers import INTEGRATORS
-from .sweep import COLUMNS, Parts, SweepPlan, file_sha256, read_table, run_local, sample_points, write_table
+from .sweep import (COLUMNS, Parts, SweepPlan, check_sphere_travel, file_sha256, pressable_points, read_table, run_local,
+                    sample_points, write_table)
 
 try:
     import tomllib
@@ -285,7 +286,7 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
         grid = [(c, r, f) for c in centers for r in spec.radii for f in spec.factors]
         for k, (c, r, f) in enumerate(grid, start=1):
             lesion = Lesion(tuple(float(x) for x in c), r, f)
-            edge_scale, anchor_scale = lesion.scales(mesh)
+            edge_scale, anchor_scale = lesion.scales(mesh, scene.tissue)
             if not (edge_scale != 1.0).any() and not (anchor_scale != 1.0).any():
                 raise InputError(f"lesion {k} of {name}: radius {r * 1e3:g} mm around {np.round(c * 1e3, 2).tolist()} mm "
                                  f"holds no vertex and no spring of the mesh (a lesion there changes nothing): "
@@ -298,8 +299,6 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     """The scene's mesh and its baseline plan (no lesion), after the checks a sweep makes."""
     from ..checks import check_ring_count
 
-    if scene.fixed_below is not None:
-        raise InputError(f"scene {name!r} has supports ([support] fixed_below_mm), which the batched sweep does not hold yet")
     rings = spec.rings if spec.rings is not None else scene.rings
     if rings == AUTO:
         raise InputError(f"scene {name!r} has rings = 'auto'; a dataset presses a fixed ring count: give [dataset] rings")
@@ -308,10 +307,12 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     press = {k: spec.press.get(k, getattr(scene.press, k)) for k in ("depth", "ramp", "hold", "settle")}
     check_protocol(press["depth"], spec.dt, press["ramp"], press["hold"], press["settle"], 1, float(np.ptp(mesh.vertices, axis=0).max()))
     check_limit(spec.points, "points", "[dataset] points")
-    points, vertices = sample_points(mesh, spec.points)
+    check_sphere_travel(scene.probe_radius, press["depth"], spec.dt, press["ramp"])
+    points, vertices = pressable_points(mesh, spec.points, scene.fixed_below)
     chunk = spec.chunk or (len(vertices) if cuda else 64)
     plan = SweepPlan(mesh, scene.tissue, None, None, int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
-                     press["settle"], points, vertices, chunk, spec.integrator)
+                     press["settle"], points, vertices, chunk, spec.integrator, probe_radius=scene.probe_radius,
+                     fixed_below=scene.fixed_below)
     return mesh, plan
 
 

@@ -439,3 +439,26 @@ def auto_dt(model, limit: float = 1e-3, safety: float = 0.9) -> float:
         return limit
     step = math.floor(safety * crit / 5e-5) * 5e-5
     return step if step > 0 else safety * crit
+
+
+def pressable_points(mesh, n: int, fixed_below=None):
+    """sample_points less those a support holds (z below `fixed_below` [m]: a press there reads no force).
+    Raises InputError when the support holds every one."""
+    points, vertices = sample_points(mesh, n)
+    if fixed_below is None:
+        return points, vertices
+    keep = mesh.vertices[vertices, 2] >= fixed_below
+    if not keep.any():
+        raise InputError(f"every sampled point is held by the support (z below {fixed_below * 1e3:g} mm)")
+    return points[keep], vertices[keep]
+
+
+def check_sphere_travel(radius: float, depth: float, dt: float, ramp: float) -> None:
+    """InputError where a sphere of `radius` [m] would move its radius or more in one frame of the
+    press's ramp (it would pass through vertices), before any work; BatchPalpation checks it again."""
+    from ..protocol.schedule import PressSchedule
+
+    travel = depth / PressSchedule.from_times(dt, ramp, 0.0, 0.0).ramp_n
+    if radius > 0 and travel >= radius:
+        raise InputError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its "
+                         f"radius {radius * 1e3:g} mm: it would pass through vertices; ramp longer or use a smaller --dt-ms")

@@ -113,9 +113,8 @@ def cmd_sweep(args) -> int:
 def _plan(args, devices):
     """The scene, its mesh and the sweep's plan (points, chunks, rings, step); says what will be pressed.
     Returns (plan, scene, the rings in words)."""
-    from ..batch.sweep import SweepPlan, sample_points
+    from ..batch.sweep import SweepPlan, check_sphere_travel, pressable_points
     from ..batch.sweep_auto import rings_summary
-    from ..protocol.schedule import PressSchedule
     from ..scene.loader import resolve_scene_or_mesh
 
     scene = resolve_scene_or_mesh(args.scene, scale_mm=args.scale_mm or 1.0)
@@ -134,19 +133,11 @@ def _plan(args, devices):
     settle = press.settle if args.settle_s is None else args.settle_s
     dt = 1e-3 if args.dt_ms is None else args.dt_ms * 1e-3
     frames = check_protocol(depth, dt, ramp, hold, settle, 1, float(np.ptp(mesh.vertices, axis=0).max()))
-    travel = depth / PressSchedule.from_times(dt, ramp, hold, settle).ramp_n
-    if radius > 0 and travel >= radius:
-        raise InputError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its "
-                         f"radius {radius * 1e3:g} mm: it would pass through vertices; ramp longer or use a smaller --dt-ms")
+    check_sphere_travel(radius, depth, dt, ramp)
     check_limit(args.points, "points", "--points")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
-    points, vertices = sample_points(mesh, args.points)
-    if scene.fixed_below is not None:  # a supported vertex cannot be pressed
-        keep = mesh.vertices[vertices, 2] >= scene.fixed_below
-        if not keep.any():
-            raise InputError(f"every sampled point is held by the support (z below {scene.fixed_below * 1e3:g} mm)")
-        points, vertices = points[keep], vertices[keep]
+    points, vertices = pressable_points(mesh, args.points, scene.fixed_below)
     cuda = devices[0] != "cpu"
     chunk = args.chunk or (64 if not cuda else min(-(-len(vertices) // len(devices)), 16384))
     plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, dt, depth, ramp, hold, settle, points,
