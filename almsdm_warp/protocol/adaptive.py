@@ -49,6 +49,35 @@ def fixed_ring_estimate(jacobi: float, outer_free: float) -> tuple[float, float]
     return jacobi * (1.0 + lam * lam) / (1.0 - lam * lam), lam
 
 
+def vertex_stiffness(model) -> tuple[np.ndarray, np.ndarray]:
+    """(anchor k_a, sum of the springs' k_ij) of every vertex [N/m], float64: how far the fixed ring's
+    reactions reach (coherent_count)."""
+    ka = model.anchor_ke.numpy().astype(np.float64)
+    ks = np.zeros(model.particle_count)
+    edges, ke = model.mesh.edges, model.spring_ke.numpy().astype(np.float64)
+    np.add.at(ks, edges[:, 0], ke)
+    np.add.at(ks, edges[:, 1], ke)
+    return ka, ks
+
+
+def coherent_count(stiffness, boundary) -> float:
+    """The fixed ring's vertices whose reactions act together: all n_B of them without anchors; with
+    anchors of share s = k_a / (k_a + sum k_ij) of the stiffness, those within the anchors' decay
+    length, (1 - s) / (4 s), at least 1 (stiffness: vertex_stiffness())."""
+    ka, ks = stiffness
+    anchors = float(ka[boundary].sum())
+    share = anchors / (anchors + float(ks[boundary].sum())) if len(boundary) else 1.0
+    reach = (1.0 - share) / (4.0 * share) if share > 0.0 else math.inf
+    return min(max(reach, 1.0), max(len(boundary), 1))
+
+
+def force_error_estimate(energy: float, work: float, coherent: float) -> float:
+    """The relative force error of holding the fixed ring: COHERENCE sqrt(n) S / (F delta), from the
+    ring-motion kernel's S = sum f . u_J over the fixed ring [J], the probe's work F delta [J] and n
+    (coherent_count)."""
+    return COHERENCE * math.sqrt(coherent) * energy / work if work > 0.0 else 0.0
+
+
 class AdaptivePalpation(Palpation):
     """A Palpation whose region is sized to `tol` [m] as it is pressed (``--rings auto --tol-mm``).
 
@@ -91,13 +120,7 @@ class AdaptivePalpation(Palpation):
         self._steps = 0
         self._boundary = 0
         self._coherent = 1.0
-        # each vertex's anchor and the sum of its springs [N/m]: how far the fixed ring's reactions reach
-        model = self.model
-        self._vertex_ka = model.anchor_ke.numpy().astype(np.float64)
-        self._vertex_ks = np.zeros(model.particle_count)
-        edges, ke = self.mesh.edges, model.spring_ke.numpy().astype(np.float64)
-        np.add.at(self._vertex_ks, edges[:, 0], ke)
-        np.add.at(self._vertex_ks, edges[:, 1], ke)
+        self._stiffness = vertex_stiffness(self.model)
         self._outer = 0
         self._motion_graphs = None
         slots = self.max_rings + 3  # the Jacobi estimate, each ring, the fixed ring's energy
@@ -235,26 +258,14 @@ class AdaptivePalpation(Palpation):
         if n == 0:  # the region is its seed alone: nothing fixed
             return 0.0, 0.0, 0.0
         est, lam = fixed_ring_estimate(float(m[0]), float(m[n]))
-        return est, self.force_error_estimate(float(m[-1]), float(m[1])), lam
-
-    def force_error_estimate(self, energy: float, depth: float) -> float:
-        """The relative force error of holding the fixed ring, from the kernel's sum f . u_J over it
-        [J x 2] and the probe's depth [m] (module docstring: COHERENCE sqrt(n_B) sum f . u_J / (F depth))."""
         fx, fy, fz = (float(c) for c in self._force_view)
-        work = math.sqrt(fx * fx + fy * fy + fz * fz) * depth
-        if work <= 0.0:
-            return 0.0
-        return COHERENCE * math.sqrt(self._coherent) * energy / work
+        work = math.sqrt(fx * fx + fy * fy + fz * fz) * float(m[1])  # F delta: delta, ring 0's largest motion
+        return est, force_error_estimate(float(m[-1]), work, self._coherent), lam
 
     def _size_boundary(self) -> None:
-        # the fixed ring's vertices that act together: all of them without anchors; with anchors of share
-        # s = k_a / (k_a + sum k_ij) of the stiffness, those within the anchors' decay length, (1 - s) / (4 s)
         b = self.region.boundary()
         self._boundary = len(b)
-        ka = float(self._vertex_ka[b].sum())
-        share = ka / (ka + float(self._vertex_ks[b].sum())) if len(b) else 1.0
-        reach = (1.0 - share) / (4.0 * share) if share > 0.0 else math.inf
-        self._coherent = min(max(reach, 1.0), max(self._boundary, 1))
+        self._coherent = coherent_count(self._stiffness, b)
 
     def _check(self) -> None:
         m = self.ring_motion()
