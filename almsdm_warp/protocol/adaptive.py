@@ -8,9 +8,13 @@ estimate u_J of the fixed ring's (each fixed vertex freed alone, its neighbours 
 with anchors the Jacobi ratio rho = u_J / u_(N-1) is lambda / (1 + lambda^2), lambda the decay per
 ring, and freeing the whole far field multiplies u_J by (1 + lambda^2) / (1 - lambda^2): that is
 the estimate e_N of ring N's displacement (0.77-1.05 of the true value on the scenes and the
-shared meshes). The
-region grows while e_N * MARGIN > tol, or while the probe force error it implies, k_1 e_N^2 / u_1
-(the error ring 1 inherits, times the probe's spring stiffness), is over half the force tolerance.
+shared meshes). The region grows while e_N * MARGIN > tol, or while the force error of holding
+ring N is over half the force tolerance. That error is exactly r_B . u_B / (F delta) for a linear
+model (r_B the fixed ring's reactions, u_B its global displacements, F delta the probe's work); the
+kernel sums f . u_J over the fixed ring, and the reactions acting together multiply it by about
+sqrt(n), n the fixed-ring vertices within the anchors' reach (all of them with no anchors):
+force_error_estimate. A region that covers its mesh component frees its outer ring (the global
+model there). With a sphere, ring 0 is the patch it covers (Palpation.touch) and stays so.
 """
 
 from __future__ import annotations
@@ -120,6 +124,7 @@ class AdaptivePalpation(Palpation):
         self._steps = 0
         self._boundary = 0
         self._coherent = 1.0
+        self._force_over = False
         self._stiffness = vertex_stiffness(self.model)
         self._outer = 0
         self._motion_graphs = None
@@ -149,6 +154,7 @@ class AdaptivePalpation(Palpation):
         self._countdown = self.check_steps
         self._steps = 0
         self._motion_graphs = None
+        self._force_over = False
         self._size_boundary()
 
     def expand(self, rings: int = 1) -> None:
@@ -281,7 +287,11 @@ class AdaptivePalpation(Palpation):
             return
         est, ferr, lam = self.estimate(m)
         tol, half = self.tol, 0.5 * self.force_tol
-        if est * self.margin <= tol and ferr <= half:
+        force_over = ferr > half
+        if est * self.margin <= tol and (not force_over or not self._force_over):
+            # the force estimate, a static identity, reads high in a press's first transient (the
+            # ramp's start reaching the fixed ring): it grows the region when two checks in a row agree
+            self._force_over = force_over
             self._within = (n, est, ferr)  # formatted only when auto_reason is read
             return
         if n >= self.max_rings:

@@ -75,6 +75,8 @@ class Patch:
         self.rings_chosen = self.region.outer_ring
         self.reason = "not pressed yet"
         self.events = []
+        self.force_over = False
+        """Whether the last check's force-error estimate was over the bound."""
 
     def vertices(self) -> np.ndarray:
         return self.region.vertices()
@@ -307,7 +309,9 @@ class MultiPalpation:
             est, lam = fixed_ring_estimate(float(m[0]), float(m[n]))
             work = float(np.linalg.norm(self.probes.reaction[pressed], axis=1).sum()) * float(m[1])
             ferr = force_error_estimate(float(m[-1]), work, coherent_count(self._stiffness, patch.region.boundary()))
-            if est * self.margin <= self.tol and ferr <= 0.5 * self.force_tol:
+            over = ferr > 0.5 * self.force_tol  # grows on the force when two checks in a row agree (adaptive.py)
+            if est * self.margin <= self.tol and (not over or not patch.force_over):
+                patch.force_over = over
                 patch.reason = (f"ring {n} (fixed) would move {est * 1e3:.3g} mm if freed (estimated), force error "
                                 f"{ferr:.2%}: within tol {self.tol * 1e3:g} mm")
                 continue
