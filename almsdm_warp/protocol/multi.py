@@ -77,6 +77,8 @@ class Patch:
         self.events = []
         self.force_over = False
         """Whether the last check's force-error estimate was over the bound."""
+        self.coherent = (-1, 1.0)
+        """(region vertices, coherent_count) of the fixed ring when it was last read."""
 
     def vertices(self) -> np.ndarray:
         return self.region.vertices()
@@ -308,7 +310,9 @@ class MultiPalpation:
                 continue
             est, lam = fixed_ring_estimate(float(m[0]), float(m[n]))
             work = float(np.linalg.norm(self.probes.reaction[pressed], axis=1).sum()) * float(m[1])
-            ferr = force_error_estimate(float(m[-1]), work, coherent_count(self._stiffness, patch.region.boundary()))
+            if patch.coherent[0] != patch.region.vertex_count:  # the fixed ring read back once per region size
+                patch.coherent = (patch.region.vertex_count, coherent_count(self._stiffness, patch.region.boundary()))
+            ferr = force_error_estimate(float(m[-1]), work, patch.coherent[1])
             over = ferr > 0.5 * self.force_tol  # grows on the force when two checks in a row agree (adaptive.py)
             if est * self.margin <= self.tol and (not over or not patch.force_over):
                 patch.force_over = over
