@@ -229,6 +229,24 @@ def test_auto_command_line(tmp_path):
         assert not target.exists()
 
 
+def test_auto_command_line_with_a_sphere(tmp_path):
+    """--rings auto with --probe-radius-mm: the region grown from the sphere's patch (88 vertices at one
+    ring, where the paper's one-vertex seed has 7), its peak force within 2% of the global model's (the
+    static force is the same to 4 digits at 1 ring; the peak, at the ramp's end, 1.4% over: dampers
+    near the fixed ring, which the static criterion does not see: docs/adaptive.md)."""
+    out = {}
+    for rings in ("auto", "global"):
+        out[rings] = tmp_path / f"{rings}.json"
+        extra = ["--tol-mm", "0.1"] if rings == "auto" else []
+        assert main(["--rings", rings, *extra, "--probe-radius-mm", "10", "--depth-mm", "5", "--integrator", "implicit",
+                     "--dt-ms", "5", "--settle-s", "0.05", "--json", str(out[rings])]) == 0
+    auto, glob = (json.loads(out[r].read_text()) for r in ("auto", "global"))
+    assert auto["model"]["probe_radius_mm"] == 10 and auto["model"]["rings_chosen"] >= 1
+    assert auto["model"]["region_vertices"] > 7 * auto["model"]["rings_chosen"]
+    force, reference = auto["presses"][0]["peak_force_N"], glob["presses"][0]["peak_force_N"]
+    assert abs(force / reference - 1.0) <= 0.02, (force, reference)
+
+
 def test_uncaptured_steps_and_checks_are_the_same(device):
     """capture=False (every launch from Python) grows the same region and gives the same bits."""
     scene, mesh = scene_and_mesh()
