@@ -19,14 +19,17 @@ def eval_ring_motion(
     region: RegionArrays, count: int, slots: int, tissue: TissueArrays, q: wp.array(dtype=wp.vec3), motion: wp.array(dtype=wp.float32)
 ):
     # motion[0]: the largest displacement a fixed-ring vertex would take if it alone were freed;
-    # motion[1 + r]: the largest displacement |q - q_rest| on ring r (free rings; 0 on the fixed one)
+    # motion[1 + r]: the largest displacement |q - q_rest| on ring r (free rings; 0 on the fixed one);
+    # motion[slots - 1]: sum over the fixed ring of f . u_J, the energy the fixed ring's reactions
+    # would release if its vertices were freed one by one (twice that energy)
     for s in range(slots):
         motion[s] = 0.0
+    energy = float(0.0)
     for i in range(count):
         v = region.region_vertex[i]
         x = q[v]
         if region.region_boundary[i] == 0:
-            slot = wp.min(1 + region.region_ring[i], slots - 1)  # rings past the array share its last entry
+            slot = wp.min(1 + region.region_ring[i], slots - 2)  # rings past the array share its last ring entry
             motion[slot] = wp.max(motion[slot], wp.length(x - tissue.q_rest[v]))
         else:
             # one Jacobi step of the static equilibrium K u = f at v: anchor and springs, eqs. (3)-(5),
@@ -43,11 +46,14 @@ def eval_ring_motion(
                 d = edge_direction(q[j] - x)
                 D += tissue.spring_ke[e] * wp.outer(d, d)
             if wp.determinant(D) > 0.0:
-                motion[0] = wp.max(motion[0], wp.length(wp.inverse(D) * f))
+                u_J = wp.inverse(D) * f
+                motion[0] = wp.max(motion[0], wp.length(u_J))
+                energy += wp.dot(f, u_J)
+    motion[slots - 1] = energy
 
 
 def eval_region_motion(model, region, state, motion):
-    """Fill `motion` (float32, >= rings + 2 entries) for `region` at `state`: see eval_ring_motion."""
+    """Fill `motion` (float32, >= rings + 3 entries) for `region` at `state`: see eval_ring_motion."""
     wp.launch(
         eval_ring_motion,
         dim=1,

@@ -15,7 +15,11 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import shortest_path
 from test_simulation_press import scene_and_mesh, top_vertex
 
-from almsdm_warp.protocol.adaptive import AdaptivePalpation, fixed_ring_estimate
+from almsdm_warp.protocol.adaptive import AdaptivePalpation, fixed_ring_estimate, hold_press
+from almsdm_warp.mesh import primitives
+from almsdm_warp.mesh.io import load_mesh
+from almsdm_warp.tissue.material import Material
+from conftest import SCENES
 from almsdm_warp.evaluation.adaptive_accuracy import auto_point, fixed_point, global_reference
 from almsdm_warp.cli.main import main
 from almsdm_warp.kernels.ring_motion import eval_region_motion
@@ -64,12 +68,12 @@ def test_ring_motion_matches_numpy(device):
     disp = np.linalg.norm(q - q0, axis=1)
     expect_rings = [disp[hops == r].max() for r in range(3)]
     np.testing.assert_allclose(got[1:4], expect_rings, rtol=1e-5)
-    assert np.all(got[4:] == 0.0) and expect_rings[2] > 1e-6  # the fixed ring and beyond: 0
+    assert np.all(got[4:-1] == 0.0) and expect_rings[2] > 1e-6  # the fixed ring and beyond: 0
     # Jacobi step at each fixed vertex, in float64
     t = scene.tissue
     e = mesh.edges.astype(np.int64)
     L0 = np.linalg.norm(q0[e[:, 1]] - q0[e[:, 0]], axis=1)
-    best = 0.0
+    best = energy = 0.0
     for f in np.flatnonzero(hops == 3):
         force = -t.anchor_stiffness * (q[f] - q0[f])
         D = t.anchor_stiffness * np.eye(3)
@@ -80,9 +84,12 @@ def test_ring_motion_matches_numpy(device):
             d = r / length
             force += t.edge_stiffness * (length - L0[k]) * d
             D += t.edge_stiffness * np.outer(d, d)
-        best = max(best, np.linalg.norm(np.linalg.solve(D, force)))
-    assert best > 1e-7
+        u_J = np.linalg.solve(D, force)
+        best = max(best, np.linalg.norm(u_J))
+        energy += force @ u_J
+    assert best > 1e-7 and energy > 0.0
     np.testing.assert_allclose(got[0], best, rtol=1e-3)
+    np.testing.assert_allclose(got[-1], energy, rtol=1e-3)  # sum of f . u_J over the fixed ring
 
 
 @pytest.mark.parametrize("ka_over_k", [0.5, 2.0, 8.0])
@@ -222,6 +229,24 @@ def test_auto_command_line(tmp_path):
         assert not target.exists()
 
 
+def test_auto_command_line_with_a_sphere(tmp_path):
+    """--rings auto with --probe-radius-mm: the region grown from the sphere's patch (88 vertices at one
+    ring, where the paper's one-vertex seed has 7), its peak force within 2% of the global model's (the
+    static force is the same to 4 digits at 1 ring; the peak, at the ramp's end, 1.4% over: dampers
+    near the fixed ring, which the static criterion does not see: docs/adaptive.md)."""
+    out = {}
+    for rings in ("auto", "global"):
+        out[rings] = tmp_path / f"{rings}.json"
+        extra = ["--tol-mm", "0.1"] if rings == "auto" else []
+        assert main(["--rings", rings, *extra, "--probe-radius-mm", "10", "--depth-mm", "5", "--integrator", "implicit",
+                     "--dt-ms", "5", "--settle-s", "0.05", "--json", str(out[rings])]) == 0
+    auto, glob = (json.loads(out[r].read_text()) for r in ("auto", "global"))
+    assert auto["model"]["probe_radius_mm"] == 10 and auto["model"]["rings_chosen"] >= 1
+    assert auto["model"]["region_vertices"] > 7 * auto["model"]["rings_chosen"]
+    force, reference = auto["presses"][0]["peak_force_N"], glob["presses"][0]["peak_force_N"]
+    assert abs(force / reference - 1.0) <= 0.02, (force, reference)
+
+
 def test_uncaptured_steps_and_checks_are_the_same(device):
     """capture=False (every launch from Python) grows the same region and gives the same bits."""
     scene, mesh = scene_and_mesh()
@@ -234,3 +259,50 @@ def test_uncaptured_steps_and_checks_are_the_same(device):
     assert log_a == log_b and log_a["rings"] >= 3
     np.testing.assert_array_equal(a.force, b.force)
     np.testing.assert_array_equal(a.displacement, b.displacement)
+
+
+# -- the material model: no anchors, supports; the sphere probe ------------------------------------
+SOLID = Material(10e3, 0.45, 1000.0, rayleigh_beta=0.01)
+"""E 10 kPa, nu 0.45, Rayleigh d = 0.01 s x k: tets whose only support is the fixed plane."""
+
+
+def material_press(mesh, rings, device, radius, depth, fixed_below, tol=1e-4):
+    """(|force| at the end of the hold [N], the palpation) of a quasi-static press (implicit, dt 5 ms, ramp
+    0.1 s, hold 0.2 s): the force of the region as grown (the peak, at the ramp's end, can precede growth)."""
+    kw = dict(integrator="implicit", dt=5e-3, device=device, fixed_below=fixed_below, probe_radius=radius)
+    if rings == "auto":
+        pal = AdaptivePalpation(mesh, SOLID, tol=tol, retire=False, **kw)
+    else:
+        pal = Palpation(mesh, SOLID, rings=rings, **kw)
+    pal.touch(top_vertex(mesh))
+    hold_press(pal, depth, 0.1, 0.2)
+    return float(np.linalg.norm(pal.feedback_force)), pal
+
+
+def test_sphere_auto_meets_the_force_tolerance_on_a_supported_liver(device):
+    """The liver scene's tets with the material model and no anchors, held below z = -25 mm, a sphere of
+    10 mm pressed 5 mm: the adaptive region's force within 1% of the global model's (every vertex free),
+    where 2 fixed rings are 5% over; the region grew from the sphere's patch and kept it as ring 0."""
+    mesh = load_mesh(SCENES / "liver.vtu")
+    reference, _ = material_press(mesh, "global", device, 0.01, 0.005, -0.025)
+    two, _ = material_press(mesh, 2, device, 0.01, 0.005, -0.025)
+    assert two / reference - 1.0 > 0.03  # the comparison can fail: a small region is too stiff
+    force, auto = material_press(mesh, "auto", device, 0.01, 0.005, -0.025)
+    assert abs(force / reference - 1.0) <= 0.01, (force, reference, auto.auto_reason)
+    assert auto.rings_chosen > 2 and not auto.whole
+    ring = auto.region.vertex_ring.numpy()
+    patch = auto.sphere_patch(auto.vertex, 0.005)
+    np.testing.assert_array_equal(np.flatnonzero(ring == 0), patch)
+
+
+def test_auto_frees_the_whole_ball_when_no_fixed_ring_is_enough(device):
+    """A tet ball held below z = -40 mm pressed 2 mm at its top by the paper's probe (R = 0): even a
+    region of the whole ball with its last ring fixed is over 1% stiff; auto grows to the whole ball,
+    frees it and gives the global model's force."""
+    mesh = primitives.tet_ball(50.0, 12.0, refine_top=4.0)
+    reference, _ = material_press(mesh, "global", device, 0.0, 0.002, -0.04)
+    last, fixed = material_press(mesh, 64, device, 0.0, 0.002, -0.04)
+    assert fixed.region.vertex_count == mesh.vertex_count and last / reference - 1.0 > 0.01
+    force, auto = material_press(mesh, "auto", device, 0.0, 0.002, -0.04)
+    assert auto.whole and "all of it free" in auto.auto_reason
+    np.testing.assert_allclose(force, reference, rtol=5e-3)  # 0.2%: freed late in the ramp, settling in the hold

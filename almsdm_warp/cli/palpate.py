@@ -183,9 +183,6 @@ def _resolve(args) -> _Run:
                          f"the support plane z = {scene.fixed_below * 1e3:g} mm and cannot be pressed")
     tol = auto_tol(args, rings, scene)
     radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
-    if radius > 0 and tol is not None:
-        raise InputError("a spherical probe (--probe-radius-mm, [probe] radius_mm) needs a ring count or a global "
-                         "model: --rings auto sizes the region around one driven vertex")
     return _Run(scene, mesh, device, rings, tol, depth, ramp, hold, settle, dt, vertex, point, contact_extra, radius)
 
 
@@ -211,7 +208,8 @@ def _build(args, run: _Run):
         if run.tol is not None:
             from ..protocol.adaptive import AdaptivePalpation
 
-            pal = AdaptivePalpation(mesh, scene.tissue, tol=run.tol, integrator=args.integrator, dt=run.dt, device=run.device, **lesion)
+            pal = AdaptivePalpation(mesh, scene.tissue, tol=run.tol, integrator=args.integrator, dt=run.dt, device=run.device,
+                                    probe_radius=run.probe_radius, **lesion)
         else:
             pal = Palpation(mesh, scene.tissue, rings=run.rings, integrator=args.integrator, dt=run.dt, device=run.device,
                             probe_radius=run.probe_radius, **lesion)

@@ -45,23 +45,27 @@ def _point(pal, reference, protocol, time_steps):
     return point
 
 
-def global_reference(mesh, tissue=None, device=None, *, vertex=None, integrator="implicit", dt=5e-3, **protocol):
-    """(peak force [N], hold-end positions [m]) of the global anchored model under the protocol."""
+def global_reference(mesh, tissue=None, device=None, *, vertex=None, integrator="implicit", dt=5e-3, probe_radius=0.0,
+                     fixed_below=None, **protocol):
+    """(peak force [N], hold-end positions [m]) of the global anchored model under the protocol (a sphere
+    of `probe_radius` [m] > 0 pressed the same depth; vertices below `fixed_below` [m] supported)."""
     prot = {**PROTOCOL, **protocol}
-    pal = Palpation(mesh, tissue, rings="global", integrator=integrator, dt=dt, device=device)
+    pal = Palpation(mesh, tissue, rings="global", integrator=integrator, dt=dt, device=device, probe_radius=probe_radius,
+                    fixed_below=fixed_below)
     pal.touch(top_vertex(pal.mesh) if vertex is None else vertex)
     return hold_press(pal, **prot)
 
 
 def fixed_point(mesh, tissue, rings, device=None, *, vertex=None, integrator="implicit", dt=5e-3, reference=None,
-                time_steps=False, **protocol):
+                time_steps=False, probe_radius=0.0, fixed_below=None, **protocol):
     """The same as auto_point for a fixed ring count (the chart's other points, and the comparison)."""
     prot = {**PROTOCOL, **protocol}
-    pal = Palpation(mesh, tissue, rings=rings, integrator=integrator, dt=dt, device=device)
+    model = dict(probe_radius=probe_radius, fixed_below=fixed_below)
+    pal = Palpation(mesh, tissue, rings=rings, integrator=integrator, dt=dt, device=device, **model)
     v = top_vertex(pal.mesh) if vertex is None else vertex
     pal.touch(v)
     if reference is None:
-        reference = global_reference(mesh, tissue, device, vertex=v, integrator=integrator, dt=dt, **prot)
+        reference = global_reference(mesh, tissue, device, vertex=v, integrator=integrator, dt=dt, **model, **prot)
     return _point(pal, reference, prot, time_steps)
 
 
@@ -74,7 +78,8 @@ def auto_point(mesh, tissue=None, tol=1e-4, device=None, *, vertex=None, integra
     mesh: a TissueMesh (SI) or a path; vertex: the contact (default: the highest surface vertex);
     reference: a global_reference() result to reuse across tolerances; time_steps: also time a step
     of the grown region (median of 10 batches of 20, the probe held); options: more keyword
-    arguments of AdaptivePalpation (margin, force_tol, start_rings, ...).
+    arguments of AdaptivePalpation (margin, force_tol, start_rings, probe_radius, fixed_below, ...), the
+    last two also the reference's.
     """
     from ..protocol.adaptive import AdaptivePalpation
     from ..mesh.io import load_mesh
@@ -86,7 +91,8 @@ def auto_point(mesh, tissue=None, tol=1e-4, device=None, *, vertex=None, integra
     v = top_vertex(pal.mesh) if vertex is None else vertex
     pal.touch(v)
     if reference is None:
-        reference = global_reference(mesh, tissue, device, vertex=v, integrator=integrator, dt=dt, **prot)
+        model = {k: v for k, v in (options or {}).items() if k in ("probe_radius", "fixed_below")}
+        reference = global_reference(mesh, tissue, device, vertex=v, integrator=integrator, dt=dt, **model, **prot)
     point = _point(pal, reference, prot, time_steps)
     point.update(tol_mm=tol * 1e3, reason=pal.auto_reason, events=list(pal.events), vertex=int(v))
     return point

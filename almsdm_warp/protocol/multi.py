@@ -17,7 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 import warp as wp
 
-from .adaptive import FORCE_TOL, MARGIN, fixed_ring_estimate
+from .adaptive import FORCE_TOL, MARGIN, coherent_count, fixed_ring_estimate, force_error_estimate, vertex_stiffness
 from ..mesh.device_mesh import check_vertex
 from ..kernels.arrays import ProbeArrays, struct_from
 from ..kernels.multi_probe import drive_probe_vertices
@@ -71,10 +71,14 @@ class Patch:
         self.region = MultiRegion(owner.model.dmesh).build_seeds(seeds, rings)
         self.solver = make_solver(owner.model, owner.integrator, **owner.solver_kw)
         self.patch_probe = wp.array(np.asarray(self.probes, dtype=np.int32), dtype=wp.int32, device=owner.device)
-        self.motion = wp.zeros(owner.max_rings + 2, dtype=wp.float32, device=owner.device)
+        self.motion = wp.zeros(owner.max_rings + 3, dtype=wp.float32, device=owner.device)
         self.rings_chosen = self.region.outer_ring
         self.reason = "not pressed yet"
         self.events = []
+        self.force_over = False
+        """Whether the last check's force-error estimate was over the bound."""
+        self.coherent = (-1, 1.0)
+        """(region vertices, coherent_count) of the fixed ring when it was last read."""
 
     def vertices(self) -> np.ndarray:
         return self.region.vertices()
@@ -158,9 +162,7 @@ class MultiPalpation:
         self.vertices = vertices
         self.probes = _Probes(vertices, self.device)
         self.reaction = self.probes.reaction  # a view that every step updates
-        off = self.model.dmesh.adj_offsets.numpy()
-        edges = self.model.dmesh.adj_edge.numpy()
-        self._k1 = np.array([self.model._ke_host[edges[off[v] : off[v + 1]]].sum() for v in vertices])
+        self._stiffness = vertex_stiffness(self.model)
         self._driven = np.zeros(len(vertices), dtype=bool)
         self._countdown = self.check_steps
         self._steps = 0
@@ -307,11 +309,13 @@ class MultiPalpation:
             if not self.adaptive or n == 0:
                 continue
             est, lam = fixed_ring_estimate(float(m[0]), float(m[n]))
-            u1 = est if n == 1 else float(m[2])
-            e1 = est if n == 1 else (est * est / u1 if u1 > 0 else 0.0)
-            forces = np.linalg.norm(self.probes.reaction[pressed], axis=1)
-            ferr = max((k * e1 / f if f > 0 else 0.0) for k, f in zip(self._k1[pressed], forces))
-            if est * self.margin <= self.tol and ferr <= 0.5 * self.force_tol:
+            work = float(np.linalg.norm(self.probes.reaction[pressed], axis=1).sum()) * float(m[1])
+            if patch.coherent[0] != patch.region.vertex_count:  # the fixed ring read back once per region size
+                patch.coherent = (patch.region.vertex_count, coherent_count(self._stiffness, patch.region.boundary()))
+            ferr = force_error_estimate(float(m[-1]), work, patch.coherent[1])
+            over = ferr > 0.5 * self.force_tol  # grows on the force when two checks in a row agree (adaptive.py)
+            if est * self.margin <= self.tol and (not over or not patch.force_over):
+                patch.force_over = over
                 patch.reason = (f"ring {n} (fixed) would move {est * 1e3:.3g} mm if freed (estimated), force error "
                                 f"{ferr:.2%}: within tol {self.tol * 1e3:g} mm")
                 continue
