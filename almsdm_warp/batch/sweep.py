@@ -16,7 +16,9 @@ import json
 import math
 import shutil
 import threading
+import time
 import zipfile
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -149,38 +151,6 @@ class SweepPlan:
             out["stiffness_N_per_mm"][idx] = result.stiffness_N_per_mm
             out["recovery_error_mm"][idx] = result.recovery_error * 1e3
         return out
-
-
-class RingBatches:
-    """A plan's BatchPalpations on one device, one per ring count (made when first asked for)."""
-
-    def __init__(self, plan: SweepPlan, model):
-        self.plan, self.model, self.device = plan, model, model.device
-        self._batches = {}
-
-    def get(self, rings: int):
-        from .batch_palpation import BatchPalpation
-
-        if rings not in self._batches:
-            p = self.plan
-            self._batches[rings] = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator)
-        return self._batches[rings]
-
-
-def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_launch=None):
-    """Start the presses of points begin..end (a batch per ring count among them); returns a finisher."""
-    rings = plan.point_rings[begin:end]
-    per_launch = 200 if batches.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
-    started = []
-    for k in np.unique(rings):
-        idx = np.flatnonzero(rings == k)
-        batch = batches.get(int(k))
-        batch.touch(plan.vertices[begin:end][idx])
-        # the progress counts frames: a launch of `steps` substeps advances it by steps / substeps frames each
-        launch = None if on_launch is None else (lambda steps, n=len(idx), b=batch: on_launch(steps * n // b.substeps))
-        batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=launch)
-        started.append((idx, batch))
-    return lambda: checked_columns(plan.columns(begin, end, [(idx, batch.finish_press()) for idx, batch in started]))
 
 
 def checked_columns(columns: dict) -> dict:
@@ -340,48 +310,350 @@ class Parts:
 
 
 # -- running -----------------------------------------------------------------------------------
-def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str], progress=None) -> None:
-    """Press the chunks `todo` round-robin over `devices` (each chunk written when it is done).
+PHASES = ("sampling", "set-up", "region build", "planning", "launch", "waiting for the device", "read-back", "checks",
+          "writing", "waiting for the writer", "gather", "output")
+"""The host phases of a sweep's wall time (SweepTimes); the device's press time is counted apart."""
 
-    Several CUDA devices: a host thread each (region builds, read-backs and writes overlap; Warp's
-    calls release the GIL while they wait). Otherwise one thread, chunks interleaved over them.
+
+class SweepTimes:
+    """Where a sweep's wall time goes: seconds per host phase, summed over the threads that ran it
+    (one a device, and the writer's), and the press kernels' time on the device.
+
+    On CUDA the press time is the union of the intervals between events recorded around each
+    chunk's press on its stream, read when the chunk's results are read (a synchronisation the sweep
+    makes anyway); on the CPU, where launches are synchronous, it is the launches' wall time.
     """
-    models = {d: plan.model(d) for d in devices}
-    batches = [plan.batch(d, models[d]) for d in devices]
+
+    def __init__(self):
+        self.seconds = dict.fromkeys(PHASES, 0.0)
+        self.press_s = 0.0
+        """Press kernels [s]: per device, the time it was pressing, summed over devices."""
+        self.host_per_chunk: list[float] = []
+        """Host time [s] of each chunk on its device's thread (build, plan, launch, read-back, checks)."""
+        self._lock = threading.Lock()
+
+    @contextmanager
+    def phase(self, name: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.add(name, time.perf_counter() - t0)
+
+    def add(self, name: str, seconds: float) -> None:
+        with self._lock:
+            self.seconds[name] += seconds
+
+    def add_press(self, seconds: float) -> None:
+        with self._lock:
+            self.press_s += seconds
+
+    def table(self, wall_s: float) -> str:
+        """The breakdown as lines of text: each phase, the press kernels and the rest of `wall_s` [s]."""
+        rows = [(name, s) for name, s in self.seconds.items() if s > 0]
+        rows.append(("press kernels (device)", self.press_s))
+        lines = [f"{name:<26}{s:10.3f} s{100 * s / wall_s:7.1f} %" for name, s in rows]
+        lines.append(f"{'wall':<26}{wall_s:10.3f} s  (host phases of several threads may overlap the press)")
+        if self.host_per_chunk:
+            h = np.array(self.host_per_chunk)
+            lines.append(f"host time per chunk: median {np.median(h) * 1e3:.1f} ms, max {h.max() * 1e3:.1f} ms ({len(h)} chunks)")
+        return "\n".join(lines)
+
+    def as_dict(self, wall_s: float) -> dict:
+        """The breakdown in seconds, JSON keys with their unit."""
+        out = {f"{name.replace(' ', '_').replace('-', '_')}_s": s for name, s in self.seconds.items()}
+        return {**out, "press_kernels_s": self.press_s, "wall_s": wall_s}
+
+
+class RingBatches:
+    """A plan's BatchPalpations on one device, one per ring count (made when first asked for).
+
+    critical_dt_bound: the whole mesh's critical step (BatchPalpation.critical_dt_bound), or None."""
+
+    def __init__(self, plan: SweepPlan, model, critical_dt_bound=None):
+        self.plan, self.model, self.device = plan, model, model.device
+        self.critical_dt_bound = critical_dt_bound
+        self._batches = {}
+
+    def get(self, rings: int):
+        from .batch_palpation import BatchPalpation
+
+        if rings not in self._batches:
+            p = self.plan
+            batch = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator)
+            batch.critical_dt_bound = self.critical_dt_bound
+            self._batches[rings] = batch
+        return self._batches[rings]
+
+
+def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_launch=None):
+    """Start the presses of points begin..end (a batch per ring count among them); returns a finisher."""
+    rings = plan.point_rings[begin:end]
+    per_launch = 200 if batches.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
+    started = []
+    for k in np.unique(rings):
+        idx = np.flatnonzero(rings == k)
+        batch = batches.get(int(k))
+        batch.touch(plan.vertices[begin:end][idx])
+        batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=frames(on_launch, batch, len(idx)))
+        started.append((idx, batch))
+    return lambda: checked_columns(plan.columns(begin, end, [(idx, batch.finish_press()) for idx, batch in started]))
+
+
+def frames(on_launch, batch, n: int):
+    """The progress counts frames: a launch of `steps` substeps of `n` presses advances it by n x steps / substeps."""
+    return None if on_launch is None else (lambda steps: on_launch(steps * n // batch.substeps))
+
+
+class Lane:
+    """One chunk in flight on a device: its batches (one per ring count), its CUDA stream and its
+    read-back buffers in pinned host memory.
+
+    A device's thread keeps two lanes: it builds, plans and launches chunk i + 1 on one stream while
+    chunk i presses on the other, then reads chunk i back on its own stream (never the null stream,
+    which would wait for both). On the CPU, where launches are synchronous, the same steps in order.
+    """
+
+    def __init__(self, batches: RingBatches, times: SweepTimes):
+        import warp as wp
+
+        self.batches, self.times, self.device = batches, times, batches.device
+        self.stream = wp.Stream(self.device) if self.device.is_cuda else None
+        self.started = []
+        """(indices in the chunk, batch, pinned (peak, hold, q0), events) of the chunk in flight."""
+        self._pinned = {}
+
+    def scope(self):
+        import warp as wp
+
+        return wp.ScopedStream(self.stream) if self.stream is not None else nullcontext()
+
+    def start(self, plan: SweepPlan, i: int, on_launch=None, origin=None) -> None:
+        """Build, plan and launch chunk `i`, and queue its read-back (asynchronous on CUDA)."""
+        begin, end = self.chunk = plan.chunks[i]
+        rings = plan.point_rings[begin:end]
+        per_launch = 200 if self.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
+        t0, self.started = time.perf_counter(), []
+        with self.scope():
+            for k in np.unique(rings):
+                idx = np.flatnonzero(rings == k)
+                batch = self.batches.get(int(k))
+                with self.times.phase("region build"):
+                    batch.build(plan.vertices[begin:end][idx])
+                with self.times.phase("planning"):
+                    batch.plan()
+                with self.times.phase("launch"):
+                    events = self._record(origin)
+                    batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch,
+                                      on_launch=frames(on_launch, batch, len(idx)))
+                    events += self._record(origin)
+                    self.started.append((idx, batch, self._read_back(batch, int(k)), events))
+        pressed = 0.0
+        if self.device.is_cpu:  # synchronous: the launch was the press
+            pressed = sum(e[1] - e[0] for *_, e in self.started)
+            self.times.add_press(pressed)
+        self.host_s = time.perf_counter() - t0 - pressed
+
+    def _record(self, origin):
+        import warp as wp
+
+        if self.stream is None:
+            return [time.perf_counter()]
+        event = wp.Event(self.device, enable_timing=True)
+        self.stream.record_event(event)
+        return [event]
+
+    def _read_back(self, batch, rings: int):
+        # the results copied into pinned host buffers on this stream, after the press: no wait here
+        import warp as wp
+
+        if self.stream is None:
+            return None
+        n = batch.batch_size
+        buffers = self._pinned.get(rings)
+        if buffers is None or len(buffers[0]) < n:
+            buffers = self._pinned[rings] = [wp.empty(n, dtype=wp.vec3, device="cpu", pinned=True) for _ in range(3)]
+        out = [b[:n] for b in buffers]
+        for dst, src in zip(out, (batch.peak_reaction, batch.hold_reaction, batch.q_state[:, 0])):
+            wp.copy(dst, src, stream=self.stream)
+        return out
+
+    def finish(self, plan: SweepPlan, origin=None) -> dict:
+        """Wait for the chunk started last and return its checked columns."""
+        import warp as wp
+
+        t0 = time.perf_counter()
+        if self.stream is not None:
+            with self.times.phase("waiting for the device"):
+                wp.synchronize_stream(self.stream)
+            self.busy = [(wp.get_event_elapsed_time(origin, e[0]), wp.get_event_elapsed_time(origin, e[1])) for *_, e in self.started]
+        results = []
+        with self.times.phase("read-back"):
+            for idx, batch, pinned, _ in self.started:
+                result = batch.finish_press() if pinned is None else batch.result_from(*(b.numpy() for b in pinned))
+                results.append((idx, result))
+            columns = plan.columns(*self.chunk, results)
+        with self.times.phase("checks"):
+            columns = checked_columns(columns)
+        self.host_s += time.perf_counter() - t0
+        self.times.host_per_chunk.append(self.host_s)
+        return columns
+
+
+class Writer:
+    """Writes the chunks' part files on a thread of its own, in the order given (at most `depth` waiting).
+
+    An error there (a full disk; an interrupt in tests) is raised again in the sweep's thread by
+    put() or close(); after it nothing more is written."""
+
+    def __init__(self, parts: Parts, times: SweepTimes, depth: int = 4):
+        import queue
+
+        self.parts, self.times, self.error = parts, times, None
+        self.queue = queue.Queue(depth)
+        self.thread = threading.Thread(target=self._run, name="sweep-writer", daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while (item := self.queue.get()) is not None:
+            if self.error is None:
+                try:
+                    with self.times.phase("writing"):
+                        self.parts.write(*item)
+                except BaseException as exc:  # handed to the sweep's thread
+                    self.error = exc
+
+    def put(self, i: int, columns: dict) -> None:
+        self.check()
+        with self.times.phase("waiting for the writer"):
+            self.queue.put((i, columns))
+
+    def check(self) -> None:
+        if self.error is not None:
+            raise self.error
+
+    def close(self, wait: bool = True) -> None:
+        """Write what is queued (wait) or drop it, end the thread, raise its error if any."""
+        if not wait:
+            while not self.queue.empty():
+                self.queue.get_nowait()
+        with self.times.phase("waiting for the writer"):
+            self.queue.put(None)
+            self.thread.join()
+        if wait:
+            self.check()
+
+
+def run_device(plan: SweepPlan, batches: list, take, put, times: SweepTimes, on_launch=None) -> None:
+    """Press the chunks that `take()` hands out (None: no more) on one device, two at a time over
+    `batches`' two lanes; put(i, columns) each when done."""
+    import warp as wp
+
+    lanes = [Lane(b, times) for b in batches]
+    origin = None
+    if lanes[0].stream is not None:  # the device clock's zero for the press intervals
+        origin = wp.Event(lanes[0].device, enable_timing=True)
+        lanes[0].stream.record_event(origin)
+    busy, flying, n = [], None, 0
+    while True:
+        i = take()
+        if i is not None:
+            lane = lanes[n % len(lanes)]
+            lane.start(plan, i, on_launch, origin)
+            n += 1
+        if flying is not None:
+            j, done = flying
+            put(j, done.finish(plan, origin))
+            busy += getattr(done, "busy", [])
+        if i is None:
+            break
+        flying = (i, lane)
+    times.add_press(union_length(busy) * 1e-3)
+
+
+def union_length(intervals) -> float:
+    """Total length of the union of (begin, end) intervals."""
+    total, reach = 0.0, -math.inf
+    for b, e in sorted(intervals):
+        if e > reach:
+            total += e - max(b, reach)
+            reach = e
+    return total
+
+
+def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str], progress=None, *, pipeline: bool = True,
+              times: SweepTimes | None = None) -> None:
+    """Press the chunks `todo` over `devices` (each chunk written when it is done).
+
+    pipeline: a host thread per device (a device named twice gets two), each with its own model and
+    two lanes (Lane): chunk i + 1 is built and launched while chunk i presses, results read back
+    into pinned memory, part files written on a thread of their own; chunks are handed out in
+    order to whichever device is free. Without: one thread, chunks interleaved over the devices,
+    each built, pressed, read and written in turn. Both give the same bits for the same plan.
+    times: where the wall time goes (SweepTimes), filled in.
+    """
+    times = times if times is not None else SweepTimes()
     advance = None if progress is None else progress.advance
+    with times.phase("set-up"):
+        models = [plan.model(d) for d in devices]
+        bound = sweep_critical_dt(plan, models[0])
     todo = list(todo)
-    if len(set(devices)) > 1 and all(d.startswith("cuda") for d in devices):
-        _run_threads(plan, parts, [todo[k :: len(batches)] for k in range(len(batches))], batches, advance)
+    if not pipeline:
+        batches = [RingBatches(plan, m) for m in models]
+        while todo:
+            running = [(todo.pop(0), b) for b in batches if todo]
+            with times.phase("launch"):
+                running = [(i, press_chunk(b, plan, *plan.chunks[i], on_launch=advance)) for i, b in running]
+            for i, finish in running:
+                with times.phase("read-back"):
+                    columns = finish()
+                with times.phase("writing"):
+                    parts.write(i, columns)
         return
-    while todo:
-        running = []
-        for batch in batches:
-            if todo:
-                i = todo.pop(0)
-                running.append((i, press_chunk(batch, plan, *plan.chunks[i], on_launch=advance)))
-        for i, finish in running:
-            parts.write(i, finish())
-
-
-def _run_threads(plan, parts, queues, batches, advance):
-    from concurrent.futures import ThreadPoolExecutor
-
+    writer, lock, queue = Writer(parts, times), threading.Lock(), iter(todo)
     stop = threading.Event()
 
-    def work(batch, queue):
-        for i in queue:
-            if stop.is_set():
-                return
-            parts.write(i, press_chunk(batch, plan, *plan.chunks[i], on_launch=advance)())
+    def take():
+        with lock:
+            return None if stop.is_set() else next(queue, None)
 
-    with ThreadPoolExecutor(len(batches)) as pool:
-        futures = [pool.submit(work, b, q) for b, q in zip(batches, queues)]
-        try:
-            for f in futures:
-                f.result()
-        except BaseException:  # an interrupt: the other threads end after their current chunk
-            stop.set()
-            raise
+    def work(lanes):
+        run_device(plan, [RingBatches(plan, m, bound) for m in lanes], take, writer.put, times, advance)
+
+    cuda = [m for m in models if m.device.is_cuda]
+    if len(cuda) == len(models) and len({m.device.alias for m in cuda}) == len(cuda):
+        groups = [[m, m] for m in models]  # a thread a GPU, two lanes on its model
+    else:  # the CPU (synchronous launches) or a device named twice: one thread, its lanes over the models
+        groups = [[models[k % len(models)] for k in range(max(2, len(models)))]]
+    _run_threads(work, groups, stop, writer)
+
+
+def _run_threads(work, groups, stop, writer):
+    from concurrent.futures import ThreadPoolExecutor
+
+    try:
+        if len(groups) == 1:
+            work(groups[0])
+        else:
+            with ThreadPoolExecutor(len(groups)) as pool:
+                futures = [pool.submit(work, g) for g in groups]
+                try:
+                    for f in futures:
+                        f.result()
+                except BaseException:  # an interrupt or an error: the other threads end after their current chunk
+                    stop.set()
+                    raise
+    except BaseException:
+        stop.set()
+        writer.close(wait=False)
+        raise
+    writer.close()
+
+
+def sweep_critical_dt(plan: SweepPlan, model) -> float | None:
+    """The whole mesh's critical step [s] (a bound of every region's, BatchPalpation.critical_dt_bound)
+    for an explicit plan, computed once a sweep; None for an implicit one."""
+    return model.critical_dt() if plan.integrator == "explicit" else None
 
 
 def _ray_chunk(plan: SweepPlan, begin: int, end: int, gpu: bool) -> dict:
