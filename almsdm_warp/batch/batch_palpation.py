@@ -163,8 +163,9 @@ class BatchPalpation:
         self._critical_cache, self._bound = {}, force_bound(self.model)
         self.critical_dt_bound = None
         """A lower bound [s] of every region's critical step (the whole mesh's Model.critical_dt()),
-        or None. Where the frame is under half of 0.9 x that bound, touch() takes one substep without
-        estimating the batch's own critical step (which could only be longer): the same substeps."""
+        or None. Where one substep is stable under that bound (less 1e-4 relative: the estimates of a
+        region and of the whole mesh agree to 1e-7 where they meet), touch() takes one substep
+        without estimating the batch's own critical step, which is no shorter: the same substeps."""
         self.cg_max_iterations = int(cg_max_iterations)
         self.cg_tolerance = float(cg_tolerance)
         if kernel is not None and kernel not in KERNELS:
@@ -211,7 +212,7 @@ class BatchPalpation:
         if self.integrator != "explicit":
             return
         bound = self.critical_dt_bound
-        if not self._fixed_substeps and bound is not None and substeps_for(self.frame_dt, 0.5 * bound) == 1:
+        if not self._fixed_substeps and bound is not None and substeps_for(self.frame_dt, (1 - 1e-4) * bound) == 1:
             self.critical_dt = bound  # the union's critical step is at least this: one substep
             return
         rv = host_copy(self.regions.region_vertex)
