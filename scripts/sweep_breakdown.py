@@ -38,7 +38,7 @@ def main(argv=None):
     ap.add_argument("extra", nargs="*", help="more arguments for almsdm sweep (after --)")
     args = ap.parse_args(argv)
     tree = args.tree.resolve()
-    env = {**os.environ, "PYTHONPATH": str(tree)}
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tree), *filter(None, [os.environ.get("PYTHONPATH")])])}
     has_profile = "--profile" in subprocess.run([sys.executable, "-m", "almsdm_warp.cli.main", "sweep", "--help"],
                                                 cwd=tree, env=env, capture_output=True, text=True).stdout
     with tempfile.TemporaryDirectory() as tmp:

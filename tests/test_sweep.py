@@ -142,6 +142,21 @@ def test_pipelined_sweep_gives_the_serial_bits(stomach, tmp_path):
     np.testing.assert_array_equal(results[0]["rings"], rings)
 
 
+def test_ray_actor_presses_the_serial_bits(stomach, tmp_path):
+    # what a Ray actor of one device runs (here in process, on the CPU): the serial path's columns
+    points, vertices = sw.sample_points(stomach, 10)
+    from almsdm_warp.tissue.params import TissueParams
+
+    plan = sw.SweepPlan(stomach, TissueParams(), None, None, 2, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 4)
+    actor = sw.SweepDevice(plan, False, sw.sweep_critical_dt(plan, plan.model("cpu")))
+    serial = plan.batch("cpu")
+    for i, (begin, end) in enumerate(plan.chunks):
+        expected = sw.press_chunk(serial, plan, begin, end)()
+        got = actor.press(i)
+        for c in sw.COLUMNS:
+            np.testing.assert_array_equal(got[c], expected[c])
+
+
 def test_one_substep_from_the_whole_mesh_bound(stomach):
     # where the whole mesh's critical step allows one substep, a batch given it as its bound takes
     # one without estimating its own; the batch's own estimate (the independent answer) agrees

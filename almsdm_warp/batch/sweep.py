@@ -4,8 +4,9 @@ The points are spread evenly (farthest-point sampling of the surface vertices, o
 surface sample snapped to the nearest vertex when N exceeds them). The work is cut into chunks of
 points; each chunk is pressed as one batch (BatchPalpation) on one device and written at once, as
 its own file, atomically, beside the output (``OUT.parts/``), so an interrupted sweep resumes
-from what it wrote. Chunks go round-robin to every device given (several GPUs of one process run
-at once: launches are asynchronous), or to Ray tasks of one GPU each (``ray`` extra). When all
+from what it wrote. Chunks go, in order, to whichever device given is free (a host thread a GPU),
+where the next chunk is built and launched while one presses and the results are read back and
+written on the side (run_local); or to Ray actors of one GPU each (``ray`` extra). When all
 are done they are gathered, in point order, into the output (.csv or .npz) and the parts removed.
 """
 
@@ -456,10 +457,10 @@ class Lane:
                 with self.times.phase("planning"):
                     batch.plan()
                 with self.times.phase("launch"):
-                    events = self._record(origin)
+                    events = self._record()
                     batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch,
                                       on_launch=frames(on_launch, batch, len(idx)))
-                    events += self._record(origin)
+                    events += self._record()
                     self.started.append((idx, batch, self._read_back(batch, int(k)), events))
         pressed = 0.0
         if self.device.is_cpu:  # synchronous: the launch was the press
@@ -467,7 +468,11 @@ class Lane:
             self.times.add_press(pressed)
         self.host_s = time.perf_counter() - t0 - pressed
 
-    def _record(self, origin):
+    def clock_origin(self):
+        """An event on this stream, the zero of the press intervals on the device's clock (None on the CPU)."""
+        return self._record()[0] if self.stream is not None else None
+
+    def _record(self):
         import warp as wp
 
         if self.stream is None:
@@ -560,13 +565,8 @@ class Writer:
 def run_device(plan: SweepPlan, batches: list, take, put, times: SweepTimes, on_launch=None) -> None:
     """Press the chunks that `take()` hands out (None: no more) on one device, two at a time over
     `batches`' two lanes; put(i, columns) each when done."""
-    import warp as wp
-
     lanes = [Lane(b, times) for b in batches]
-    origin = None
-    if lanes[0].stream is not None:  # the device clock's zero for the press intervals
-        origin = wp.Event(lanes[0].device, enable_timing=True)
-        lanes[0].stream.record_event(origin)
+    origin = lanes[0].clock_origin()
     busy, flying, n = [], None, 0
     while True:
         i = take()
@@ -669,30 +669,54 @@ def sweep_critical_dt(plan: SweepPlan, model) -> float | None:
     return model.critical_dt() if plan.integrator == "explicit" else None
 
 
-def _ray_chunk(plan: SweepPlan, begin: int, end: int, gpu: bool) -> dict:
-    # a Ray task: one chunk on this worker's GPU (Ray sets CUDA_VISIBLE_DEVICES) or its CPU
-    from ..warp_init import init_warp
+class SweepDevice:
+    """One device's share of a sweep in a Ray actor (one GPU, where Ray sets CUDA_VISIBLE_DEVICES, or
+    one CPU): the plan's model made once there, a chunk a call, pressed through a Lane as the local
+    pipeline presses it (the same bits)."""
 
-    init_warp()
-    batch = plan.batch("cuda:0" if gpu else "cpu")
-    return press_chunk(batch, plan, begin, end)()
+    def __init__(self, plan: SweepPlan, gpu: bool, critical_dt_bound=None):
+        from ..warp_init import init_warp
+
+        init_warp()
+        self.plan, self.times = plan, SweepTimes()
+        self.lane = Lane(RingBatches(plan, plan.model("cuda:0" if gpu else "cpu"), critical_dt_bound), self.times)
+        self.origin = self.lane.clock_origin()
+
+    def press(self, i: int) -> dict:
+        """The checked columns of chunk `i`."""
+        self.lane.start(self.plan, i, None, self.origin)
+        return self.lane.finish(self.plan, self.origin)
 
 
 def run_ray(plan: SweepPlan, parts: Parts, todo: list[int], gpu: bool, address=None, progress=None) -> None:
-    """Press the chunks `todo` as Ray tasks of one GPU each (or one CPU); written as they come back."""
+    """Press the chunks `todo` on Ray actors of one GPU each (or one CPU), one per GPU (CPU) of the
+    cluster, two chunks queued on each so the next starts as one returns; written as they come back."""
     try:
         import ray
     except ImportError as exc:
         raise InputError("--ray needs Ray: pip install 'almsdm_warp[ray]'") from exc
     if not ray.is_initialized():
         ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
-    task = ray.remote(num_gpus=1, num_cpus=1)(_ray_chunk) if gpu else ray.remote(num_cpus=1)(_ray_chunk)
+    device = ray.remote(num_gpus=1, num_cpus=1)(SweepDevice) if gpu else ray.remote(num_cpus=1)(SweepDevice)
     plan_ref = ray.put(plan)
-    pending = {task.remote(plan_ref, *plan.chunks[i], gpu): i for i in todo}
+    bound = sweep_critical_dt(plan, plan.model("cpu"))
+    count = max(1, min(len(todo), int(ray.cluster_resources().get("GPU" if gpu else "CPU", 1))))
+    actors = [device.remote(plan_ref, gpu, bound) for _ in range(count)]
+    queue, pending = list(todo), {}
+
+    def submit(a: int) -> None:
+        if queue:
+            i = queue.pop(0)
+            pending[actors[a].press.remote(i)] = (i, a)
+
+    for a in range(count):
+        submit(a)
+        submit(a)
     while pending:
         done, _ = ray.wait(list(pending), num_returns=1)
-        i = pending.pop(done[0])
+        i, a = pending.pop(done[0])
         parts.write(i, ray.get(done[0]))
+        submit(a)
         if progress is not None:
             b, e = plan.chunks[i]
             progress.advance((e - b) * press_steps(plan))
