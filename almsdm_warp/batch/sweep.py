@@ -80,7 +80,7 @@ def sample_points(mesh, n: int, seed: int = 0):
         pts = dense[farthest_points(dense, n, int(np.argmax(dense[:, 2])))]
     else:  # farthest-point sampling costs n x 3n: beyond FPS_MAX, area-uniform random points
         pts, _ = trimesh.sample.sample_surface(tm, n, seed=seed)
-    _, near = cKDTree(v[surface]).query(pts)
+    _, near = cKDTree(v[surface]).query(pts, workers=-1)  # every core: the same nearest vertices
     return pts, surface[near].astype(np.int64)
 
 
@@ -563,21 +563,28 @@ class Writer:
 
 
 def run_device(plan: SweepPlan, batches: list, take, put, times: SweepTimes, on_launch=None) -> None:
-    """Press the chunks that `take()` hands out (None: no more) on one device, two at a time over
-    `batches`' two lanes; put(i, columns) each when done."""
+    """Press the chunks that `take()` hands out (None: no more) on one device, a lane (Lane) for each
+    of `batches`: with two, chunk i + 1 is launched before chunk i is read; put(i, columns) each when done."""
     lanes = [Lane(b, times) for b in batches]
     origin = lanes[0].clock_origin()
     busy, flying, n = [], None, 0
+
+    def finish(chunk):
+        j, lane = chunk
+        put(j, lane.finish(plan, origin))
+        busy.extend(getattr(lane, "busy", []))
+
     while True:
         i = take()
+        lane = lanes[n % len(lanes)]
+        if flying is not None and flying[1] is lane:  # a single lane: its chunk is read first
+            finish(flying)
+            flying = None
         if i is not None:
-            lane = lanes[n % len(lanes)]
             lane.start(plan, i, on_launch, origin)
             n += 1
         if flying is not None:
-            j, done = flying
-            put(j, done.finish(plan, origin))
-            busy += getattr(done, "busy", [])
+            finish(flying)
         if i is None:
             break
         flying = (i, lane)
@@ -636,7 +643,9 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
     cuda = [m for m in models if m.device.is_cuda]
     if len(cuda) == len(models) and len({m.device.alias for m in cuda}) == len(cuda):
         groups = [[m, m] for m in models]  # a thread a GPU, two lanes on its model
-    else:  # the CPU (synchronous launches) or a device named twice: one thread, its lanes over the models
+    elif all(m.device.is_cpu for m in models):  # synchronous launches: one thread, a lane a model
+        groups = [models]
+    else:  # a GPU named twice: one thread, two lanes or more over the models
         groups = [[models[k % len(models)] for k in range(max(2, len(models)))]]
     _run_threads(work, groups, stop, writer)
 
