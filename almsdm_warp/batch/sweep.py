@@ -248,6 +248,8 @@ class Parts:
         """Chunk index -> SHA-256 of its file, as written."""
         self.damaged: list[int] = []
         """Chunks found on disk by open() that did not match their checksum (removed, to be pressed again)."""
+        self.written: dict[int, dict] = {}
+        """Chunk index -> the columns this process wrote to its file (gather() takes them as they are)."""
         self._lock = threading.Lock()  # chunks finish on several threads (several GPUs)
 
     @property
@@ -304,11 +306,16 @@ class Parts:
         with self._lock:
             self.sums[i] = digest[0]
             self._write_manifest()
+            self.written[i] = columns
 
     def gather(self) -> dict:
-        """Every chunk's columns, in point order; InputError for a chunk damaged since it was written."""
+        """Every chunk's columns, in point order: those this process wrote from memory, the others read
+        back; InputError for a chunk found damaged."""
         parts = []
         for i in range(len(self.plan.chunks)):
+            if i in self.written:
+                parts.append(self.written[i])
+                continue
             path = self.chunk_path(i)
             try:
                 if self.sums.get(i) != file_sha256(path):
