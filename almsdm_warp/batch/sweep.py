@@ -19,7 +19,7 @@ import shutil
 import threading
 import time
 import zipfile
-from contextlib import contextmanager, nullcontext
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -440,14 +440,27 @@ class Lane:
 
         self.batches, self.times, self.device = batches, times, batches.device
         self.stream = wp.Stream(self.device) if self.device.is_cuda else None
+        for k in np.unique(batches.plan.point_rings):  # made now: their set-up reads on the null stream
+            batches.get(int(k))
         self.started = []
         """(indices in the chunk, batch, pinned (peak, hold, q0), events) of the chunk in flight."""
         self._pinned = {}
 
+    @contextmanager
     def scope(self):
+        """This lane's stream as its device's current one (wp.ScopedStream would also set the process's
+        default device, which the threads of several GPUs would race for)."""
         import warp as wp
 
-        return wp.ScopedStream(self.stream) if self.stream is not None else nullcontext()
+        if self.stream is None:
+            yield
+            return
+        saved = wp.get_stream(self.device)
+        wp.set_stream(self.stream, self.device, sync=True)  # after what the device's stream holds (the model)
+        try:
+            yield
+        finally:
+            wp.set_stream(saved, self.device)
 
     def start(self, plan: SweepPlan, i: int, on_launch=None, origin=None) -> None:
         """Build, plan and launch chunk `i`, and queue its read-back (asynchronous on CUDA)."""
