@@ -483,7 +483,7 @@ class Lane:
                     events += self._record()
                     self.started.append((idx, batch, self._read_back(batch, int(k)), events))
         pressed = 0.0
-        if self.device.is_cpu:  # synchronous: the launch was the press
+        if self.stream is None:  # the CPU, synchronous: the launch was the press
             pressed = sum(e[1] - e[0] for *_, e in self.started)
             self.times.add_press(pressed)
         self.host_s = time.perf_counter() - t0 - pressed
