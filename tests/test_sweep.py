@@ -157,6 +157,49 @@ def test_ray_actor_presses_the_serial_bits(stomach, tmp_path):
             np.testing.assert_array_equal(got[c], expected[c])
 
 
+def test_stream_lanes_read_back_the_finished_press(stomach, monkeypatch):
+    # the CUDA branch of a Lane (events, its stream, results copied into host buffers and turned into
+    # columns by BatchPalpation.result_from) run on the CPU with the stream calls stubbed: the columns
+    # of the serial path, which reads through finish_press
+    import time
+    import warp as wp
+    from almsdm_warp.tissue.params import TissueParams
+
+    class Event:
+        def __init__(self, *args, **kw):
+            self.t = None
+
+    class Stream:
+        def record_event(self, event):
+            event.t = time.perf_counter()
+            return event
+
+    empty, copy, copies = wp.empty, wp.copy, []
+    monkeypatch.setattr(wp, "Event", Event)
+    monkeypatch.setattr(wp, "get_stream", lambda device: None)
+    monkeypatch.setattr(wp, "set_stream", lambda stream, device, sync=False: None)
+    monkeypatch.setattr(wp, "synchronize_stream", lambda stream: None)
+    monkeypatch.setattr(wp, "get_event_elapsed_time", lambda a, b: (b.t - a.t) * 1e3)
+    monkeypatch.setattr(wp, "empty", lambda *a, pinned=False, **kw: empty(*a, **kw))
+    monkeypatch.setattr(wp, "copy", lambda dst, src, stream=None: (copies.append(stream), copy(dst, src)))
+    points, vertices = sw.sample_points(stomach, 14)
+    plan = sw.SweepPlan(stomach, TissueParams(), None, None, np.array([2, 3] * 7), 5e-4, 0.01, 0.02, 0.02, 0.02, points, vertices, 5)
+    model = plan.model("cpu")
+    lanes = [sw.Lane(sw.RingBatches(plan, model), sw.SweepTimes()) for _ in range(2)]
+    for lane in lanes:
+        lane.stream = Stream()
+    origin = lanes[0].clock_origin()
+    serial = plan.batch("cpu")
+    for i, (begin, end) in enumerate(plan.chunks):
+        lanes[i % 2].start(plan, i, None, origin)
+        got = lanes[i % 2].finish(plan, origin)
+        expected = sw.press_chunk(serial, plan, begin, end)()
+        for c in sw.COLUMNS:
+            np.testing.assert_array_equal(got[c], expected[c])
+    assert sum(s is lanes[0].stream for s in copies) == 3 * 2 * 2  # 3 results x 2 ring counts x chunks 0, 2
+    assert all(b <= e for b, e in lanes[1].busy)
+
+
 def test_one_substep_from_the_whole_mesh_bound(stomach):
     # where the whole mesh's critical step allows one substep, a batch given it as its bound takes
     # one without estimating its own; the batch's own estimate (the independent answer) agrees
