@@ -262,3 +262,17 @@ def press_batch(batch, step_begin, step_count):
         outputs=[p.q_state, p.qd_state],
         device=m.device,
     )
+
+
+@wp.kernel
+def gather_contact_q(q_state: wp.array2d(dtype=wp.vec3), contact_local: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.vec3)):
+    # each palpation's contact vertex position (its local index: 0 for the paper's probe, anywhere in a sphere's ring 0)
+    b = wp.tid()
+    out[b] = q_state[b, contact_local[b]]
+
+
+def contact_positions(batch):
+    """Each palpation's contact vertex position [m], a [B] vec3 device array (on the current stream)."""
+    out = wp.empty(batch.batch_size, dtype=wp.vec3, device=batch.device)
+    wp.launch(gather_contact_q, dim=batch.batch_size, inputs=[batch.q_state, batch.contact_local], outputs=[out], device=batch.device)
+    return out

@@ -119,20 +119,121 @@ def test_interrupted_sweep_resumes_to_the_same_file(tmp_path, monkeypatch, capsy
     assert "different sweep" in capsys.readouterr().err
 
 
-def test_chunks_over_several_devices_interleave(stomach, tmp_path):
-    # two batches in flight at once (as on two GPUs), here both on the CPU: the same numbers
+def test_pipelined_sweep_gives_the_serial_bits(stomach, tmp_path):
+    # the pipeline (two chunks in flight a device, read-back and writing on the side), on one device
+    # or split over two, against the serial path: chunk after chunk, each read and written in turn;
+    # per-point ring counts make chunks of several batches
     points, vertices = sw.sample_points(stomach, 12)
     from almsdm_warp.tissue.params import TissueParams
 
-    plan = sw.SweepPlan(stomach, TissueParams(), None, None, 3, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 5)
+    rings = np.array([3, 2, 3, 3, 2, 2, 3, 3, 3, 2, 3, 3])
+    plan = sw.SweepPlan(stomach, TissueParams(), None, None, rings, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 5)
     results = []
-    for devices in (["cpu"], ["cpu", "cpu"]):
-        parts = sw.Parts(tmp_path / f"x{len(devices)}.npz", plan)
+    for devices, pipeline in ((["cpu"], False), (["cpu"], True), (["cpu", "cpu"], True)):
+        parts = sw.Parts(tmp_path / f"x{len(devices)}{pipeline}.npz", plan)
         parts.open()
-        sw.run_local(plan, parts, [0, 1, 2], devices)
+        times = sw.SweepTimes()
+        sw.run_local(plan, parts, [0, 1, 2], devices, pipeline=pipeline, times=times)
         results.append(parts.gather())
-    for c in sw.COLUMNS:
-        np.testing.assert_array_equal(results[0][c], results[1][c])
+        assert len(times.host_per_chunk) == (3 if pipeline else 0)
+    for other in results[1:]:
+        for c in sw.COLUMNS:
+            np.testing.assert_array_equal(other[c], results[0][c])
+    np.testing.assert_array_equal(results[0]["rings"], rings)
+
+
+def test_ray_actor_presses_the_serial_bits(stomach, tmp_path):
+    # what a Ray actor of one device runs (here in process, on the CPU): the serial path's columns
+    points, vertices = sw.sample_points(stomach, 10)
+    from almsdm_warp.tissue.params import TissueParams
+
+    plan = sw.SweepPlan(stomach, TissueParams(), None, None, 2, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 4)
+    actor = sw.SweepDevice(plan, False, sw.sweep_critical_dt(plan, plan.model("cpu")))
+    serial = plan.batch("cpu")
+    for i, (begin, end) in enumerate(plan.chunks):
+        expected = sw.press_chunk(serial, plan, begin, end)()
+        got = actor.press(i)
+        for c in sw.COLUMNS:
+            np.testing.assert_array_equal(got[c], expected[c])
+
+
+def test_stream_lanes_read_back_the_finished_press(stomach, monkeypatch):
+    # the CUDA branch of a Lane (events, its stream, results copied into host buffers and turned into
+    # columns by BatchPalpation.result_from) run on the CPU with the stream calls stubbed: the columns
+    # of the serial path, which reads through finish_press
+    import time
+    import warp as wp
+    from almsdm_warp.tissue.params import TissueParams
+
+    class Event:
+        def __init__(self, *args, **kw):
+            self.t = None
+
+    class Stream:
+        def record_event(self, event):
+            event.t = time.perf_counter()
+            return event
+
+    empty, copy, copies = wp.empty, wp.copy, []
+    monkeypatch.setattr(wp, "Event", Event)
+    monkeypatch.setattr(wp, "get_stream", lambda device: None)
+    monkeypatch.setattr(wp, "set_stream", lambda stream, device, sync=False: None)
+    monkeypatch.setattr(wp, "synchronize_stream", lambda stream: None)
+    monkeypatch.setattr(wp, "get_event_elapsed_time", lambda a, b: (b.t - a.t) * 1e3)
+    monkeypatch.setattr(wp, "empty", lambda *a, pinned=False, **kw: empty(*a, **kw))
+    monkeypatch.setattr(wp, "copy", lambda dst, src, stream=None: (copies.append(stream), copy(dst, src)))
+    points, vertices = sw.sample_points(stomach, 14)
+    plan = sw.SweepPlan(stomach, TissueParams(), None, None, np.array([2, 3] * 7), 5e-4, 0.01, 0.02, 0.02, 0.02, points, vertices, 5)
+    model = plan.model("cpu")
+    lanes = [sw.Lane(sw.RingBatches(plan, model), sw.SweepTimes()) for _ in range(2)]
+    for lane in lanes:
+        lane.stream = Stream()
+    origin = lanes[0].clock_origin()
+    serial = plan.batch("cpu")
+    for i, (begin, end) in enumerate(plan.chunks):
+        lanes[i % 2].start(plan, i, None, origin)
+        got = lanes[i % 2].finish(plan, origin)
+        expected = sw.press_chunk(serial, plan, begin, end)()
+        for c in sw.COLUMNS:
+            np.testing.assert_array_equal(got[c], expected[c])
+    assert sum(s is lanes[0].stream for s in copies) == 3 * 2 * 2  # 3 results x 2 ring counts x chunks 0, 2
+    assert all(b <= e for b, e in lanes[1].busy)
+
+
+def test_one_substep_from_the_whole_mesh_bound(stomach):
+    # where the whole mesh's critical step allows one substep, a batch given it as its bound takes
+    # one without estimating its own; the batch's own estimate (the independent answer) agrees
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
+    from almsdm_warp.tissue.params import TissueParams
+
+    for dt, substeps in ((1e-3, 1), (2e-3, 2)):
+        plain = BatchPalpation(stomach, TissueParams(), rings=3, dt=dt, device="cpu")
+        bounded = BatchPalpation(model=plain.model, rings=3, dt=dt)
+        bounded.critical_dt_bound = plain.model.critical_dt()
+        plain.touch(stomach.surface_vertices[::40])
+        bounded.touch(stomach.surface_vertices[::40])
+        assert plain.substeps == bounded.substeps == substeps
+        assert plain.critical_dt >= bounded.critical_dt_bound * (1 - 1e-6)
+
+
+def test_union_length_against_a_fine_grid():
+    rng = np.random.default_rng(3)
+    begin = rng.uniform(0, 90, 40)
+    intervals = list(zip(begin, begin + rng.uniform(0, 10, 40)))
+    grid = (np.arange(1_000_000) + 0.5) * 1e-4
+    covered = np.zeros(len(grid), dtype=bool)
+    for b, e in intervals:
+        covered |= (grid >= b) & (grid < e)
+    assert abs(sw.union_length(intervals) - covered.sum() * 1e-4) < 40 * 2e-4
+    assert sw.union_length([]) == 0.0
+
+
+def test_default_chunk_fills_the_devices():
+    assert sw.default_chunk(10_000, ["cpu"]) == 64
+    assert sw.default_chunk(200, ["cuda:0"]) == 200  # all in one launch
+    assert sw.default_chunk(1_000_000, ["cuda:0"]) == 131072  # 8 chunks: the next is built while one presses
+    assert sw.default_chunk(1_000_000, ["cuda:0", "cuda:1"]) == 125000  # 4 chunks a device
+    assert sw.default_chunk(100_000, ["cuda:0"]) == 25000
 
 
 def test_sweep_on_ray_gives_the_same_file(tmp_path):

@@ -34,6 +34,20 @@ BATCH_INTEGRATORS = ("explicit", "implicit")
 """The integrators a batch has kernels for (kernels/batch_press*.py), a subset of solvers.INTEGRATORS."""
 
 
+def host_copy(a: wp.array) -> np.ndarray:
+    """A host copy of `a`, read on the device's current stream.
+
+    ``array.numpy()`` copies on the CUDA null stream, which waits for every stream of the device:
+    a read here waits only for the work queued before it on the current stream, so a sweep can
+    build the next chunk's regions on one stream while another presses."""
+    if a.device.is_cpu:
+        return a.numpy()
+    host = wp.empty(a.shape, dtype=a.dtype, device="cpu")
+    wp.copy(host, a)
+    wp.synchronize_stream(a.device.stream)
+    return host.numpy()
+
+
 def _pow2(n: int, minimum: int = 1) -> int:
     return max(minimum, 1 << max(int(n) - 1, 0).bit_length())
 
@@ -182,6 +196,11 @@ class BatchPalpation:
         # the batch changed on its own): as Palpation's, set by plan_substeps at each touch()
         self.substeps, self.critical_dt, self.notes = 1, math.inf, []
         self._critical_cache, self._bound = {}, force_bound(self.model)
+        self.critical_dt_bound = None
+        """A lower bound [s] of every region's critical step (the whole mesh's Model.critical_dt()),
+        or None. Where one substep is stable under that bound (less 1e-4 relative: the estimates of a
+        region and of the whole mesh agree to 1e-7 where they meet), touch() takes one substep
+        without estimating the batch's own critical step, which is no shorter: the same substeps."""
         self.cg_max_iterations = int(cg_max_iterations)
         self.cg_tolerance = float(cg_tolerance)
         if kernel is not None and kernel not in KERNELS:
@@ -199,6 +218,10 @@ class BatchPalpation:
     def touch(self, vertices, depth=None) -> "BatchPalpation":
         """Put a probe on each of `vertices` and build their regions (one launch, on the device). With
         a sphere, each region's ring 0 is the patch it covers pressed `depth` [m] deep (default PATCH_DEPTH)."""
+        return self.build(vertices, depth).plan()
+
+    def build(self, vertices, depth=None) -> "BatchPalpation":
+        """touch()'s first half: the regions of `vertices` (and the sphere's patches), built on the device."""
         self.vertices = self._checked_vertices(vertices)
         self.batch_size = len(self.vertices)
         if self.probe_radius > 0:
@@ -208,6 +231,10 @@ class BatchPalpation:
             offsets, seeds = np.arange(self.batch_size + 1, dtype=np.int32), self.vertices.astype(np.int32)
         self.regions = self._build_regions(offsets, seeds)
         self._find_contacts()
+        return self
+
+    def plan(self) -> "BatchPalpation":
+        """touch()'s second half, after build(): the kernel, substeps and states of those regions."""
         self._choose_kernel()
         self.plan_substeps()
         self._allocate_states()
@@ -226,7 +253,11 @@ class BatchPalpation:
         self.integrator, self.substeps = self.requested_integrator, 1
         if self.integrator != "explicit":
             return
-        rv = self.regions.region_vertex.numpy()
+        bound = self.critical_dt_bound
+        if not self._fixed_substeps and bound is not None and substeps_for(self.frame_dt, (1 - 1e-4) * bound) == 1:
+            self.critical_dt = bound  # the union's critical step is at least this: one substep
+            return
+        rv = host_copy(self.regions.region_vertex)
         free = rv[np.arange(rv.shape[1])[None, :] < self.free_vertex_counts[:, None]]
         key = np.unique(free).tobytes()
         if key not in self._critical_cache:
@@ -284,7 +315,7 @@ class BatchPalpation:
         while True:
             regions = BatchRegions(len(seed_offsets) - 1, cv, ce, k, self.device)
             br.build_regions(self.model.dmesh, seed_offsets, seeds, k, self.support, regions)
-            status = regions.status.numpy()
+            status = host_copy(regions.status)
             if not np.any(status):
                 return regions
             if np.any(status & br.BUILD_OVERFLOW):
@@ -296,10 +327,10 @@ class BatchPalpation:
     def _choose_kernel(self) -> None:
         # the kernels' capacities: the largest region of this batch, not the build's guess
         regions = self.regions
-        counts = self.region_vertex_counts = regions.region_count.numpy()
-        free = self.free_vertex_counts = regions.free_count.numpy()
-        entries = int(regions.entry_count.numpy().max(initial=1))
-        springs = int(regions.spring_count.numpy().max(initial=1))
+        counts = self.region_vertex_counts = host_copy(regions.region_count)
+        free = self.free_vertex_counts = host_copy(regions.free_count)
+        entries = int(host_copy(regions.entry_count).max(initial=1))
+        springs = int(host_copy(regions.spring_count).max(initial=1))
         self.vertex_capacity = _pow2(int(counts.max()), 16)
         self.entry_capacity = _pow2(entries, 16)
         self.fast_plan = self._fast_plan(int(counts.max()), int(free.max()), entries, springs)
@@ -424,9 +455,12 @@ class BatchPalpation:
 
     def finish_press(self) -> BatchResult:
         """Wait for the press and read it back (the force magnitudes as Palpation's host code takes them)."""
-        peak = self.peak_reaction.numpy()
-        hold = self.hold_reaction.numpy()
-        q0 = self.q_state.numpy()[np.arange(self.batch_size), self._contact_local, :]
+        q0 = bk.contact_positions(self).numpy()
+        return self.result_from(self.peak_reaction.numpy(), self.hold_reaction.numpy(), q0)
+
+    def result_from(self, peak: np.ndarray, hold: np.ndarray, q0: np.ndarray) -> BatchResult:
+        """The press's result from host copies of peak_reaction, hold_reaction and each contact vertex's
+        position (q_state at contact_local), as read when the press is done; SimulationDiverged as finish_press."""
         rest = self.mesh.vertices[self.vertices].astype(np.float32).astype(np.float64)
         # PressResult's expressions, vectorized: float32 components squared in float64 (Python's
         # x ** 2 and NumPy's agree), summed left to right; the norm of the float64 difference

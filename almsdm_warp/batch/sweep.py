@@ -4,8 +4,9 @@ The points are spread evenly (farthest-point sampling of the surface vertices, o
 surface sample snapped to the nearest vertex when N exceeds them). The work is cut into chunks of
 points; each chunk is pressed as one batch (BatchPalpation) on one device and written at once, as
 its own file, atomically, beside the output (``OUT.parts/``), so an interrupted sweep resumes
-from what it wrote. Chunks go round-robin to every device given (several GPUs of one process run
-at once: launches are asynchronous), or to Ray tasks of one GPU each (``ray`` extra). When all
+from what it wrote. Chunks go, in order, to whichever device given is free (a host thread a GPU),
+where the next chunk is built and launched while one presses and the results are read back and
+written on the side (run_local); or to Ray actors of one GPU each (``ray`` extra). When all
 are done they are gathered, in point order, into the output (.csv or .npz) and the parts removed.
 """
 
@@ -16,7 +17,9 @@ import json
 import math
 import shutil
 import threading
+import time
 import zipfile
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,8 +80,19 @@ def sample_points(mesh, n: int, seed: int = 0):
         pts = dense[farthest_points(dense, n, int(np.argmax(dense[:, 2])))]
     else:  # farthest-point sampling costs n x 3n: beyond FPS_MAX, area-uniform random points
         pts, _ = trimesh.sample.sample_surface(tm, n, seed=seed)
-    _, near = cKDTree(v[surface]).query(pts)
+    _, near = cKDTree(v[surface]).query(pts, workers=-1)  # every core: the same nearest vertices
     return pts, surface[near].astype(np.int64)
+
+
+def default_chunk(points: int, devices: list[str]) -> int:
+    """Points a chunk when the command line gives none: 64 on the CPU (the progress moves, a resume
+    loses little); on GPUs at least four chunks a device where the points allow (so the next chunk is
+    built while one presses, and the devices share the work), 16384..131072 points each (a launch
+    that fills an H200: a block a palpation)."""
+    if all(d == "cpu" for d in devices):
+        return 64
+    per_device = -(-points // len(devices))
+    return max(1, min(per_device, max(16384, min(-(-per_device // 4), 131072))))
 
 
 # -- the plan ----------------------------------------------------------------------------------
@@ -158,39 +172,6 @@ class SweepPlan:
         return out
 
 
-class RingBatches:
-    """A plan's BatchPalpations on one device, one per ring count (made when first asked for)."""
-
-    def __init__(self, plan: SweepPlan, model):
-        self.plan, self.model, self.device = plan, model, model.device
-        self._batches = {}
-
-    def get(self, rings: int):
-        from .batch_palpation import BatchPalpation
-
-        if rings not in self._batches:
-            p = self.plan
-            self._batches[rings] = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator,
-                                                  probe_radius=p.probe_radius)
-        return self._batches[rings]
-
-
-def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_launch=None):
-    """Start the presses of points begin..end (a batch per ring count among them); returns a finisher."""
-    rings = plan.point_rings[begin:end]
-    per_launch = 200 if batches.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
-    started = []
-    for k in np.unique(rings):
-        idx = np.flatnonzero(rings == k)
-        batch = batches.get(int(k))
-        batch.touch(plan.vertices[begin:end][idx], plan.depth)
-        # the progress counts frames: a launch of `steps` substeps advances it by steps / substeps frames each
-        launch = None if on_launch is None else (lambda steps, n=len(idx), b=batch: on_launch(steps * n // b.substeps))
-        batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=launch)
-        started.append((idx, batch))
-    return lambda: checked_columns(plan.columns(begin, end, [(idx, batch.finish_press()) for idx, batch in started]))
-
-
 def checked_columns(columns: dict) -> dict:
     """`columns`, or SimulationDiverged where a number is not finite: a sweep never writes one."""
     from ..protocol.palpation import SimulationDiverged
@@ -219,9 +200,11 @@ def write_table(path, columns: dict) -> Path:
             cols = [np.asarray(columns[c]) for c in COLUMNS]
             with open(tmp, "w", encoding="utf-8") as f:
                 f.write(",".join(COLUMNS) + "\n")
-                for row in zip(*cols):
+                for b in range(0, len(cols[0]), 1 << 16):  # blocks of rows, each column formatted at once
                     # repr: the shortest text that reads back to the same float
-                    f.write(",".join(str(int(x)) if c in _INT_COLUMNS else repr(float(x)) for c, x in zip(COLUMNS, row)) + "\n")
+                    text = [map(str, col[b : b + (1 << 16)].astype(np.int64).tolist()) if c in _INT_COLUMNS else
+                            map(repr, col[b : b + (1 << 16)].astype(np.float64).tolist()) for c, col in zip(COLUMNS, cols)]
+                    f.write("".join(line + "\n" for line in map(",".join, zip(*text))))
 
     atomic_write(path, write)
     return path
@@ -272,6 +255,8 @@ class Parts:
         """Chunk index -> SHA-256 of its file, as written."""
         self.damaged: list[int] = []
         """Chunks found on disk by open() that did not match their checksum (removed, to be pressed again)."""
+        self.written: dict[int, dict] = {}
+        """Chunk index -> the columns this process wrote to its file (gather() takes them as they are)."""
         self._lock = threading.Lock()  # chunks finish on several threads (several GPUs)
 
     @property
@@ -328,11 +313,16 @@ class Parts:
         with self._lock:
             self.sums[i] = digest[0]
             self._write_manifest()
+            self.written[i] = columns
 
     def gather(self) -> dict:
-        """Every chunk's columns, in point order; InputError for a chunk damaged since it was written."""
+        """Every chunk's columns, in point order: those this process wrote from memory, the others read
+        back; InputError for a chunk found damaged."""
         parts = []
         for i in range(len(self.plan.chunks)):
+            if i in self.written:
+                parts.append(self.written[i])
+                continue
             path = self.chunk_path(i)
             try:
                 if self.sums.get(i) != file_sha256(path):
@@ -348,74 +338,424 @@ class Parts:
 
 
 # -- running -----------------------------------------------------------------------------------
-def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str], progress=None) -> None:
-    """Press the chunks `todo` round-robin over `devices` (each chunk written when it is done).
+PHASES = ("sampling", "set-up", "region build", "planning", "launch", "waiting for the device", "read-back", "checks",
+          "writing", "waiting for the writer", "gather", "output")
+"""The host phases of a sweep's wall time (SweepTimes); the device's press time is counted apart."""
 
-    Several CUDA devices: a host thread each (region builds, read-backs and writes overlap; Warp's
-    calls release the GIL while they wait). Otherwise one thread, chunks interleaved over them.
+
+class SweepTimes:
+    """Where a sweep's wall time goes: seconds per host phase, summed over the threads that ran it
+    (one a device, and the writer's), and the press kernels' time on the device.
+
+    On CUDA the press time is the union of the intervals between events recorded around each
+    chunk's press on its stream, read when the chunk's results are read (a synchronisation the sweep
+    makes anyway); on the CPU, where launches are synchronous, it is the launches' wall time.
     """
-    models = {d: plan.model(d) for d in devices}
-    batches = [plan.batch(d, models[d]) for d in devices]
+
+    def __init__(self):
+        self.seconds = dict.fromkeys(PHASES, 0.0)
+        self.press_s = 0.0
+        """Press kernels [s]: per device, the time it was pressing, summed over devices."""
+        self.host_per_chunk: list[float] = []
+        """Host time [s] of each chunk on its device's thread (build, plan, launch, read-back, checks)."""
+        self._lock = threading.Lock()
+
+    @contextmanager
+    def phase(self, name: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.add(name, time.perf_counter() - t0)
+
+    def add(self, name: str, seconds: float) -> None:
+        with self._lock:
+            self.seconds[name] += seconds
+
+    def add_press(self, seconds: float) -> None:
+        with self._lock:
+            self.press_s += seconds
+
+    def table(self, wall_s: float) -> str:
+        """The breakdown as lines of text: each phase, the press kernels and the rest of `wall_s` [s]."""
+        rows = [(name, s) for name, s in self.seconds.items() if s > 0]
+        rows.append(("press kernels (device)", self.press_s))
+        lines = [f"{name:<26}{s:10.3f} s{100 * s / wall_s:7.1f} %" for name, s in rows]
+        lines.append(f"{'wall':<26}{wall_s:10.3f} s  (host phases of several threads may overlap the press)")
+        if self.host_per_chunk:
+            h = np.array(self.host_per_chunk)
+            lines.append(f"host time per chunk: median {np.median(h) * 1e3:.1f} ms, max {h.max() * 1e3:.1f} ms ({len(h)} chunks)")
+        return "\n".join(lines)
+
+    def as_dict(self, wall_s: float) -> dict:
+        """The breakdown in seconds, JSON keys with their unit."""
+        out = {f"{name.replace(' ', '_').replace('-', '_')}_s": s for name, s in self.seconds.items()}
+        return {**out, "press_kernels_s": self.press_s, "wall_s": wall_s}
+
+
+class RingBatches:
+    """A plan's BatchPalpations on one device, one per ring count (made when first asked for).
+
+    critical_dt_bound: the whole mesh's critical step (BatchPalpation.critical_dt_bound), or None."""
+
+    def __init__(self, plan: SweepPlan, model, critical_dt_bound=None):
+        self.plan, self.model, self.device = plan, model, model.device
+        self.critical_dt_bound = critical_dt_bound
+        self._batches = {}
+
+    def get(self, rings: int):
+        from .batch_palpation import BatchPalpation
+
+        if rings not in self._batches:
+            p = self.plan
+            batch = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator,
+                                   probe_radius=p.probe_radius)
+            batch.critical_dt_bound = self.critical_dt_bound
+            self._batches[rings] = batch
+        return self._batches[rings]
+
+
+def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_launch=None):
+    """Start the presses of points begin..end (a batch per ring count among them); returns a finisher."""
+    rings = plan.point_rings[begin:end]
+    per_launch = 200 if batches.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
+    started = []
+    for k in np.unique(rings):
+        idx = np.flatnonzero(rings == k)
+        batch = batches.get(int(k))
+        batch.touch(plan.vertices[begin:end][idx], plan.depth)
+        batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=frames(on_launch, batch, len(idx)))
+        started.append((idx, batch))
+    return lambda: checked_columns(plan.columns(begin, end, [(idx, batch.finish_press()) for idx, batch in started]))
+
+
+def frames(on_launch, batch, n: int):
+    """The progress counts frames: a launch of `steps` substeps of `n` presses advances it by n x steps / substeps."""
+    return None if on_launch is None else (lambda steps: on_launch(steps * n // batch.substeps))
+
+
+class Lane:
+    """One chunk in flight on a device: its batches (one per ring count), its CUDA stream and its
+    read-back buffers in pinned host memory.
+
+    A device's thread keeps two lanes: it builds, plans and launches chunk i + 1 on one stream while
+    chunk i presses on the other, then reads chunk i back on its own stream (never the null stream,
+    which would wait for both). On the CPU, where launches are synchronous, the same steps in order.
+    """
+
+    def __init__(self, batches: RingBatches, times: SweepTimes):
+        import warp as wp
+
+        self.batches, self.times, self.device = batches, times, batches.device
+        self.stream = wp.Stream(self.device) if self.device.is_cuda else None
+        for k in np.unique(batches.plan.point_rings):  # made now: their set-up reads on the null stream
+            batches.get(int(k))
+        self.started = []
+        """(indices in the chunk, batch, pinned (peak, hold, q0), events) of the chunk in flight."""
+        self._pinned = {}
+
+    @contextmanager
+    def scope(self):
+        """This lane's stream as its device's current one (wp.ScopedStream would also set the process's
+        default device, which the threads of several GPUs would race for)."""
+        import warp as wp
+
+        if self.stream is None:
+            yield
+            return
+        saved = wp.get_stream(self.device)
+        wp.set_stream(self.stream, self.device, sync=True)  # after what the device's stream holds (the model)
+        try:
+            yield
+        finally:
+            wp.set_stream(saved, self.device)
+
+    def start(self, plan: SweepPlan, i: int, on_launch=None, origin=None) -> None:
+        """Build, plan and launch chunk `i`, and queue its read-back (asynchronous on CUDA)."""
+        begin, end = self.chunk = plan.chunks[i]
+        rings = plan.point_rings[begin:end]
+        per_launch = 200 if self.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
+        t0, self.started = time.perf_counter(), []
+        with self.scope():
+            for k in np.unique(rings):
+                idx = np.flatnonzero(rings == k)
+                batch = self.batches.get(int(k))
+                with self.times.phase("region build"):
+                    batch.build(plan.vertices[begin:end][idx], plan.depth)
+                with self.times.phase("planning"):
+                    batch.plan()
+                with self.times.phase("launch"):
+                    events = self._record()
+                    batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch,
+                                      on_launch=frames(on_launch, batch, len(idx)))
+                    events += self._record()
+                    self.started.append((idx, batch, self._read_back(batch, int(k)), events))
+        pressed = 0.0
+        if self.stream is None:  # the CPU, synchronous: the launch was the press
+            pressed = sum(e[1] - e[0] for *_, e in self.started)
+            self.times.add_press(pressed)
+        self.host_s = time.perf_counter() - t0 - pressed
+
+    def clock_origin(self):
+        """An event on this stream, the zero of the press intervals on the device's clock (None on the CPU)."""
+        return self._record()[0] if self.stream is not None else None
+
+    def _record(self):
+        import warp as wp
+
+        if self.stream is None:
+            return [time.perf_counter()]
+        event = wp.Event(self.device, enable_timing=True)
+        self.stream.record_event(event)
+        return [event]
+
+    def _read_back(self, batch, rings: int):
+        # the results copied into pinned host buffers on this stream, after the press: no wait here
+        import warp as wp
+
+        from ..kernels.batch_press import contact_positions
+
+        if self.stream is None:
+            return None
+        n = batch.batch_size
+        buffers = self._pinned.get(rings)
+        if buffers is None or len(buffers[0]) < n:
+            buffers = self._pinned[rings] = [wp.empty(n, dtype=wp.vec3, device="cpu", pinned=True) for _ in range(3)]
+        out = [b[:n] for b in buffers]
+        for dst, src in zip(out, (batch.peak_reaction, batch.hold_reaction, contact_positions(batch))):
+            wp.copy(dst, src, stream=self.stream)
+        return out
+
+    def finish(self, plan: SweepPlan, origin=None) -> dict:
+        """Wait for the chunk started last and return its checked columns."""
+        import warp as wp
+
+        t0 = time.perf_counter()
+        if self.stream is not None:
+            with self.times.phase("waiting for the device"):
+                wp.synchronize_stream(self.stream)
+            self.busy = [(wp.get_event_elapsed_time(origin, e[0]), wp.get_event_elapsed_time(origin, e[1])) for *_, e in self.started]
+        results = []
+        with self.times.phase("read-back"):
+            for idx, batch, pinned, _ in self.started:
+                result = batch.finish_press() if pinned is None else batch.result_from(*(b.numpy() for b in pinned))
+                results.append((idx, result))
+            columns = plan.columns(*self.chunk, results)
+        with self.times.phase("checks"):
+            columns = checked_columns(columns)
+        self.host_s += time.perf_counter() - t0
+        self.times.host_per_chunk.append(self.host_s)
+        return columns
+
+
+class Writer:
+    """Writes the chunks' part files on a thread of its own, in the order given (at most `depth` waiting).
+
+    An error there (a full disk; an interrupt in tests) is raised again in the sweep's thread by
+    put() or close(); after it nothing more is written."""
+
+    def __init__(self, parts: Parts, times: SweepTimes, depth: int = 4):
+        import queue
+
+        self.parts, self.times, self.error = parts, times, None
+        self.queue = queue.Queue(depth)
+        self.thread = threading.Thread(target=self._run, name="sweep-writer", daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while (item := self.queue.get()) is not None:
+            if self.error is None:
+                try:
+                    with self.times.phase("writing"):
+                        self.parts.write(*item)
+                except BaseException as exc:  # handed to the sweep's thread
+                    self.error = exc
+
+    def put(self, i: int, columns: dict) -> None:
+        self.check()
+        with self.times.phase("waiting for the writer"):
+            self.queue.put((i, columns))
+
+    def check(self) -> None:
+        if self.error is not None:
+            raise self.error
+
+    def close(self, wait: bool = True) -> None:
+        """Write what is queued (wait) or drop it, end the thread, raise its error if any."""
+        if not wait:
+            while not self.queue.empty():
+                self.queue.get_nowait()
+        with self.times.phase("waiting for the writer"):
+            self.queue.put(None)
+            self.thread.join()
+        if wait:
+            self.check()
+
+
+def run_device(plan: SweepPlan, batches: list, take, put, times: SweepTimes, on_launch=None) -> None:
+    """Press the chunks that `take()` hands out (None: no more) on one device, a lane (Lane) for each
+    of `batches`: with two, chunk i + 1 is launched before chunk i is read; put(i, columns) each when done."""
+    lanes = [Lane(b, times) for b in batches]
+    origin = lanes[0].clock_origin()
+    busy, flying, n = [], None, 0
+
+    def finish(chunk):
+        j, lane = chunk
+        put(j, lane.finish(plan, origin))
+        busy.extend(getattr(lane, "busy", []))
+
+    while True:
+        i = take()
+        lane = lanes[n % len(lanes)]
+        if flying is not None and flying[1] is lane:  # a single lane: its chunk is read first
+            finish(flying)
+            flying = None
+        if i is not None:
+            lane.start(plan, i, on_launch, origin)
+            n += 1
+        if flying is not None:
+            finish(flying)
+        if i is None:
+            break
+        flying = (i, lane)
+    times.add_press(union_length(busy) * 1e-3)
+
+
+def union_length(intervals) -> float:
+    """Total length of the union of (begin, end) intervals."""
+    total, reach = 0.0, -math.inf
+    for b, e in sorted(intervals):
+        if e > reach:
+            total += e - max(b, reach)
+            reach = e
+    return total
+
+
+def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str], progress=None, *, pipeline: bool = True,
+              times: SweepTimes | None = None) -> None:
+    """Press the chunks `todo` over `devices` (each chunk written when it is done).
+
+    pipeline: a host thread per device (a device named twice gets two), each with its own model and
+    two lanes (Lane): chunk i + 1 is built and launched while chunk i presses, results read back
+    into pinned memory, part files written on a thread of their own; chunks are handed out in
+    order to whichever device is free. Without: one thread, chunks interleaved over the devices,
+    each built, pressed, read and written in turn. Both give the same bits for the same plan.
+    times: where the wall time goes (SweepTimes), filled in.
+    """
+    times = times if times is not None else SweepTimes()
     advance = None if progress is None else progress.advance
+    with times.phase("set-up"):
+        models = [plan.model(d) for d in devices]
+        bound = sweep_critical_dt(plan, models[0])
     todo = list(todo)
-    if len(set(devices)) > 1 and all(d.startswith("cuda") for d in devices):
-        _run_threads(plan, parts, [todo[k :: len(batches)] for k in range(len(batches))], batches, advance)
+    if not pipeline:
+        batches = [RingBatches(plan, m) for m in models]
+        while todo:
+            running = [(todo.pop(0), b) for b in batches if todo]
+            with times.phase("launch"):
+                running = [(i, press_chunk(b, plan, *plan.chunks[i], on_launch=advance)) for i, b in running]
+            for i, finish in running:
+                with times.phase("read-back"):
+                    columns = finish()
+                with times.phase("writing"):
+                    parts.write(i, columns)
         return
-    while todo:
-        running = []
-        for batch in batches:
-            if todo:
-                i = todo.pop(0)
-                running.append((i, press_chunk(batch, plan, *plan.chunks[i], on_launch=advance)))
-        for i, finish in running:
-            parts.write(i, finish())
-
-
-def _run_threads(plan, parts, queues, batches, advance):
-    from concurrent.futures import ThreadPoolExecutor
-
+    writer, lock, queue = Writer(parts, times), threading.Lock(), iter(todo)
     stop = threading.Event()
 
-    def work(batch, queue):
-        for i in queue:
-            if stop.is_set():
-                return
-            parts.write(i, press_chunk(batch, plan, *plan.chunks[i], on_launch=advance)())
+    def take():
+        with lock:
+            return None if stop.is_set() else next(queue, None)
 
-    with ThreadPoolExecutor(len(batches)) as pool:
-        futures = [pool.submit(work, b, q) for b, q in zip(batches, queues)]
-        try:
-            for f in futures:
-                f.result()
-        except BaseException:  # an interrupt: the other threads end after their current chunk
-            stop.set()
-            raise
+    def work(lanes):
+        run_device(plan, [RingBatches(plan, m, bound) for m in lanes], take, writer.put, times, advance)
+
+    cuda = [m for m in models if m.device.is_cuda]
+    if len(cuda) == len(models) and len({m.device.alias for m in cuda}) == len(cuda):
+        groups = [[m, m] for m in models]  # a thread a GPU, two lanes on its model
+    elif all(m.device.is_cpu for m in models):  # synchronous launches: one thread, a lane a model
+        groups = [models]
+    else:  # a GPU named twice: one thread, two lanes or more over the models
+        groups = [[models[k % len(models)] for k in range(max(2, len(models)))]]
+    _run_threads(work, groups, stop, writer)
 
 
-def _ray_chunk(plan: SweepPlan, begin: int, end: int, gpu: bool) -> dict:
-    # a Ray task: one chunk on this worker's GPU (Ray sets CUDA_VISIBLE_DEVICES) or its CPU
-    from ..warp_init import init_warp
+def _run_threads(work, groups, stop, writer):
+    from concurrent.futures import ThreadPoolExecutor
 
-    init_warp()
-    batch = plan.batch("cuda:0" if gpu else "cpu")
-    return press_chunk(batch, plan, begin, end)()
+    try:
+        if len(groups) == 1:
+            work(groups[0])
+        else:
+            with ThreadPoolExecutor(len(groups)) as pool:
+                futures = [pool.submit(work, g) for g in groups]
+                try:
+                    for f in futures:
+                        f.result()
+                except BaseException:  # an interrupt or an error: the other threads end after their current chunk
+                    stop.set()
+                    raise
+    except BaseException:
+        stop.set()
+        writer.close(wait=False)
+        raise
+    writer.close()
+
+
+def sweep_critical_dt(plan: SweepPlan, model) -> float | None:
+    """The whole mesh's critical step [s] (a bound of every region's, BatchPalpation.critical_dt_bound)
+    for an explicit plan, computed once a sweep; None for an implicit one."""
+    return model.critical_dt() if plan.integrator == "explicit" else None
+
+
+class SweepDevice:
+    """One device's share of a sweep in a Ray actor (one GPU, where Ray sets CUDA_VISIBLE_DEVICES, or
+    one CPU): the plan's model made once there, a chunk a call, pressed through a Lane as the local
+    pipeline presses it (the same bits)."""
+
+    def __init__(self, plan: SweepPlan, gpu: bool, critical_dt_bound=None):
+        from ..warp_init import init_warp
+
+        init_warp()
+        self.plan, self.times = plan, SweepTimes()
+        self.lane = Lane(RingBatches(plan, plan.model("cuda:0" if gpu else "cpu"), critical_dt_bound), self.times)
+        self.origin = self.lane.clock_origin()
+
+    def press(self, i: int) -> dict:
+        """The checked columns of chunk `i`."""
+        self.lane.start(self.plan, i, None, self.origin)
+        return self.lane.finish(self.plan, self.origin)
 
 
 def run_ray(plan: SweepPlan, parts: Parts, todo: list[int], gpu: bool, address=None, progress=None) -> None:
-    """Press the chunks `todo` as Ray tasks of one GPU each (or one CPU); written as they come back."""
+    """Press the chunks `todo` on Ray actors of one GPU each (or one CPU), one per GPU (CPU) of the
+    cluster, two chunks queued on each so the next starts as one returns; written as they come back."""
     try:
         import ray
     except ImportError as exc:
         raise InputError("--ray needs Ray: pip install 'almsdm_warp[ray]'") from exc
     if not ray.is_initialized():
         ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
-    task = ray.remote(num_gpus=1, num_cpus=1)(_ray_chunk) if gpu else ray.remote(num_cpus=1)(_ray_chunk)
+    device = ray.remote(num_gpus=1, num_cpus=1)(SweepDevice) if gpu else ray.remote(num_cpus=1)(SweepDevice)
     plan_ref = ray.put(plan)
-    pending = {task.remote(plan_ref, *plan.chunks[i], gpu): i for i in todo}
+    bound = sweep_critical_dt(plan, plan.model("cpu"))
+    count = max(1, min(len(todo), int(ray.cluster_resources().get("GPU" if gpu else "CPU", 1))))
+    actors = [device.remote(plan_ref, gpu, bound) for _ in range(count)]
+    queue, pending = list(todo), {}
+
+    def submit(a: int) -> None:
+        if queue:
+            i = queue.pop(0)
+            pending[actors[a].press.remote(i)] = (i, a)
+
+    for a in range(count):
+        submit(a)
+        submit(a)
     while pending:
         done, _ = ray.wait(list(pending), num_returns=1)
-        i = pending.pop(done[0])
+        i, a = pending.pop(done[0])
         parts.write(i, ray.get(done[0]))
+        submit(a)
         if progress is not None:
             b, e = plan.chunks[i]
             progress.advance((e - b) * press_steps(plan))

@@ -39,8 +39,10 @@ def add_parser(sub) -> None:
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=None, metavar="MS", help="frame [ms] (default 1); the explicit integrator takes it in substeps under 0.9 x the critical step")
     p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
-    p.add_argument("--chunk", type=count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU, all points split over the GPUs)")
-    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks as Ray tasks (one GPU each with a CUDA --device, else one CPU); ADDRESS of a cluster, or a local one")
+    p.add_argument("--chunk", type=count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU; on GPUs, four chunks a device or more, 16384..131072 points each)")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks on Ray actors (one GPU each with a CUDA --device, else one CPU; one a GPU of the cluster); ADDRESS of a cluster, or a local one")
+    p.add_argument("--pipeline", action=argparse.BooleanOptionalAction, default=True, help="build and launch the next chunk while one presses, read back and write on the side (default); --no-pipeline: one chunk after another (the same numbers)")
+    p.add_argument("--profile", action="store_true", help="print where the wall time went: sampling, region builds, planning, press kernels, read-back, checks, writing, gather")
     p.add_argument("--png", default=None, metavar="PATH", help="also draw the organ coloured by stiffness (matplotlib)")
     p.add_argument("--max-region-steps", type=number_arg("> 0"), default=LIMITS["region_steps"], metavar="N", help=f"refuse a sweep that would take more region-steps (points x frames x substeps) than N (default {LIMITS['region_steps']:g})")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
@@ -65,7 +67,7 @@ def _devices(text: str) -> list[str]:
 
 
 def cmd_sweep(args) -> int:
-    from ..batch.sweep import run_local, run_ray
+    from ..batch.sweep import SweepTimes, run_local, run_ray
     from ..protocol.palpation import SimulationDiverged
     from ..export.writers import check_output, write_output
     from ..progress import Progress
@@ -78,7 +80,8 @@ def cmd_sweep(args) -> int:
         check_output(args.png, "image", "--png")
     quiet_warp()
     devices = _devices(args.device)
-    plan, scene, rings_text = _plan(args, devices)
+    times, t_start = SweepTimes(), time.perf_counter()
+    plan, scene, rings_text = _plan(args, devices, times)
     parts, todo, left = _resume(out, plan)
     from ..batch.sweep import press_steps
 
@@ -89,7 +92,7 @@ def cmd_sweep(args) -> int:
             if args.ray:
                 run_ray(plan, parts, todo, devices[0] != "cpu", None if args.ray == "local" else args.ray, bar)
             else:
-                run_local(plan, parts, todo, devices, bar)
+                run_local(plan, parts, todo, devices, bar, pipeline=args.pipeline, times=times)
     except KeyboardInterrupt:
         print(f"almsdm: interrupted; the chunks done are in {parts.dir}: run the same command again to resume", file=sys.stderr)
         return 130
@@ -97,10 +100,14 @@ def cmd_sweep(args) -> int:
         parts.remove()
         raise InputError(str(exc)) from exc
     elapsed = time.perf_counter() - t0
-    columns = parts.gather()
-    write_output(out, columns, "table", "--out")
-    parts.remove()
+    with times.phase("gather"):
+        columns = parts.gather()
+    with times.phase("output"):
+        write_output(out, columns, "table", "--out")
+        parts.remove()
     _report(columns, left, steps, elapsed)
+    if args.profile:
+        print(f"where the sweep's wall time went (from sampling to the written table):\n{times.table(time.perf_counter() - t_start)}")
     print(f"wrote {out}")
     if args.png:
         from ..export.sweep_png import plot_sweep
@@ -110,10 +117,10 @@ def cmd_sweep(args) -> int:
     return 0
 
 
-def _plan(args, devices):
+def _plan(args, devices, times):
     """The scene, its mesh and the sweep's plan (points, chunks, rings, step); says what will be pressed.
     Returns (plan, scene, the rings in words)."""
-    from ..batch.sweep import SweepPlan, check_sphere_travel, pressable_points
+    from ..batch.sweep import SweepPlan, check_sphere_travel, default_chunk, pressable_points
     from ..batch.sweep_auto import rings_summary
     from ..scene.loader import resolve_scene_or_mesh
 
@@ -137,13 +144,15 @@ def _plan(args, devices):
     check_limit(args.points, "points", "--points")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
-    points, vertices = pressable_points(mesh, args.points, scene.fixed_below)
+    with times.phase("sampling"):
+        points, vertices = pressable_points(mesh, args.points, scene.fixed_below)
     cuda = devices[0] != "cpu"
-    chunk = args.chunk or (64 if not cuda else min(-(-len(vertices) // len(devices)), 16384))
+    chunk = args.chunk or default_chunk(len(vertices), devices)
     plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, dt, depth, ramp, hold, settle, points,
                      vertices, chunk, args.integrator, tol, radius, scene.fixed_below)
     print(mesh.summary())
-    substeps = _substeps(plan)
+    with times.phase("set-up"):
+        substeps = _substeps(plan)
     cost = check_region_steps(len(vertices), frames, substeps, args.max_region_steps)
     if tol is not None:
         plan.rings = _size(plan, scene, scales, tol, args.progress)
