@@ -27,6 +27,20 @@ from .probe_contact import sphere_project
 wp.set_module_options({"enable_backward": False})
 
 
+@wp.func
+def held_target(
+    probe_target: wp.array(dtype=wp.vec3), probe_target_start: wp.array(dtype=wp.vec3), alpha: float
+):
+    # a first-order hold over a frame's substeps: substep s of n drives the probe to the fraction
+    # alpha = (s + 1) / n of the way from the frame's start target to its target; alpha = 1 reads
+    # the target as is (no arithmetic: one step a frame keeps its bits)
+    target = probe_target[0]
+    if alpha < 1.0:
+        start = probe_target_start[0]
+        target = start + alpha * (target - start)
+    return target
+
+
 @wp.kernel
 def integrate_region_explicit(
     free_vertex: wp.array(dtype=wp.int32),
@@ -43,6 +57,8 @@ def integrate_region_explicit(
     probe_vertex: wp.array(dtype=wp.int32),
     probe_mode: wp.array(dtype=wp.int32),
     probe_target: wp.array(dtype=wp.vec3),
+    probe_target_start: wp.array(dtype=wp.vec3),
+    alpha: float,
     probe_force: wp.array(dtype=wp.vec3),
     dt: float,
     q_in: wp.array(dtype=wp.vec3),
@@ -67,7 +83,7 @@ def integrate_region_explicit(
             probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
         if v == pv and mode == 1:
             # displacement control: the vertex is where the probe puts it
-            target = probe_target[0]
+            target = held_target(probe_target, probe_target_start, alpha)
             q_out[v] = target
             qd_out[v] = (target - x) / dt
         else:
@@ -86,6 +102,8 @@ def constrain_sphere_explicit(
     particle_mass: wp.array(dtype=wp.float32),
     probe: ProbeArrays,
     sphere: ProbeSphereArrays,
+    probe_target_start: wp.array(dtype=wp.vec3),
+    alpha: float,
     dt: float,
     q_in: wp.array(dtype=wp.vec3),
     qd_in: wp.array(dtype=wp.vec3),
@@ -96,7 +114,7 @@ def constrain_sphere_explicit(
     # the contact reactions, in local order
     if probe.probe_mode[0] != 3:
         return
-    centre = probe.probe_target[0]
+    centre = held_target(probe.probe_target, probe_target_start, alpha)
     radius = sphere.probe_radius[0]
     total = wp.vec3(0.0)
     for i in range(free_count):
@@ -114,9 +132,32 @@ def constrain_sphere_explicit(
     probe.probe_reaction[0] = total
 
 
+@wp.kernel
+def keep_peak_reaction(probe_reaction: wp.array(dtype=wp.vec3), first: int, probe_reaction_peak: wp.array(dtype=wp.vec3)):
+    # the step's reaction if it is the frame's first or the largest so far (magnitudes in float64,
+    # as the host and the batch compare them)
+    f = probe_reaction[0]
+    p = probe_reaction_peak[0]
+    fx = wp.float64(f[0])
+    fy = wp.float64(f[1])
+    fz = wp.float64(f[2])
+    px = wp.float64(p[0])
+    py = wp.float64(p[1])
+    pz = wp.float64(p[2])
+    if first != 0 or fx * fx + fy * fy + fz * fz > px * px + py * py + pz * pz:
+        probe_reaction_peak[0] = f
+
+
+def keep_peak_force(control, first: bool) -> None:
+    """control.probe_reaction_peak: the largest reaction over a frame's steps (`first`: its first step)."""
+    wp.launch(keep_peak_reaction, dim=1, inputs=[control.probe_reaction, int(first)], outputs=[control.probe_reaction_peak],
+              device=control.device)
+
+
 def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, state_out, control, dt):
     """Advance the free vertices by one semi-implicit Euler step of `dt` [s]; a Control with a sphere
-    adds the sphere's contact (a second, one-thread launch)."""
+    adds the sphere's contact (a second, one-thread launch). The probe's target (the sphere's centre)
+    is control.probe_alpha of the way from control.probe_target_start to control.probe_target."""
     dm = model.dmesh
     threads = 1 if model.device.is_cpu else free_count
     wp.launch(
@@ -125,7 +166,8 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
         inputs=[
             free_vertex, free_count, threads, dm.adj_offsets, dm.adj_vertex, model.adj_spring, model.particle_q_rest,
             model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale,
-            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force, dt,
+            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_target_start,
+            control.probe_alpha, control.probe_force, dt,
             state_in.particle_q, state_in.particle_qd,
         ],
         outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction],
@@ -136,7 +178,8 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
             constrain_sphere_explicit,
             dim=1,
             inputs=[
-                free_vertex, free_count, model.particle_mass, control.arrays, control.sphere_arrays, dt,
+                free_vertex, free_count, model.particle_mass, control.arrays, control.sphere_arrays,
+                control.probe_target_start, control.probe_alpha, dt,
                 state_in.particle_q, state_in.particle_qd,
             ],
             outputs=[state_out.particle_q, state_out.particle_qd],
