@@ -28,16 +28,15 @@ wp.set_module_options({"enable_backward": False})
 
 
 @wp.func
-def held_target(
-    probe_target: wp.array(dtype=wp.vec3), probe_target_start: wp.array(dtype=wp.vec3), alpha: float
-):
+def held_target(probe_target: wp.array(dtype=wp.vec3), probe_move: wp.array(dtype=wp.vec3d), alpha: wp.float64):
     # a first-order hold over a frame's substeps: substep s of n drives the probe to the fraction
-    # alpha = (s + 1) / n of the way from the frame's start target to its target; alpha = 1 reads
-    # the target as is (no arithmetic: one step a frame keeps its bits)
+    # alpha = (s + 1) / n of the frame's move (probe_move: its start and its target in float64, so
+    # that the point rounds to the float32 a host computing it in float64 would get); alpha = 1
+    # reads the target as is (no arithmetic: one step a frame keeps its bits)
     target = probe_target[0]
-    if alpha < 1.0:
-        start = probe_target_start[0]
-        target = start + alpha * (target - start)
+    if alpha < wp.float64(1.0):
+        start = probe_move[0]
+        target = wp.vec3(start + alpha * (probe_move[1] - start))
     return target
 
 
@@ -57,8 +56,8 @@ def integrate_region_explicit(
     probe_vertex: wp.array(dtype=wp.int32),
     probe_mode: wp.array(dtype=wp.int32),
     probe_target: wp.array(dtype=wp.vec3),
-    probe_target_start: wp.array(dtype=wp.vec3),
-    alpha: float,
+    probe_move: wp.array(dtype=wp.vec3d),
+    alpha: wp.float64,
     probe_force: wp.array(dtype=wp.vec3),
     dt: float,
     q_in: wp.array(dtype=wp.vec3),
@@ -83,7 +82,7 @@ def integrate_region_explicit(
             probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
         if v == pv and mode == 1:
             # displacement control: the vertex is where the probe puts it
-            target = held_target(probe_target, probe_target_start, alpha)
+            target = held_target(probe_target, probe_move, alpha)
             q_out[v] = target
             qd_out[v] = (target - x) / dt
         else:
@@ -102,8 +101,8 @@ def constrain_sphere_explicit(
     particle_mass: wp.array(dtype=wp.float32),
     probe: ProbeArrays,
     sphere: ProbeSphereArrays,
-    probe_target_start: wp.array(dtype=wp.vec3),
-    alpha: float,
+    probe_move: wp.array(dtype=wp.vec3d),
+    alpha: wp.float64,
     dt: float,
     q_in: wp.array(dtype=wp.vec3),
     qd_in: wp.array(dtype=wp.vec3),
@@ -114,7 +113,7 @@ def constrain_sphere_explicit(
     # the contact reactions, in local order
     if probe.probe_mode[0] != 3:
         return
-    centre = held_target(probe.probe_target, probe_target_start, alpha)
+    centre = held_target(probe.probe_target, probe_move, alpha)
     radius = sphere.probe_radius[0]
     total = wp.vec3(0.0)
     for i in range(free_count):
@@ -157,7 +156,7 @@ def keep_peak_force(control, first: bool) -> None:
 def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, state_out, control, dt):
     """Advance the free vertices by one semi-implicit Euler step of `dt` [s]; a Control with a sphere
     adds the sphere's contact (a second, one-thread launch). The probe's target (the sphere's centre)
-    is control.probe_alpha of the way from control.probe_target_start to control.probe_target."""
+    is control.probe_alpha of the way through the frame's move, control.probe_move."""
     dm = model.dmesh
     threads = 1 if model.device.is_cpu else free_count
     wp.launch(
@@ -166,7 +165,7 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
         inputs=[
             free_vertex, free_count, threads, dm.adj_offsets, dm.adj_vertex, model.adj_spring, model.particle_q_rest,
             model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale,
-            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_target_start,
+            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_move,
             control.probe_alpha, control.probe_force, dt,
             state_in.particle_q, state_in.particle_qd,
         ],
@@ -179,7 +178,7 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
             dim=1,
             inputs=[
                 free_vertex, free_count, model.particle_mass, control.arrays, control.sphere_arrays,
-                control.probe_target_start, control.probe_alpha, dt,
+                control.probe_move, control.probe_alpha, dt,
                 state_in.particle_q, state_in.particle_qd,
             ],
             outputs=[state_out.particle_q, state_out.particle_qd],

@@ -211,20 +211,21 @@ class Palpation:
             self._force = self.control.probe_force.numpy()
             self._mode = self.control.probe_mode.numpy()
             self._reaction = self.control.probe_reaction.numpy()
-            self._target_start = self.control.probe_target_start.numpy()
+            self._move = self.control.probe_move.numpy()
             self._peak = self.control.probe_reaction_peak.numpy()
         else:
             # pinned host buffers, copied inside the captured graph; numpy views of them for Python
             self._pinned = {
                 name: wp.zeros(1, dtype=dtype, device="cpu", pinned=True)
                 for name, dtype in (("target", wp.vec3), ("force", wp.vec3), ("mode", wp.int32), ("reaction", wp.vec3),
-                                    ("target_start", wp.vec3), ("peak", wp.vec3))
+                                    ("peak", wp.vec3))
             }
+            self._pinned["move"] = wp.zeros(2, dtype=wp.vec3d, device="cpu", pinned=True)
             self._target = self._pinned["target"].numpy()
             self._force = self._pinned["force"].numpy()
             self._mode = self._pinned["mode"].numpy()
             self._reaction = self._pinned["reaction"].numpy()
-            self._target_start = self._pinned["target_start"].numpy()
+            self._move = self._pinned["move"].numpy()
             self._peak = self._pinned["peak"].numpy()
         self._force_view = self._reaction[0]  # a view of the reaction buffer: no copy per step
         self._force_words = memoryview(self._reaction).cast("B").cast("f")  # the reaction as Python floats
@@ -346,7 +347,7 @@ class Palpation:
             wp.copy(control.probe_force, self._pinned["force"])
             wp.copy(control.probe_mode, self._pinned["mode"])
             if n > 1:
-                wp.copy(control.probe_target_start, self._pinned["target_start"])
+                wp.copy(control.probe_move, self._pinned["move"])
         h = self.dt / n
         for s in range(n):  # a -> b, b -> a, ...: the frame ends in b for an odd count
             # a first-order hold: substep s drives the probe (s + 1) / n of the way through the frame's move
@@ -368,11 +369,11 @@ class Palpation:
         self._graphs = replays
 
     def _holding(self, replay):
-        start, target = self._target_start, self._target
+        move = self._move
 
         def frame():
             replay()
-            start[0] = target[0]
+            move[0] = move[1]
 
         return frame
 
@@ -411,7 +412,7 @@ class Palpation:
             self._capture()
         if not self._cpu:
             wp.synchronize_device(self.device)
-        self._target_start[0] = self._target[0]
+        self._move[0] = self._move[1]
         w = self._force_words
         if not -self._bound < w[0] + w[1] + w[2] < self._bound:
             self.diverged()
@@ -424,13 +425,14 @@ class Palpation:
         With substeps, the next frame moves the probe from its start to `target` in even steps (a
         first-order hold). start [m]: that start; default the last frame's target, or where the mode
         changes, `target` itself (no move from a stale target)."""
-        if mode != self._mode[0] and target is not None:
-            self._target_start[0] = target
-        self._mode[0] = mode
         if target is not None:
+            self._move[1] = target
+            if mode != self._mode[0]:
+                self._move[0] = target
             self._target[0] = target
+        self._mode[0] = mode
         if start is not None:
-            self._target_start[0] = start
+            self._move[0] = start
 
     def set_probe_force(self, force) -> None:
         """Force-controlled probe: push the contact vertex with `force` [N] (a 3-vector)."""

@@ -233,11 +233,12 @@ class Control:
         """PROBE_OFF, PROBE_DISPLACEMENT or PROBE_FORCE, shape [1], int32."""
         self.probe_target = wp.zeros(1, dtype=wp.vec3, device=device)
         """Target position of the held vertex [m] (displacement mode), shape [1], vec3."""
-        self.probe_target_start = wp.zeros(1, dtype=wp.vec3, device=device)
-        """The frame's start target [m]: where the probe was at the end of the last frame, shape [1], vec3."""
+        self.probe_move = wp.zeros(2, dtype=wp.vec3d, device=device)
+        """The frame's move [m] in float64: [0] where it starts (the last frame's target), [1] its
+        target (probe_target before rounding to float32), shape [2], vec3d."""
         self.probe_alpha = 1.0
-        """Host, read at each launch: a step drives the probe to this fraction of the way from
-        probe_target_start to probe_target (1: the target itself; (s + 1) / n in substep s of n)."""
+        """Host, read at each launch: a step drives the probe to this fraction of probe_move (1: to
+        probe_target itself; (s + 1) / n in substep s of n)."""
         self.probe_reaction_peak = wp.zeros(1, dtype=wp.vec3, device=device)
         """Output: the largest probe_reaction over a frame's substeps [N], shape [1], vec3 (written by
         frames of more than one step)."""
