@@ -27,19 +27,6 @@ from .probe_contact import sphere_project
 wp.set_module_options({"enable_backward": False})
 
 
-@wp.func
-def held_target(probe_target: wp.array(dtype=wp.vec3), probe_move: wp.array(dtype=wp.vec3d), alpha: wp.float64):
-    # a first-order hold over a frame's substeps: substep s of n drives the probe to the fraction
-    # alpha = (s + 1) / n of the frame's move (probe_move: its start and its target in float64, so
-    # that the point rounds to the float32 a host computing it in float64 would get); alpha = 1
-    # reads the target as is (no arithmetic: one step a frame keeps its bits)
-    target = probe_target[0]
-    if alpha < wp.float64(1.0):
-        start = probe_move[0]
-        target = wp.vec3(start + alpha * (probe_move[1] - start))
-    return target
-
-
 @wp.kernel
 def integrate_region_explicit(
     free_vertex: wp.array(dtype=wp.int32),
@@ -56,8 +43,6 @@ def integrate_region_explicit(
     probe_vertex: wp.array(dtype=wp.int32),
     probe_mode: wp.array(dtype=wp.int32),
     probe_target: wp.array(dtype=wp.vec3),
-    probe_move: wp.array(dtype=wp.vec3d),
-    alpha: wp.float64,
     probe_force: wp.array(dtype=wp.vec3),
     dt: float,
     q_in: wp.array(dtype=wp.vec3),
@@ -82,7 +67,7 @@ def integrate_region_explicit(
             probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
         if v == pv and mode == 1:
             # displacement control: the vertex is where the probe puts it
-            target = held_target(probe_target, probe_move, alpha)
+            target = probe_target[0]
             q_out[v] = target
             qd_out[v] = (target - x) / dt
         else:
@@ -101,8 +86,6 @@ def constrain_sphere_explicit(
     particle_mass: wp.array(dtype=wp.float32),
     probe: ProbeArrays,
     sphere: ProbeSphereArrays,
-    probe_move: wp.array(dtype=wp.vec3d),
-    alpha: wp.float64,
     dt: float,
     q_in: wp.array(dtype=wp.vec3),
     qd_in: wp.array(dtype=wp.vec3),
@@ -113,7 +96,7 @@ def constrain_sphere_explicit(
     # the contact reactions, in local order
     if probe.probe_mode[0] != 3:
         return
-    centre = held_target(probe.probe_target, probe_move, alpha)
+    centre = probe.probe_target[0]
     radius = sphere.probe_radius[0]
     total = wp.vec3(0.0)
     for i in range(free_count):
@@ -132,31 +115,50 @@ def constrain_sphere_explicit(
 
 
 @wp.kernel
-def keep_peak_reaction(probe_reaction: wp.array(dtype=wp.vec3), first: int, probe_reaction_peak: wp.array(dtype=wp.vec3)):
-    # the step's reaction if it is the frame's first or the largest so far (magnitudes in float64,
-    # as the host and the batch compare them)
-    f = probe_reaction[0]
-    p = probe_reaction_peak[0]
-    fx = wp.float64(f[0])
-    fy = wp.float64(f[1])
-    fz = wp.float64(f[2])
-    px = wp.float64(p[0])
-    py = wp.float64(p[1])
-    pz = wp.float64(p[2])
-    if first != 0 or fx * fx + fy * fy + fz * fz > px * px + py * py + pz * pz:
-        probe_reaction_peak[0] = f
+def hold_probe_target(
+    probe_move: wp.array(dtype=wp.vec3d),
+    alpha: wp.float64,
+    probe_reaction: wp.array(dtype=wp.vec3),
+    fold: int,
+    first: int,
+    probe_target: wp.array(dtype=wp.vec3),
+    probe_reaction_peak: wp.array(dtype=wp.vec3),
+):
+    # a first-order hold over a frame's substeps: substep s of n drives the probe to the fraction
+    # alpha = (s + 1) / n of the frame's move (its start and target in float64, so the point rounds
+    # to the float32 a host computing it in float64 gets; alpha = 1 rounds the target itself)
+    start = probe_move[0]
+    probe_target[0] = wp.vec3(start + alpha * (probe_move[1] - start))
+    if fold != 0:
+        # the last substep's reaction if it is the frame's first or the largest so far (magnitudes
+        # in float64, as the host and the batch compare them)
+        f = probe_reaction[0]
+        p = probe_reaction_peak[0]
+        fx = wp.float64(f[0])
+        fy = wp.float64(f[1])
+        fz = wp.float64(f[2])
+        px = wp.float64(p[0])
+        py = wp.float64(p[1])
+        pz = wp.float64(p[2])
+        if first != 0 or fx * fx + fy * fy + fz * fz > px * px + py * py + pz * pz:
+            probe_reaction_peak[0] = f
 
 
-def keep_peak_force(control, first: bool) -> None:
-    """control.probe_reaction_peak: the largest reaction over a frame's steps (`first`: its first step)."""
-    wp.launch(keep_peak_reaction, dim=1, inputs=[control.probe_reaction, int(first)], outputs=[control.probe_reaction_peak],
-              device=control.device)
+def hold_probe(control, s: int, n: int) -> None:
+    """Before substep `s` of `n` (s = n: after the last): the probe's target (the sphere's centre)
+    (s + 1) / n of the way through the frame's move, control.probe_move; the reaction of substep
+    s - 1 kept in control.probe_reaction_peak if it is the frame's largest. Only frames of n > 1
+    substeps make it: one step a frame reads probe_target as the host wrote it."""
+    wp.launch(
+        hold_probe_target, dim=1,
+        inputs=[control.probe_move, min((s + 1) / n, 1.0), control.probe_reaction, int(s > 0), int(s == 1)],
+        outputs=[control.probe_target, control.probe_reaction_peak], device=control.device,
+    )
 
 
 def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, state_out, control, dt):
     """Advance the free vertices by one semi-implicit Euler step of `dt` [s]; a Control with a sphere
-    adds the sphere's contact (a second, one-thread launch). The probe's target (the sphere's centre)
-    is control.probe_alpha of the way through the frame's move, control.probe_move."""
+    adds the sphere's contact (a second, one-thread launch)."""
     dm = model.dmesh
     threads = 1 if model.device.is_cpu else free_count
     wp.launch(
@@ -165,8 +167,7 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
         inputs=[
             free_vertex, free_count, threads, dm.adj_offsets, dm.adj_vertex, model.adj_spring, model.particle_q_rest,
             model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale,
-            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_move,
-            control.probe_alpha, control.probe_force, dt,
+            control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force, dt,
             state_in.particle_q, state_in.particle_qd,
         ],
         outputs=[state_out.particle_q, state_out.particle_qd, control.probe_reaction],
@@ -177,8 +178,7 @@ def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, s
             constrain_sphere_explicit,
             dim=1,
             inputs=[
-                free_vertex, free_count, model.particle_mass, control.arrays, control.sphere_arrays,
-                control.probe_move, control.probe_alpha, dt,
+                free_vertex, free_count, model.particle_mass, control.arrays, control.sphere_arrays, dt,
                 state_in.particle_q, state_in.particle_qd,
             ],
             outputs=[state_out.particle_q, state_out.particle_qd],

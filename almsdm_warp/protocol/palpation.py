@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from ..kernels.integrate_explicit import keep_peak_force
+from ..kernels.integrate_explicit import hold_probe
 from ..kernels.region_state import reset_vertices_left_behind
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE, Model
 from ..region.region import Region
@@ -350,13 +350,12 @@ class Palpation:
                 wp.copy(control.probe_move, self._pinned["move"])
         h = self.dt / n
         for s in range(n):  # a -> b, b -> a, ...: the frame ends in b for an odd count
-            # a first-order hold: substep s drives the probe (s + 1) / n of the way through the frame's move
-            control.probe_alpha = (s + 1) / n
+            if n > 1:  # a first-order hold: substep s drives the probe (s + 1) / n of the way through the frame's move
+                hold_probe(control, s, n)
             self.solver.step(a, b, control, h)
-            if n > 1:
-                keep_peak_force(control, first=(s == 0))
             a, b = b, a
-        control.probe_alpha = 1.0
+        if n > 1:  # the last substep's reaction into the frame's peak
+            hold_probe(control, n, n)
         if not self._cpu:
             wp.copy(self._pinned["reaction"], control.probe_reaction)
             if n > 1:
