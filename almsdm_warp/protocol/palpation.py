@@ -496,6 +496,9 @@ class Palpation:
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Displacement-controlled press at the touched vertex: ramp to `depth` [m] along the inward
         normal over `ramp` [s], hold `hold` [s], release and settle `settle` [s].
+        With n substeps a frame the probe moves in n even steps (as the batch's press), and the peak
+        force is the largest over every substep (the continuous press's peak, which frame ends can
+        miss); `force` holds the frame ends.
 
         record: called as ``record(k, total)`` after step k (1..total) of the press when k is a
         multiple of `record_every`, and after the last step; it reads the state itself (a USD
