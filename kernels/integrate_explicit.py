@@ -114,6 +114,48 @@ def constrain_sphere_explicit(
     probe.probe_reaction[0] = total
 
 
+@wp.kernel
+def hold_probe_target(
+    probe_move: wp.array(dtype=wp.vec3d),
+    alpha: wp.float64,
+    probe_reaction: wp.array(dtype=wp.vec3),
+    fold: int,
+    first: int,
+    probe_target: wp.array(dtype=wp.vec3),
+    probe_reaction_peak: wp.array(dtype=wp.vec3),
+):
+    # a first-order hold over a frame's substeps: substep s of n drives the probe to the fraction
+    # alpha = (s + 1) / n of the frame's move (its start and target in float64, so the point rounds
+    # to the float32 a host computing it in float64 gets; alpha = 1 rounds the target itself)
+    start = probe_move[0]
+    probe_target[0] = wp.vec3(start + alpha * (probe_move[1] - start))
+    if fold != 0:
+        # the last substep's reaction if it is the frame's first or the largest so far (magnitudes
+        # in float64, as the host and the batch compare them)
+        f = probe_reaction[0]
+        p = probe_reaction_peak[0]
+        fx = wp.float64(f[0])
+        fy = wp.float64(f[1])
+        fz = wp.float64(f[2])
+        px = wp.float64(p[0])
+        py = wp.float64(p[1])
+        pz = wp.float64(p[2])
+        if first != 0 or fx * fx + fy * fy + fz * fz > px * px + py * py + pz * pz:
+            probe_reaction_peak[0] = f
+
+
+def hold_probe(control, s: int, n: int) -> None:
+    """Before substep `s` of `n` (s = n: after the last): the probe's target (the sphere's centre)
+    (s + 1) / n of the way through the frame's move, control.probe_move; the reaction of substep
+    s - 1 kept in control.probe_reaction_peak if it is the frame's largest. Only frames of n > 1
+    substeps make it: one step a frame reads probe_target as the host wrote it."""
+    wp.launch(
+        hold_probe_target, dim=1,
+        inputs=[control.probe_move, min((s + 1) / n, 1.0), control.probe_reaction, int(s > 0), int(s == 1)],
+        outputs=[control.probe_target, control.probe_reaction_peak], device=control.device,
+    )
+
+
 def integrate_explicit(model, free_vertex, free_count, anchor_scale, state_in, state_out, control, dt):
     """Advance the free vertices by one semi-implicit Euler step of `dt` [s]; a Control with a sphere
     adds the sphere's contact (a second, one-thread launch)."""

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from ..kernels.integrate_explicit import hold_probe
 from ..kernels.region_state import reset_vertices_left_behind
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE, Model
 from ..region.region import Region
@@ -109,9 +110,15 @@ class PressResult:
     """|feedback force| [N] per step (0 after release), shape [steps]."""
     displacement: np.ndarray = field(repr=False)
     """Distance of the contact vertex from its rest position [m] per step, shape [steps]."""
+    step_peak: float | None = None
+    """Largest |feedback force| [N] over every integrator step while pressed (a frame's substeps
+    included); None: the largest of `force`."""
 
     @property
     def peak_force_N(self) -> float:
+        """The peak force [N]: over every integrator step, as the batch's (BatchResult.peak_force)."""
+        if self.step_peak is not None:
+            return float(self.step_peak)
         return float(self.force.max(initial=0.0))
 
     @property
@@ -204,16 +211,22 @@ class Palpation:
             self._force = self.control.probe_force.numpy()
             self._mode = self.control.probe_mode.numpy()
             self._reaction = self.control.probe_reaction.numpy()
+            self._move = self.control.probe_move.numpy()
+            self._peak = self.control.probe_reaction_peak.numpy()
         else:
             # pinned host buffers, copied inside the captured graph; numpy views of them for Python
             self._pinned = {
                 name: wp.zeros(1, dtype=dtype, device="cpu", pinned=True)
-                for name, dtype in (("target", wp.vec3), ("force", wp.vec3), ("mode", wp.int32), ("reaction", wp.vec3))
+                for name, dtype in (("target", wp.vec3), ("force", wp.vec3), ("mode", wp.int32), ("reaction", wp.vec3),
+                                    ("peak", wp.vec3))
             }
+            self._pinned["move"] = wp.zeros(2, dtype=wp.vec3d, device="cpu", pinned=True)
             self._target = self._pinned["target"].numpy()
             self._force = self._pinned["force"].numpy()
             self._mode = self._pinned["mode"].numpy()
             self._reaction = self._pinned["reaction"].numpy()
+            self._move = self._pinned["move"].numpy()
+            self._peak = self._pinned["peak"].numpy()
         self._force_view = self._reaction[0]  # a view of the reaction buffer: no copy per step
         self._force_words = memoryview(self._reaction).cast("B").cast("f")  # the reaction as Python floats
         if self.region is None:
@@ -328,19 +341,40 @@ class Palpation:
 
     # -- stepping ------------------------------------------------------------------------------
     def _launch_step(self, a, b):
+        n, control = self.substeps, self.control
         if not self._cpu:
-            wp.copy(self.control.probe_target, self._pinned["target"])
-            wp.copy(self.control.probe_force, self._pinned["force"])
-            wp.copy(self.control.probe_mode, self._pinned["mode"])
-        h = self.dt / self.substeps
-        for _ in range(self.substeps):  # a -> b, b -> a, ...: the frame ends in b for an odd count
-            self.solver.step(a, b, self.control, h)
+            wp.copy(control.probe_target, self._pinned["target"])
+            wp.copy(control.probe_force, self._pinned["force"])
+            wp.copy(control.probe_mode, self._pinned["mode"])
+            if n > 1:
+                wp.copy(control.probe_move, self._pinned["move"])
+        h = self.dt / n
+        for s in range(n):  # a -> b, b -> a, ...: the frame ends in b for an odd count
+            if n > 1:  # a first-order hold: substep s drives the probe (s + 1) / n of the way through the frame's move
+                hold_probe(control, s, n)
+            self.solver.step(a, b, control, h)
             a, b = b, a
+        if n > 1:  # the last substep's reaction into the frame's peak
+            hold_probe(control, n, n)
         if not self._cpu:
-            wp.copy(self._pinned["reaction"], self.control.probe_reaction)
+            wp.copy(self._pinned["reaction"], control.probe_reaction)
+            if n > 1:
+                wp.copy(self._pinned["peak"], control.probe_reaction_peak)
 
     def _capture(self):
-        self._graphs = capture_step_pair(self._launch_step, self.states, self.device)
+        replays = capture_step_pair(self._launch_step, self.states, self.device)
+        if self.substeps > 1:  # the next frame starts where this one's target left the probe
+            replays = [self._holding(replay) for replay in replays]
+        self._graphs = replays
+
+    def _holding(self, replay):
+        move = self._move
+
+        def frame():
+            replay()
+            move[0] = move[1]
+
+        return frame
 
     def step(self) -> np.ndarray:
         """One frame of dt; returns the feedback force [N]: a view that every step updates in place.
@@ -377,17 +411,27 @@ class Palpation:
             self._capture()
         if not self._cpu:
             wp.synchronize_device(self.device)
+        self._move[0] = self._move[1]
         w = self._force_words
         if not -self._bound < w[0] + w[1] + w[2] < self._bound:
             self.diverged()
         return self._force_view
 
-    def set_probe(self, mode: int, target=None) -> None:
+    def set_probe(self, mode: int, target=None, start=None) -> None:
         """Probe mode (PROBE_OFF / PROBE_DISPLACEMENT / PROBE_FORCE / PROBE_SPHERE) and target [m] (the
-        sphere's centre in sphere mode), through host views."""
-        self._mode[0] = mode
+        sphere's centre in sphere mode), through host views.
+
+        With substeps, the next frame moves the probe from its start to `target` in even steps (a
+        first-order hold). start [m]: that start; default the last frame's target, or where the mode
+        changes, `target` itself (no move from a stale target)."""
         if target is not None:
+            self._move[1] = target
+            if mode != self._mode[0]:
+                self._move[0] = target
             self._target[0] = target
+        self._mode[0] = mode
+        if start is not None:
+            self._move[0] = start
 
     def set_probe_force(self, force) -> None:
         """Force-controlled probe: push the contact vertex with `force` [N] (a 3-vector)."""
@@ -452,6 +496,9 @@ class Palpation:
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Displacement-controlled press at the touched vertex: ramp to `depth` [m] along the inward
         normal over `ramp` [s], hold `hold` [s], release and settle `settle` [s].
+        With n substeps a frame the probe moves in n even steps (as the batch's press), and the peak
+        force is the largest over every substep (the continuous press's peak, which frame ends can
+        miss); `force` holds the frame ends.
 
         record: called as ``record(k, total)`` after step k (1..total) of the press when k is a
         multiple of `record_every`, and after the last step; it reads the state itself (a USD
@@ -471,9 +518,13 @@ class Palpation:
         total, release = schedule.total, schedule.release_step
         force = np.zeros(total)
         disp = np.zeros(total)
+        peak = 0.0
+        # the largest reaction over a frame's substeps (the frame's own where it has one step)
+        peak_view = self._peak[0] if self.substeps > 1 else self._force_view
         for s in range(total):
             if s < release:
-                self.set_probe(drive, start + direction * depth * schedule.fraction(s))
+                # the first frame moves from rest (the sphere touching it), as every later one from the last
+                self.set_probe(drive, start + direction * depth * schedule.fraction(s), start if s == 0 else None)
             else:
                 self.set_probe(PROBE_OFF)
             f = self.step()
@@ -481,6 +532,8 @@ class Palpation:
                 force[s] = math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2)
                 if not math.isfinite(force[s]):
                     self.check_finite(s + 1)
+                p = peak_view
+                peak = max(peak, math.sqrt(float(p[0]) ** 2 + float(p[1]) ** 2 + float(p[2]) ** 2))
             if s >= release or s % check_every == 0:
                 pos = self.state.particle_q.numpy()[v] if self._cpu else self.state.particle_q[v : v + 1].numpy()[0]
                 disp[s] = float(np.linalg.norm(pos - rest))
@@ -491,7 +544,8 @@ class Palpation:
             if record is not None and ((s + 1) % record_every == 0 or s + 1 == total):
                 record(s + 1, total)
         self.check_finite(total)
-        return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=release, force=force, displacement=disp)
+        return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=release, force=force, displacement=disp,
+                           step_peak=peak)
 
     def press_force(self, force=2.4, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Force-controlled press: push the touched vertex along the inward normal with a force
