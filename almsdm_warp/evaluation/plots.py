@@ -85,9 +85,9 @@ def plot_force_displacement(rec, table1, path):
     return _save(fig, path)
 
 
-def plot_speed_accuracy(acc, extra, path):
+def plot_speed_accuracy(acc, extra, path, against_fem=None):
     plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4))
+    fig, axes = plt.subplots(1, 3 if against_fem else 2, figsize=(16.5 if against_fem else 11, 4.4))
     rows = acc["rows"] + list(extra)
     groups = {}
     for r in rows:
@@ -118,6 +118,8 @@ def plot_speed_accuracy(acc, extra, path):
         ax.set_xlabel("time per step [us] (paper: per rendered frame)")
         ax.set_ylabel(label)
         ax.legend(fontsize=7, loc="upper right")
+    if against_fem:
+        _fem_reference_panel(axes[2], against_fem)
     fig.suptitle(
         "Speed against accuracy: rings 1..N against the global anchored reference "
         f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})"
@@ -199,4 +201,66 @@ def plot_anatomy_force(anat, path):
     ax.set_ylabel("feedback force [N]")
     ax.set_title("Force against displacement on real meshes (solid: 4 rings, dotted: global)")
     ax.legend(fontsize=6)
+    return _save(fig, path)
+
+
+def _fem_reference_panel(ax, fem):
+    """The ball's configurations: each one's force error against the P2 reference (filled) and against
+    the global model (open), over its step time; the P2 force itself is the reference line at 0."""
+    rows = [r for r in fem["rows"] if r["step_us"]]
+    x = [r["step_us"] for r in rows]
+    ax.plot(x, [max(abs(r["error_vs_fem_pct"]), 100 * FLOOR) for r in rows], "o-", color="C3", label="against P2 FEM")
+    ax.plot(x, [max(abs(r["error_vs_global_pct"]), 100 * FLOOR) for r in rows], "o--", color="C0", mfc="none", label="against the global model")
+    for r in rows:
+        ax.annotate(str(r["rings"]), (r["step_us"], max(abs(r["error_vs_fem_pct"]), 100 * FLOOR)), fontsize=6, xytext=(2, 2), textcoords="offset points")
+    glob = next(r for r in fem["rows"] if r["rings"] == "global")
+    ax.axhline(abs(glob["error_vs_fem_pct"]), color="C3", lw=0.8, ls=":")
+    ax.text(min(x), abs(glob["error_vs_fem_pct"]), " the global model against P2: the cost of springs", fontsize=7, va="bottom", color="C3")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("time per step [us]")
+    ax.set_ylabel("force error [%] (|error|)")
+    ax.set_title(f"tet ball {fem['edge_mm']:g} mm, sphere R 50 mm at 2 mm: P2 {fem['p2_force_N']:.4f} N", fontsize=9)
+    ax.legend(fontsize=7, loc="upper right")
+
+
+def plot_convergence(conv, path):
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for ax, part, xkey, xlabel, title in (
+        (axes[0], conv["icosphere"], "vertices", "mesh vertices", "icosphere R 50 mm, sphere R 10 mm pressed 5 mm (4 rings)"),
+        (axes[1], conv["ball"], "vertices", "mesh vertices", "tet ball R 50 mm, pressed 2 mm (global)"),
+    ):
+        for i, (label, forces) in enumerate(part["series"].items()):
+            ref = forces[-1]
+            ax.plot(part[xkey], [f / ref for f in forces], marker="o", color=f"C{i}",
+                    label=f"{label}: spread {100 * part['spread'][label]:.1f}%")
+            for xv, f in zip(part[xkey], forces):
+                ax.annotate(f"{f:.3f} N", (xv, f / ref), fontsize=6, xytext=(3, 3), textcoords="offset points")
+        ax.axhspan(0.95, 1.05, color="grey", alpha=0.12, lw=0)
+        ax.set_xscale("log")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("hold force / the finest level's")
+        ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=7)
+    fig.suptitle("Mesh convergence: the same press at three resolutions (grey: within 5% of the finest)", y=1.02)
+    return _save(fig, path)
+
+
+def plot_against_fem(fem, path):
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.8, 4.2))
+    rows = [r for r in fem["rows"] if r["rings"] != "global"]
+    glob = next(r for r in fem["rows"] if r["rings"] == "global")
+    ax.plot([r["region_vertices"] for r in rows], [r["force_N"] for r in rows], "o-", color="C0", label="local model (rings)")
+    for r in rows:
+        ax.annotate(f"{r['rings']}", (r["region_vertices"], r["force_N"]), fontsize=7, xytext=(3, -9), textcoords="offset points")
+    ax.plot([glob["region_vertices"]], [glob["force_N"]], "s", color="C0", mfc="none", label=f"global model {glob['force_N']:.4f} N")
+    ax.axhline(fem["p2_force_N"], color="C3", lw=1.2, label=f"P2 FEM, same mesh: {fem['p2_force_N']:.4f} N")
+    ax.axhline(fem["hertz_force_N"], color="grey", lw=1.0, ls="--", label=f"Hertz, two 50 mm spheres: {fem['hertz_force_N']:.4f} N")
+    ax.set_xscale("log")
+    ax.set_xlabel("vertices simulated")
+    ax.set_ylabel("hold force [N]")
+    ax.set_title(f"The ball case against continuum mechanics (tet ball, edge {fem['edge_mm']:g} mm)", fontsize=9)
+    ax.legend(fontsize=7, loc="lower right")
     return _save(fig, path)
