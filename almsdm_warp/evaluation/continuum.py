@@ -207,3 +207,78 @@ def run_against_fem(settings, device, tasks) -> dict:
     out["rings_needed"] = min(within) if within else None
     out["within_pct"] = 100 * WITHIN
     return out
+
+
+def _patch_samples(mesh, point, radius_m, per_mm2=50.0, seed=0):
+    """Points [m] spread uniformly by area (about `per_mm2` a square millimetre) over the surface
+    triangles within `radius_m` (plus the longest edge) of `point`, each with its triangle's id."""
+    x, tri = mesh.vertices, mesh.triangles.astype(np.int64)
+    centres = x[tri].mean(axis=1)
+    reach = radius_m + float(mesh.edge_rest_length.max())
+    near = np.flatnonzero(np.linalg.norm(centres - point, axis=1) <= reach)
+    a, b, c = (x[tri[near, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    rng = np.random.default_rng(seed)
+    count = max(1000, int(area.sum() * 1e6 * per_mm2))
+    pick = rng.choice(len(near), size=count, p=area / area.sum())
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1.0
+    u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
+    pts = a[pick] + u[:, None] * (b[pick] - a[pick]) + v[:, None] * (c[pick] - a[pick])
+    return pts, near[pick]
+
+
+def surface_patch(mesh, point, radius_m):
+    """The surface under a probe at `point` [m]: (the closest point on the surface [m], to the
+    sampling's spacing of about 0.15 mm; the unit outward normal averaged by area over the triangles
+    within `radius_m` of it)."""
+    point = np.asarray(point, dtype=np.float64)
+    pts, _ = _patch_samples(mesh, point, 2.0 * float(mesh.edge_rest_length.max()))
+    closest = pts[np.argmin(np.linalg.norm(pts - point, axis=1))]
+    x, tri = mesh.vertices, mesh.triangles.astype(np.int64)
+    near = np.flatnonzero(np.linalg.norm(x[tri].mean(axis=1) - closest, axis=1) <= radius_m)
+    normal = 0.5 * np.cross(x[tri[near, 1]] - x[tri[near, 0]], x[tri[near, 2]] - x[tri[near, 0]]).sum(axis=0)
+    return closest, normal / np.linalg.norm(normal)
+
+
+def sphere_hold_at(mesh, tissue, point, normal, depth, radius, *, rings="global", dt=1e-3, ramp=0.05, hold=0.1, device="cpu"):
+    """A rigid sphere of `radius` [m] that touches the surface at `point` [m] from outside along the
+    outward `normal`, pressed `depth` [m] along -normal and held: (hold force [N], change over the
+    hold's last 10% as a fraction). The contact is the sphere's (every vertex it would penetrate);
+    the vertex nearest `point` only seeds the region. Raises RuntimeError when the hold is not steady."""
+    import math
+
+    from ..protocol.palpation import Palpation
+    from ..protocol.schedule import PressSchedule
+    from ..sim.model import PROBE_SPHERE
+
+    point, normal = np.asarray(point, dtype=np.float64), np.asarray(normal, dtype=np.float64)
+    surface = mesh.surface_vertices
+    nearest = int(surface[np.argmin(np.linalg.norm(mesh.vertices[surface] - point, axis=1))])
+    pal = Palpation(mesh, tissue, rings=rings, integrator="implicit", dt=dt, device=device, probe_radius=radius)
+    pal.touch(nearest, depth)
+    schedule = PressSchedule.from_times(dt, ramp, hold)
+    force = np.zeros(schedule.release_step)
+    for s in range(schedule.release_step):
+        pal.set_probe(PROBE_SPHERE, point + normal * (radius - depth * schedule.fraction(s)))
+        f = pal.step()
+        force[s] = math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2)
+    pal.check_finite(schedule.release_step)
+    tail = force[-max(2, int(round(hold / dt)) // 10):]
+    change = float((tail.max() - tail.min()) / force[-1])
+    if change >= STEADY:
+        raise RuntimeError(f"hold not steady: the force changed {change:.2%} over the last 10% of the hold")
+    return float(force[-1]), change
+
+
+def local_hausdorff(mesh_a, mesh_b, point, radius_m):
+    """The largest distance [m] from either surface, within `radius_m` of `point`, to the other surface
+    (both sampled at about 50 points a square millimetre: to about 0.15 mm)."""
+    from scipy.spatial import cKDTree
+
+    samples = [_patch_samples(m, point, radius_m)[0] for m in (mesh_a, mesh_b)]
+    out = 0.0
+    for here, there in ((samples[0], samples[1]), (samples[1], samples[0])):
+        here = here[np.linalg.norm(here - point, axis=1) <= radius_m]
+        out = max(out, float(cKDTree(there).query(here)[0].max()))
+    return out
