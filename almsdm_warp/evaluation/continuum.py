@@ -93,10 +93,7 @@ def hold_force(mesh, tissue, vertex, depth, *, rings="global", probe_radius=0.0,
     pal.touch(vertex)
     result = pal.press(depth, ramp=ramp, hold=hold, settle=dt)
     force = result.force[: result.release_step]
-    tail = force[-max(2, int(round(hold / dt)) // 10):]
-    change = float((tail.max() - tail.min()) / force[-1])
-    if change >= STEADY:
-        raise RuntimeError(f"hold not steady: the force changed {change:.2%} over the last 10% of the hold")
+    change = steady_change(force, hold, dt)
     simulated = mesh.vertex_count if pal.region is None else pal.region_vertices
     seconds = time.perf_counter() - start
     step_us = None
@@ -108,6 +105,16 @@ def hold_force(mesh, tissue, vertex, depth, *, rings="global", probe_radius=0.0,
             pal.set_probe(PROBE_DISPLACEMENT, rest + inward * depth)
         step_us = time_palpation(pal, 9, read_force=True, warmup=10, budget_s=timing_budget_s, max_steps=5000).median * 1e6
     return float(force[-1]), change, simulated, seconds, step_us
+
+
+def steady_change(force, hold, dt) -> float:
+    """The change of a held force over the hold's last 10%, as a fraction of its last value.
+    Raises RuntimeError when it is not under STEADY."""
+    tail = force[-max(2, int(round(hold / dt)) // 10):]
+    change = float((tail.max() - tail.min()) / force[-1])
+    if change >= STEADY:
+        raise RuntimeError(f"hold not steady: the force changed {change:.2%} over the last 10% of the hold")
+    return change
 
 
 def spread(forces) -> float:
@@ -264,10 +271,7 @@ def sphere_hold_at(mesh, tissue, point, normal, depth, radius, *, rings="global"
         f = pal.step()
         force[s] = math.sqrt(float(f[0]) ** 2 + float(f[1]) ** 2 + float(f[2]) ** 2)
     pal.check_finite(schedule.release_step)
-    tail = force[-max(2, int(round(hold / dt)) // 10):]
-    change = float((tail.max() - tail.min()) / force[-1])
-    if change >= STEADY:
-        raise RuntimeError(f"hold not steady: the force changed {change:.2%} over the last 10% of the hold")
+    change = steady_change(force, hold, dt)
     return float(force[-1]), change
 
 
