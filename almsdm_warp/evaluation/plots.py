@@ -34,6 +34,19 @@ def _save(fig, path) -> Path:
     return path
 
 
+def _label_axes(ax, xlabel, ylabel, title=None, *, log="", legend=7, loc="best", title_size=None):
+    """An axis's scales ("x", "y" or "xy" logarithmic), labels, title and legend (font size)."""
+    if "x" in log:
+        ax.set_xscale("log")
+    if "y" in log:
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title, **({"fontsize": title_size} if title_size else {}))
+    ax.legend(fontsize=legend, loc=loc)
+
+
 def plot_recovery(rec, path):
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
@@ -113,11 +126,7 @@ def plot_speed_accuracy(acc, extra, path, against_fem=None):
         for fps, text in ((PAPER["fps_4_rings"], "paper 4 rings: 120 fps"), (PAPER["fps_global_surface"], "paper global: 34.5 fps")):
             ax.axvline(1e6 / fps, color="grey", lw=0.8, ls=":")
             ax.text(1e6 / fps, 0.05, " " + text, fontsize=7, rotation=90, color="grey", transform=ax.get_xaxis_transform())
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("time per step [us] (paper: per rendered frame)")
-        ax.set_ylabel(label)
-        ax.legend(fontsize=7, loc="upper right")
+        _label_axes(ax, "time per step [us] (paper: per rendered frame)", label, log="xy", loc="upper right")
     if against_fem:
         _fem_reference_panel(axes[2], against_fem)
     fig.suptitle(
@@ -180,12 +189,8 @@ def plot_anatomy_cost(anat, path):
         ls, marker = ("-", "o") if tag.startswith("MOR") else ("none", "^")
         ax.plot(x, [r["local_step_us"] for r in subset], ls=ls, marker=marker, color="C0", label=f"4 rings, {tag}")
         ax.plot(x, [r["global_step_us"] for r in subset], ls=ls, marker=marker, color="C3", label=f"global, {tag}")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("mesh vertices")
-    ax.set_ylabel("time per step [us] (implicit, dt 1 ms, CPU)")
-    ax.set_title("Cost of a step against mesh size (real meshes)")
-    ax.legend(fontsize=7)
+    _label_axes(ax, "mesh vertices", "time per step [us] (implicit, dt 1 ms, CPU)",
+                "Cost of a step against mesh size (real meshes)", log="xy")
     return _save(fig, path)
 
 
@@ -197,10 +202,8 @@ def plot_anatomy_force(anat, path):
         ax.plot(d, f, color=f"C{i % 10}", label=f"{r['file']} ({r['vertices']} v)")
         d, f = r["global_curve"]
         ax.plot(d, f, color=f"C{i % 10}", ls=":")
-    ax.set_xlabel("displacement of the contact vertex [mm]")
-    ax.set_ylabel("feedback force [N]")
-    ax.set_title("Force against displacement on real meshes (solid: 4 rings, dotted: global)")
-    ax.legend(fontsize=6)
+    _label_axes(ax, "displacement of the contact vertex [mm]", "feedback force [N]",
+                "Force against displacement on real meshes (solid: 4 rings, dotted: global)", legend=6)
     return _save(fig, path)
 
 
@@ -216,12 +219,9 @@ def _fem_reference_panel(ax, fem):
     glob = next(r for r in fem["rows"] if r["rings"] == "global")
     ax.axhline(abs(glob["error_vs_fem_pct"]), color="C3", lw=0.8, ls=":")
     ax.text(min(x), abs(glob["error_vs_fem_pct"]), " the global model against P2: the cost of springs", fontsize=7, va="bottom", color="C3")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("time per step [us]")
-    ax.set_ylabel("force error [%] (|error|)")
-    ax.set_title(f"tet ball {fem['edge_mm']:g} mm, sphere R 50 mm at 2 mm: P2 {fem['p2_force_N']:.4f} N", fontsize=9)
-    ax.legend(fontsize=7, loc="upper right")
+    _label_axes(ax, "time per step [us]", "force error [%] (|error|)",
+                f"tet ball {fem['edge_mm']:g} mm, sphere R 50 mm at 2 mm: P2 {fem['p2_force_N']:.4f} N",
+                log="xy", loc="upper right", title_size=9)
 
 
 def plot_convergence(conv, path):
@@ -238,11 +238,7 @@ def plot_convergence(conv, path):
             for xv, f in zip(part[xkey], forces):
                 ax.annotate(f"{f:.3f} N", (xv, f / ref), fontsize=6, xytext=(3, 3), textcoords="offset points")
         ax.axhspan(0.95, 1.05, color="grey", alpha=0.12, lw=0)
-        ax.set_xscale("log")
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("hold force / the finest level's")
-        ax.set_title(title, fontsize=9)
-        ax.legend(fontsize=7)
+        _label_axes(ax, xlabel, "hold force / the finest level's", title, log="x", title_size=9)
     fig.suptitle("Mesh convergence: the same press at three resolutions (grey: within 5% of the finest)", y=1.02)
     return _save(fig, path)
 
@@ -258,9 +254,7 @@ def plot_against_fem(fem, path):
     ax.plot([glob["region_vertices"]], [glob["force_N"]], "s", color="C0", mfc="none", label=f"global model {glob['force_N']:.4f} N")
     ax.axhline(fem["p2_force_N"], color="C3", lw=1.2, label=f"P2 FEM, same mesh: {fem['p2_force_N']:.4f} N")
     ax.axhline(fem["hertz_force_N"], color="grey", lw=1.0, ls="--", label=f"Hertz, two 50 mm spheres: {fem['hertz_force_N']:.4f} N")
-    ax.set_xscale("log")
-    ax.set_xlabel("vertices simulated")
-    ax.set_ylabel("hold force [N]")
-    ax.set_title(f"The ball case against continuum mechanics (tet ball, edge {fem['edge_mm']:g} mm)", fontsize=9)
-    ax.legend(fontsize=7, loc="lower right")
+    _label_axes(ax, "vertices simulated", "hold force [N]",
+                f"The ball case against continuum mechanics (tet ball, edge {fem['edge_mm']:g} mm)",
+                log="x", loc="lower right", title_size=9)
     return _save(fig, path)

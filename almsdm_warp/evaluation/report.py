@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 from .common import PAPER, fmt
+from .continuum import BALL
 from .stability import OSCILLATING, STABLE, explicit_boundary
 from .summary import header_lines, stability_verdicts, summary_lines
 
@@ -287,6 +288,14 @@ def _anatomy(r) -> list[str]:
     return lines
 
 
+def _ball_case(edge_mm=None, start="the") -> str:
+    """The issue's ball case (continuum.BALL) in words, with its edge length when given."""
+    edge = f"edge {edge_mm:g} mm " if edge_mm else ""
+    return (f"{start} issue's tet ball R {BALL['radius_mm']:g} mm ({edge}graded x {BALL['refine_top']:g} toward the top, "
+            f"E {BALL['young'] * 1e-3:g} kPa, nu {BALL['poisson']:g}, fixed below z = {BALL['z_fix'] * 1e3:g} mm) with a rigid "
+            f"sphere R {BALL['sphere'] * 1e3:g} mm pressed {BALL['depth'] * 1e3:g} mm")
+
+
 def _convergence(r) -> list[str]:
     c = r["convergence"]
     ico, ball = c["icosphere"], c["ball"]
@@ -295,8 +304,7 @@ def _convergence(r) -> list[str]:
         "The same press at three resolutions, held until steady (implicit): the material model (E 10 kPa, nu 0.45; on "
         "the surface t 2 mm and a foundation of 1 kPa/mm; a rigid sphere) against the paper's constants (TissueParams, "
         "the driven vertex, R = 0). Icosphere R 50 mm with a sphere R 10 mm pressed 5 mm at the pole (4 rings around the "
-        "contact); the issue's tet ball R 50 mm (graded x 4 toward the top, fixed below z = -40 mm) with a sphere R 50 mm "
-        f"pressed 2 mm (global; contact radius {c['contact_radius_mm']:.1f} mm by Hertz). Spread = max / min - 1.",
+        f"contact); {_ball_case()} (global; contact radius {c['contact_radius_mm']:.1f} mm by Hertz). Spread = max / min - 1.",
         ("mesh", "model", *[f"level {i + 1}" for i in range(len(ico["levels"]))], "spread"),
         ("mesh convergence", r["figures"]["convergence"]),
     )
@@ -319,17 +327,12 @@ def _convergence(r) -> list[str]:
 
 def _against_fem(r) -> list[str]:
     f = r["against_fem"]
-    lines = _section_head(
-        "9. Against finite elements",
-        f"The issue's ball (tet ball R 50 mm, edge {f['edge_mm']:g} mm graded x 4 toward the top, {f['vertices']} vertices, "
-        "E 10 kPa, nu 0.45, fixed below z = -40 mm), a rigid sphere R 50 mm pressed 2 mm: the product (implicit, the "
-        f"material model, held until steady) against quadratic tetrahedra (P2, {f['p2_nodes']} nodes, the same mesh, "
-        f"evaluation/fem.py: {f['p2_force_N']:.4f} N, contact radius {f['p2_contact_radius_mm']:.2f} mm) and Hertz's closed form "
-        f"for two 50 mm spheres ({f['hertz_force_N']:.4f} N, a = {f['hertz_contact_radius_mm']:.2f} mm). Step timed with the "
-        "sphere held 2 mm in.",
-        ("model", "vertices simulated", "hold force [N]", "error against P2 [%]", "error against the global model [%]", "step [us]"),
-        ("against finite elements", r["figures"]["against_fem"]),
-    )
+    intro = (f"{_ball_case(f['edge_mm'], 'The')}, {f['vertices']} vertices: the product (implicit, the material model, held "
+             f"until steady) against quadratic tetrahedra (P2, {f['p2_nodes']} nodes, the same mesh, evaluation/fem.py: "
+             f"{f['p2_force_N']:.4f} N, contact radius {f['p2_contact_radius_mm']:.2f} mm) and Hertz's closed form for two 50 mm "
+             f"spheres ({f['hertz_force_N']:.4f} N, a = {f['hertz_contact_radius_mm']:.2f} mm). Step timed with the sphere held 2 mm in.")
+    columns = ("model", "vertices simulated", "hold force [N]", "error against P2 [%]", "error against the global model [%]", "step [us]")
+    lines = _section_head("9. Against finite elements", intro, columns, ("against finite elements", r["figures"]["against_fem"]))
     for row in f["rows"]:
         lines.append(f"| {_rings_label(row['rings'])} | {row['region_vertices']} | {row['force_N']:.4f} | {row['error_vs_fem_pct']:+.1f} | "
                      f"{row['error_vs_global_pct']:+.2f} | {fmt(row['step_us'], 1)} |")
