@@ -106,15 +106,19 @@ STOMACHS = [SHARED_MESHES / "gca_stomach_1002v.obj", SHARED_MESHES / "gca_stomac
 
 
 @pytest.mark.skipif(not all(p.exists() for p in STOMACHS), reason="the shared stomach meshes are absent")
-def test_stomach_pair_within_10_percent_where_the_surfaces_agree():
-    # the same sphere at the same physical point on both files (points 3 and 4 of the script's five):
-    # the surfaces agree under the probe (Hausdorff < 0.5 mm within the 10 mm contact radius, normals
-    # within 8 degrees) and the forces too: measured ratios 0.948 and 0.993
+def test_stomach_pair_within_10_percent_at_every_point_where_both_resolve_the_probe():
+    # the same sphere (R 35 mm pressed 10 mm) at the same physical point on both files, at each of the
+    # script's first 5 farthest-point samples: the contact radius a (15-27 mm) is resolved by both
+    # (contact-disc edge <= 0.45 a: measured 0.28-0.38 a on the 1002-vertex file), the surfaces agree
+    # under it (Hausdorff < 0.5 mm, normals within 4 degrees) and so do the forces: measured ratios
+    # 5587 / 1002 of 0.979, 0.960, 0.955, 0.977, 0.915
     from almsdm_warp.mesh.io import load_mesh
 
     coarse, fine = (load_mesh(p) for p in STOMACHS)
-    points = table.spread_points(coarse)[[3, 4]]
-    for point in points:
-        (fa, fb), hausdorff, angle, _ = table.stomach_pair(coarse, fine, point)
-        assert hausdorff < 0.5 and angle < 10.0
-        assert fb == pytest.approx(fa, rel=0.10)
+    for point in table.spread_points(coarse, 5):
+        pair = table.stomach_pair(coarse, fine, point)
+        a = pair["contact_mm"]
+        assert all(edge <= table.RULE * a for edge in pair["edge_mm"]), (point, a, pair["edge_mm"])
+        assert pair["hausdorff_mm"] < 0.5 and pair["angle_deg"] < 10.0
+        fa, fb = pair["forces"]
+        assert fb == pytest.approx(fa, rel=0.10), (point, fa, fb)

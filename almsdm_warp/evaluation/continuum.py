@@ -63,17 +63,28 @@ def ball_mesh(edge_mm: float, seed: int = 0) -> TissueMesh:
     return primitives.tet_ball(BALL["radius_mm"], edge_mm, seed=seed, refine_top=BALL["refine_top"])
 
 
-def contact_edge_mm(mesh: TissueMesh, radius_m: float) -> float:
-    """Mean length [mm] of the surface edges inside the contact disc of `radius_m` around the top
-    pole (both ends within it): the resolution the probe sees."""
+def contact_edge_mm(mesh: TissueMesh, radius_m: float, centre=None) -> float:
+    """Mean length [mm] of the surface edges inside the contact disc of `radius_m` around `centre` [m]
+    (the top pole unless given; both ends within it): the resolution the probe sees."""
     x = mesh.vertices
-    top = x[top_vertex(mesh)]
+    centre = x[top_vertex(mesh)] if centre is None else np.asarray(centre, dtype=np.float64)
     edges = mesh.edges
     surface = np.zeros(len(x), dtype=bool)
     surface[mesh.surface_vertices] = True
-    inside = surface & (np.linalg.norm(x - top, axis=1) <= radius_m)
+    inside = surface & (np.linalg.norm(x - centre, axis=1) <= radius_m)
     e = edges[inside[edges[:, 0]] & inside[edges[:, 1]]]
     return float(np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1).mean() * 1e3) if len(e) else float("nan")
+
+
+def overlap_radius(mesh: TissueMesh, point, normal, radius, depth) -> float:
+    """The contact radius [m] of a rigid sphere of `radius` [m] touching the rest surface at `point`
+    along the outward `normal` and pressed `depth` [m]: the largest distance from the probe's axis of
+    the surface it overlaps (sampled as in surface_patch; sqrt(2 R d - d^2) on a plane). A membrane on
+    an elastic foundation touches the probe over about this disc; curvature under the probe sets it."""
+    point, normal = np.asarray(point, dtype=np.float64), np.asarray(normal, dtype=np.float64)
+    pts, _ = _patch_samples(mesh, point, 2.0 * np.sqrt(2.0 * radius * depth))
+    inside = pts[np.linalg.norm(pts - (point + normal * (radius - depth)), axis=1) < radius] - point
+    return float(np.linalg.norm(inside - np.outer(inside @ normal, normal), axis=1).max()) if len(inside) else 0.0
 
 
 def hold_force(mesh, tissue, vertex, depth, *, rings="global", probe_radius=0.0, fixed_below=None, dt=1e-3,
@@ -127,14 +138,14 @@ def _ball_press(mesh, tissue, press, **kw):
 
 
 def count_tasks(settings) -> int:
-    return 2 * (len(settings.convergence_subdivisions) + len(settings.convergence_edges_mm)) + 3 + len(settings.fem_rings)
+    return 2 * (len(settings.continuum.subdivisions) + len(settings.continuum.edges_mm)) + 3 + len(settings.continuum.fem_rings)
 
 
 def run_convergence(settings, device, tasks) -> dict:
     """Force against resolution: the material model and the paper's constants (R = 0) on the pole
     icosphere (4 rings around the contact, the global force to 1e-6: docs/calibration.md) and on the
     tet ball (global)."""
-    ico = {"levels": list(settings.convergence_subdivisions), "vertices": [], "edge_mm": [], "series": {}}
+    ico = {"levels": list(settings.continuum.subdivisions), "vertices": [], "edge_mm": [], "series": {}}
     meshes = [pole_icosphere_mesh(ICOSPHERE["radius_mm"], s) for s in ico["levels"]]
     for mesh in meshes:
         ico["vertices"].append(mesh.vertex_count)
@@ -145,7 +156,7 @@ def run_convergence(settings, device, tasks) -> dict:
             tasks.step(f"convergence: icosphere {s}, {label}")
             forces.append(hold_force(mesh, tissue, top_vertex(mesh), ICOSPHERE["depth"], rings=4, probe_radius=radius, device=device)[0])
         ico["series"][label] = forces
-    ball = {"edges_mm": list(settings.convergence_edges_mm), "vertices": [], "contact_edge_mm": [], "series": {}}
+    ball = {"edges_mm": list(settings.continuum.edges_mm), "vertices": [], "contact_edge_mm": [], "series": {}}
     meshes = [ball_mesh(e) for e in ball["edges_mm"]]
     contact = hertz.hertz_contact_radius(BALL["sphere"], BALL["depth"], BALL["sphere"])
     for mesh in meshes:
@@ -164,8 +175,8 @@ def run_convergence(settings, device, tasks) -> dict:
 
 
 def _fem_references(settings, vertices, tets, tasks) -> dict:
-    """P2 on the ball, Hertz for the two spheres, and (settings.fem_hertz_block) P2 against Hertz on a block."""
-    tasks.step(f"against FEM: P2 on the {settings.fem_edge_mm:g} mm ball")
+    """P2 on the ball, Hertz for the two spheres, and (settings.continuum.hertz_block) P2 against Hertz on a block."""
+    tasks.step(f"against FEM: P2 on the {settings.continuum.fem_edge_mm:g} mm ball")
     t0 = time.perf_counter()
     p2 = fem.sphere_press(vertices, tets, young=BALL["young"], poisson=BALL["poisson"], order=2,
                           sphere_radius=BALL["sphere"], depth=BALL["depth"],
@@ -178,7 +189,7 @@ def _fem_references(settings, vertices, tets, tasks) -> dict:
         "block": None,
     }
     tasks.step("against FEM: Hertz on a block")
-    if settings.fem_hertz_block:
+    if settings.continuum.hertz_block:
         xs = np.array([0.0, 1.0, 2.0, 3.0, 5.0, 8.0, 13.0, 20.0, 30.0, 40.0])
         v, t = primitives.tet_grid_arrays(xs, xs, -xs[::-1])
         radius, depth = 0.02, 0.0002
@@ -193,14 +204,14 @@ def _fem_references(settings, vertices, tets, tasks) -> dict:
 
 
 def run_against_fem(settings, device, tasks) -> dict:
-    """The issue's ball: the product's force (global, and local regions of settings.fem_rings around
+    """The issue's ball: the product's force (global, and local regions of settings.continuum.fem_rings around
     the sphere's patch) against P2 finite elements on the same mesh and Hertz's closed form; each
     configuration's error against the FEM and against the global model, and its step time."""
-    vertices, tets = primitives.tet_ball_arrays(BALL["radius_mm"], settings.fem_edge_mm, refine_top=BALL["refine_top"])
+    vertices, tets = primitives.tet_ball_arrays(BALL["radius_mm"], settings.continuum.fem_edge_mm, refine_top=BALL["refine_top"])
     mesh = TissueMesh.from_arrays(vertices * 1e3, tetrahedra=tets, scale=1.0)
-    out = {"edge_mm": settings.fem_edge_mm, "vertices": mesh.vertex_count, **_fem_references(settings, vertices, tets, tasks)}
+    out = {"edge_mm": settings.continuum.fem_edge_mm, "vertices": mesh.vertex_count, **_fem_references(settings, vertices, tets, tasks)}
     rows = []
-    for rings in (*settings.fem_rings, "global"):
+    for rings in (*settings.continuum.fem_rings, "global"):
         tasks.step(f"against FEM: {rings} rings")
         force, change, simulated, _, step_us = _ball_press(mesh, SOLID, BALL_PRESS, rings=rings, probe_radius=BALL["sphere"],
                                                            device=device, timing_budget_s=settings.timing_budget_s)
