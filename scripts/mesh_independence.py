@@ -16,7 +16,7 @@ constants (TissueParams(), the driven vertex, R = 0):
     contact radius, each file's edge inside it, the ratio per point, and how far the two surfaces differ
     under the probe.
 
-Run: python scripts/mesh_independence.py [--quick] [--meshes DIR]. docs/calibration.md holds the table.
+Run: python scripts/mesh_independence.py [--quick] [--probe R_MM DEPTH_MM] [--meshes DIR]. docs/calibration.md holds the table.
 """
 
 from __future__ import annotations
@@ -31,11 +31,8 @@ from almsdm_warp.evaluation.continuum import (SOLID, SURFACE, ball_mesh, contact
                                               overlap_radius, pole_icosphere_mesh, sphere_hold_at, spread, surface_patch)
 from almsdm_warp.evaluation.hertz import hertz_contact_radius
 from almsdm_warp.mesh.io import load_mesh
+from almsdm_warp.region.contact import top_vertex
 from almsdm_warp.tissue.params import TissueParams
-
-
-def top_vertex(mesh) -> int:
-    return int(np.argmax(mesh.vertices[:, 2]))
 
 
 def row(label, level, vertices, simulated, result):
@@ -95,8 +92,6 @@ def spread_points(mesh, count=5):
 PROBE, PRESS = 0.035, 0.010
 """The stomach pair's probe radius and press [m]: a contact radius of 15-34 mm at the sampled points,
 so that both files resolve it by the rule (contact-disc edge at most 0.45 a; docs/calibration.md)."""
-UNDER_RESOLVED = (0.010, 0.005)
-"""The earlier probe and press [m]: a 7-9 mm contact that the 1002-vertex file does not resolve."""
 RULE = 0.45
 """The resolution rule: mean surface edge inside the contact disc at most this fraction of its radius."""
 DT, HOLD = 2e-3, 0.2
@@ -146,12 +141,14 @@ def stomach_table(directory: Path, count=8, probe=PROBE, press=PRESS):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="the coarse levels only")
+    parser.add_argument("--probe", nargs=2, type=float, default=(PROBE * 1e3, PRESS * 1e3), metavar=("R_MM", "DEPTH_MM"),
+                        help="the stomach pair's sphere and press (default %(default)s; 10 5 is the under-resolved case)")
     parser.add_argument("--meshes", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "meshes",
                         help="folder with gca_stomach_1002v.obj and gca_stomach_5587v.obj")
     args = parser.parse_args(argv)
     icosphere_table([4, 5] if args.quick else [4, 5, 6], [4, 8])
     ball_table([8, 6.5] if args.quick else [12, 10, 8, 6.5, 5.5])
-    stomach_table(args.meshes)
+    stomach_table(args.meshes, probe=args.probe[0] * 1e-3, press=args.probe[1] * 1e-3)
     return 0
 
 
