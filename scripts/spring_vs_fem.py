@@ -31,6 +31,7 @@ import scipy.sparse as sp
 from scipy.integrate import quad
 
 from almsdm_warp.evaluation import fem
+from almsdm_warp.evaluation.continuum import pole_icosphere
 from almsdm_warp.mesh import primitives
 from almsdm_warp.mesh.topology import unique_edges
 from almsdm_warp.tissue.material import Material, anchor_stiffness, edge_stiffness
@@ -141,18 +142,6 @@ def ball_table(edges_mm):
 
 
 # -- (b) a membrane on a Winkler foundation ----------------------------------------------------------------
-def pole_icosphere(radius_mm, subdivisions):
-    """Icosphere (vertices [m], triangles) turned so that one of the icosahedron's 12 vertices, kept by
-    every subdivision, is the top pole (0, 0, R): the press starts at the same point at every level."""
-    vertices, triangles = primitives.icosphere_arrays(radius_mm, subdivisions)
-    a = vertices[0] / np.linalg.norm(vertices[0])
-    z = np.array([0.0, 0.0, 1.0])
-    v, c = np.cross(a, z), float(a @ z)
-    vx = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    rotation = np.eye(3) + vx + vx @ vx / (1.0 + c)  # Rodrigues: a onto z
-    return vertices @ rotation.T, np.asarray(triangles, dtype=np.int64)
-
-
 def shell_press(vertices, triangles, material, sphere_radius, depth, *, membrane=True, large_strain=True):
     """Force [N] of a sphere pressed `depth` [m] into a membrane (E t) on a foundation (kappa), free body."""
     edges = unique_edges(triangles).astype(np.int64)

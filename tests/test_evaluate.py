@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import shortest_path
 from almsdm_warp.cli.main import main
 from almsdm_warp.errors import InputError
 from almsdm_warp.evaluation.accuracy import join_extra_points, read_extra_points
+from almsdm_warp.mesh import primitives
 from almsdm_warp.evaluation.stability import DIVERGED, NOT_RECOVERED, OSCILLATING, STABLE, classify
 from almsdm_warp.protocol.palpation import PressResult
 
@@ -66,7 +67,8 @@ def test_results_md_names_machine_date_and_command(quick):
         model = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), None)
     if model:
         assert model in md
-    for section in ("## 1. Recovery", "## 2. Table 1", "## 3. Force against displacement", "## 4. Table 2", "## 5. Speed against accuracy", "## 6. Stability map", "## 7. Real anatomy"):
+    for section in ("## 1. Recovery", "## 2. Table 1", "## 3. Force against displacement", "## 4. Table 2", "## 5. Speed against accuracy", "## 6. Stability map", "## 7. Real anatomy",
+                    "## 8. Mesh convergence", "## 9. Against finite elements"):
         assert section in md
 
 
@@ -74,7 +76,7 @@ def test_figures_are_non_blank_pngs(quick):
     import matplotlib.image as mpimg
 
     out, results, md, _ = quick
-    expected = {"recovery", "force_displacement", "speed_accuracy", "stability"}
+    expected = {"recovery", "force_displacement", "speed_accuracy", "stability", "convergence", "against_fem"}
     if results["anatomy"]["rows"]:
         expected |= {"anatomy_cost", "anatomy_force"}
     assert set(results["figures"]) == expected
@@ -190,6 +192,34 @@ def test_table2_and_anatomy(quick):
         assert max(r["local_residual_mm"]) < 0.11
         if r["free_residual_mm"] is not None:
             assert r["free_residual_mm"] > 1.0
+
+
+def test_convergence_and_against_fem_sections(quick):
+    """The material model converges where the paper's constants follow the mesh; the ball's global
+    model against an independent P2 solve on the same mesh (and Hertz's closed form, recomputed)."""
+    from almsdm_warp.evaluation import fem
+
+    _, results, md, _ = quick
+    conv = results["convergence"]
+    for part in (conv["icosphere"], conv["ball"]):
+        material, paper = (part["series"][k] for k in part["series"])
+        assert len(material) == 2 and max(material) / min(material) - 1 < 0.05
+        assert max(paper) / min(paper) - 1 > 0.15  # one stiffness per edge: the force follows the mesh
+    f = results["against_fem"]
+    vertices, tets = primitives.tet_ball_arrays(50.0, f["edge_mm"], refine_top=4.0)
+    p1 = fem.sphere_press(vertices, tets, young=10e3, poisson=0.45, order=1, sphere_radius=0.05, depth=0.002,
+                          fixed=lambda x: fem.clamped_below(x, -0.04))
+    assert p1.force > f["p2_force_N"] > 0.2  # P1 locks at nu 0.45: stiffer than the P2 reference
+    a = (0.025 * 0.002) ** 0.5
+    assert f["hertz_force_N"] == pytest.approx(4 / 3 * 10e3 / (1 - 0.45**2) * 0.025**0.5 * 0.002**1.5)
+    assert f["hertz_contact_radius_mm"] == pytest.approx(a * 1e3)
+    glob = next(r for r in f["rows"] if r["rings"] == "global")
+    assert glob["force_N"] == pytest.approx(f["p2_force_N"], rel=0.08)  # calibration: 0.94-0.975 of P2
+    assert glob["error_vs_fem_pct"] == pytest.approx(100 * (glob["force_N"] / f["p2_force_N"] - 1))
+    assert glob["error_vs_global_pct"] == 0.0
+    local = [r for r in f["rows"] if r["rings"] != "global"]
+    assert [abs(r["error_vs_global_pct"]) for r in local] == sorted((abs(r["error_vs_global_pct"]) for r in local), reverse=True)
+    assert f"| global | {glob['region_vertices']} | {glob['force_N']:.4f} |" in md
 
 
 def _press(displacement, release_step, depth=0.01, dt=1e-3):

@@ -49,6 +49,22 @@ PAPER = {
 
 
 @dataclass(frozen=True)
+class ContinuumSettings:
+    """How much of the spring model against continuum mechanics a run does (evaluation/continuum)."""
+
+    subdivisions: tuple = (4, 5, 6)
+    """Icosphere subdivisions of the mesh-convergence section."""
+    edges_mm: tuple = (8.0, 6.5, 5.5)
+    """Tet ball edge lengths [mm] of the mesh-convergence section."""
+    fem_edge_mm: float = 8.0
+    """Edge [mm] of the tet ball pressed against the P2 reference (P2 costs seconds at 8 mm)."""
+    fem_rings: tuple = (2, 4, 6, 8)
+    """Ring counts of the local model pressed against the P2 reference (and the global model)."""
+    hertz_block: bool = True
+    """Solve P2 on a large block against Hertz's half-space (about 15 s on 2 cores)."""
+
+
+@dataclass(frozen=True)
 class Settings:
     """How much of each experiment a run does: "full" (docs/results.md), "quick" (< 2 min on 2
     CPU cores) or "tiny" (the test's: every part, the least work that still shows each effect)."""
@@ -71,6 +87,8 @@ class Settings:
     """(file name in the shared meshes, millimetres per file unit) of the real meshes to run."""
     anatomy_free_max_vertices: int = 2500
     """The unanchored global model is run on real meshes up to this many vertices."""
+    continuum: ContinuumSettings = ContinuumSettings()
+    """The mesh-convergence and against-FEM sections."""
 
 
 _ANATOMY_FULL = (
@@ -116,6 +134,7 @@ SETTINGS = {
             ("mor_liverCoarse.vtu", 30.0),
         ),
         anatomy_free_max_vertices=1100,
+        continuum=ContinuumSettings((4, 5), (10.0, 8.0), fem_edge_mm=12.0, fem_rings=(2, 4), hertz_block=False),
     ),
     "tiny": Settings(
         name="tiny",
@@ -129,6 +148,7 @@ SETTINGS = {
         stability_free_dt_ms=(1.0,),
         anatomy=(("mor_liverTinyMesh.vtu", 30.0), ("mor_liverVeryCOARSE.vtu", 30.0)),
         anatomy_free_max_vertices=100,
+        continuum=ContinuumSettings((3, 4), (16.0, 12.0), fem_edge_mm=16.0, fem_rings=(1, 2), hertz_block=False),
     ),
 }
 

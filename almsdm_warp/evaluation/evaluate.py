@@ -20,6 +20,7 @@ from pathlib import Path
 
 from . import accuracy as evaluate_accuracy
 from . import anatomy as evaluate_anatomy
+from . import continuum as evaluate_continuum
 from . import paper as evaluate_paper
 from . import stability as evaluate_stability
 from .common import SETTINGS, Settings, Tasks
@@ -31,6 +32,8 @@ FIGURES = {
     "stability": "results_stability.png",
     "anatomy_cost": "results_anatomy_cost.png",
     "anatomy_force": "results_anatomy_force.png",
+    "convergence": "results_convergence.png",
+    "against_fem": "results_against_fem.png",
 }
 """Figure files, written in `<out>/figures/`."""
 
@@ -75,6 +78,8 @@ def run_evaluation(out_dir, settings: Settings | str = "full", device="cpu", *, 
     from .plots import (
         plot_anatomy_cost,
         plot_anatomy_force,
+        plot_against_fem,
+        plot_convergence,
         plot_force_displacement,
         plot_recovery,
         plot_speed_accuracy,
@@ -89,7 +94,7 @@ def run_evaluation(out_dir, settings: Settings | str = "full", device="cpu", *, 
     normals = evaluate_paper.find_normals_strategies() if normals is None else normals
     auto_factory = evaluate_accuracy.find_auto_factory() if auto_factory is None else auto_factory
     started = time.perf_counter()
-    total = sum(m.count_tasks(settings) for m in (evaluate_paper, evaluate_accuracy, evaluate_stability, evaluate_anatomy))
+    total = sum(m.count_tasks(settings) for m in (evaluate_paper, evaluate_accuracy, evaluate_stability, evaluate_anatomy, evaluate_continuum))
     results = {
         "settings": settings.name,
         "command": command or f"almsdm evaluate --device {device}",
@@ -105,6 +110,8 @@ def run_evaluation(out_dir, settings: Settings | str = "full", device="cpu", *, 
             ("accuracy", lambda: evaluate_accuracy.run_accuracy(settings, device, tasks, auto_factory)),
             ("stability", lambda: evaluate_stability.run_stability(settings, device, tasks)),
             ("anatomy", lambda: evaluate_anatomy.run_anatomy(settings, device, tasks, meshes_dir)),
+            ("convergence", lambda: evaluate_continuum.run_convergence(settings, device, tasks)),
+            ("against_fem", lambda: evaluate_continuum.run_against_fem(settings, device, tasks)),
         )
         results["part_s"] = {}
         for name, run in parts:
@@ -121,11 +128,13 @@ def run_evaluation(out_dir, settings: Settings | str = "full", device="cpu", *, 
     written = {}
     written["recovery"] = plot_recovery(results["recovery"], figures / FIGURES["recovery"])
     written["force_displacement"] = plot_force_displacement(results["recovery"], results["table1"], figures / FIGURES["force_displacement"])
-    written["speed_accuracy"] = plot_speed_accuracy(results["accuracy"], extra, figures / FIGURES["speed_accuracy"])
+    written["speed_accuracy"] = plot_speed_accuracy(results["accuracy"], extra, figures / FIGURES["speed_accuracy"], results["against_fem"])
     written["stability"] = plot_stability(results["stability"], figures / FIGURES["stability"])
     if results["anatomy"]["rows"]:
         written["anatomy_cost"] = plot_anatomy_cost(results["anatomy"], figures / FIGURES["anatomy_cost"])
         written["anatomy_force"] = plot_anatomy_force(results["anatomy"], figures / FIGURES["anatomy_force"])
+    written["convergence"] = plot_convergence(results["convergence"], figures / FIGURES["convergence"])
+    written["against_fem"] = plot_against_fem(results["against_fem"], figures / FIGURES["against_fem"])
     results["figures"] = {k: f"figures/{Path(v).name}" for k, v in written.items()}
     atomic_write_text(out / "results.json", json.dumps(_clean(results), indent=1) + "\n")
     atomic_write_text(out / "results.md", render_results(results))

@@ -34,6 +34,24 @@ def _save(fig, path) -> Path:
     return path
 
 
+def _label_axes(ax, xlabel, ylabel, title=None, *, log="", legend=7, loc="best", title_size=None):
+    """An axis's scales ("x", "y" or "xy" logarithmic), labels, title and legend (font size). A
+    logarithmic x axis labels its decades only: over less than a decade matplotlib labels the minor
+    ticks too, and they overlap."""
+    if "x" in log:
+        from matplotlib.ticker import NullFormatter
+
+        ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())
+    if "y" in log:
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title, **({"fontsize": title_size} if title_size else {}))
+    ax.legend(fontsize=legend, loc=loc)
+
+
 def plot_recovery(rec, path):
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
@@ -85,9 +103,9 @@ def plot_force_displacement(rec, table1, path):
     return _save(fig, path)
 
 
-def plot_speed_accuracy(acc, extra, path):
+def plot_speed_accuracy(acc, extra, path, against_fem=None):
     plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4))
+    fig, axes = plt.subplots(1, 3 if against_fem else 2, figsize=(16.5 if against_fem else 11, 4.4))
     rows = acc["rows"] + list(extra)
     groups = {}
     for r in rows:
@@ -113,11 +131,9 @@ def plot_speed_accuracy(acc, extra, path):
         for fps, text in ((PAPER["fps_4_rings"], "paper 4 rings: 120 fps"), (PAPER["fps_global_surface"], "paper global: 34.5 fps")):
             ax.axvline(1e6 / fps, color="grey", lw=0.8, ls=":")
             ax.text(1e6 / fps, 0.05, " " + text, fontsize=7, rotation=90, color="grey", transform=ax.get_xaxis_transform())
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("time per step [us] (paper: per rendered frame)")
-        ax.set_ylabel(label)
-        ax.legend(fontsize=7, loc="upper right")
+        _label_axes(ax, "time per step [us] (paper: per rendered frame)", label, log="xy", loc="upper right")
+    if against_fem:
+        _fem_reference_panel(axes[2], against_fem)
     fig.suptitle(
         "Speed against accuracy: rings 1..N against the global anchored reference "
         f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})"
@@ -178,12 +194,8 @@ def plot_anatomy_cost(anat, path):
         ls, marker = ("-", "o") if tag.startswith("MOR") else ("none", "^")
         ax.plot(x, [r["local_step_us"] for r in subset], ls=ls, marker=marker, color="C0", label=f"4 rings, {tag}")
         ax.plot(x, [r["global_step_us"] for r in subset], ls=ls, marker=marker, color="C3", label=f"global, {tag}")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("mesh vertices")
-    ax.set_ylabel("time per step [us] (implicit, dt 1 ms, CPU)")
-    ax.set_title("Cost of a step against mesh size (real meshes)")
-    ax.legend(fontsize=7)
+    _label_axes(ax, "mesh vertices", "time per step [us] (implicit, dt 1 ms, CPU)",
+                "Cost of a step against mesh size (real meshes)", log="xy")
     return _save(fig, path)
 
 
@@ -195,8 +207,60 @@ def plot_anatomy_force(anat, path):
         ax.plot(d, f, color=f"C{i % 10}", label=f"{r['file']} ({r['vertices']} v)")
         d, f = r["global_curve"]
         ax.plot(d, f, color=f"C{i % 10}", ls=":")
-    ax.set_xlabel("displacement of the contact vertex [mm]")
-    ax.set_ylabel("feedback force [N]")
-    ax.set_title("Force against displacement on real meshes (solid: 4 rings, dotted: global)")
-    ax.legend(fontsize=6)
+    _label_axes(ax, "displacement of the contact vertex [mm]", "feedback force [N]",
+                "Force against displacement on real meshes (solid: 4 rings, dotted: global)", legend=6)
+    return _save(fig, path)
+
+
+def _fem_reference_panel(ax, fem):
+    """The ball's configurations: each one's force error against the P2 reference (filled) and against
+    the global model (open), over its step time; the P2 force itself is the reference line at 0."""
+    rows = [r for r in fem["rows"] if r["step_us"]]
+    x = [r["step_us"] for r in rows]
+    ax.plot(x, [max(abs(r["error_vs_fem_pct"]), 100 * FLOOR) for r in rows], "o-", color="C3", label="against P2 FEM")
+    ax.plot(x, [max(abs(r["error_vs_global_pct"]), 100 * FLOOR) for r in rows], "o--", color="C0", mfc="none", label="against the global model")
+    for r in rows:
+        ax.annotate(str(r["rings"]), (r["step_us"], max(abs(r["error_vs_fem_pct"]), 100 * FLOOR)), fontsize=6, xytext=(2, 2), textcoords="offset points")
+    glob = next(r for r in fem["rows"] if r["rings"] == "global")
+    ax.axhline(abs(glob["error_vs_fem_pct"]), color="C3", lw=0.8, ls=":")
+    ax.text(min(x), abs(glob["error_vs_fem_pct"]), " the global model against P2: the cost of springs", fontsize=7, va="bottom", color="C3")
+    _label_axes(ax, "time per step [us]", "force error [%] (|error|)",
+                f"tet ball {fem['edge_mm']:g} mm, sphere R 50 mm at 2 mm: P2 {fem['p2_force_N']:.4f} N",
+                log="xy", loc="upper right", title_size=9)
+
+
+def plot_convergence(conv, path):
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for ax, part, xkey, xlabel, title in (
+        (axes[0], conv["icosphere"], "vertices", "mesh vertices", "icosphere R 50 mm, sphere R 10 mm pressed 5 mm (4 rings)"),
+        (axes[1], conv["ball"], "vertices", "mesh vertices", "tet ball R 50 mm, pressed 2 mm (global)"),
+    ):
+        for i, (label, forces) in enumerate(part["series"].items()):
+            ref = forces[-1]
+            ax.plot(part[xkey], [f / ref for f in forces], marker="o", color=f"C{i}",
+                    label=f"{label}: spread {100 * part['spread'][label]:.1f}%")
+            for xv, f in zip(part[xkey], forces):
+                ax.annotate(f"{f:.3f} N", (xv, f / ref), fontsize=6, xytext=(3, 3 - 9 * i), textcoords="offset points")  # series apart where they meet
+        ax.axhspan(0.95, 1.05, color="grey", alpha=0.12, lw=0)
+        _label_axes(ax, xlabel, "hold force / the finest level's", title, log="x", title_size=9)
+        ax.set_xticks(part[xkey], [str(v) for v in part[xkey]])  # the levels themselves: less than a decade apart
+    fig.suptitle("Mesh convergence: the same press at three resolutions (grey: within 5% of the finest)", y=1.02)
+    return _save(fig, path)
+
+
+def plot_against_fem(fem, path):
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.8, 4.2))
+    rows = [r for r in fem["rows"] if r["rings"] != "global"]
+    glob = next(r for r in fem["rows"] if r["rings"] == "global")
+    ax.plot([r["region_vertices"] for r in rows], [r["force_N"] for r in rows], "o-", color="C0", label="local model (rings)")
+    for r in rows:
+        ax.annotate(f"{r['rings']}", (r["region_vertices"], r["force_N"]), fontsize=7, xytext=(3, -9), textcoords="offset points")
+    ax.plot([glob["region_vertices"]], [glob["force_N"]], "s", color="C0", mfc="none", label=f"global model {glob['force_N']:.4f} N")
+    ax.axhline(fem["p2_force_N"], color="C3", lw=1.2, label=f"P2 FEM, same mesh: {fem['p2_force_N']:.4f} N")
+    ax.axhline(fem["hertz_force_N"], color="grey", lw=1.0, ls="--", label=f"Hertz, two 50 mm spheres: {fem['hertz_force_N']:.4f} N")
+    _label_axes(ax, "vertices simulated", "hold force [N]",
+                f"The ball case against continuum mechanics (tet ball, edge {fem['edge_mm']:g} mm)",
+                log="x", loc="lower right", title_size=9)
     return _save(fig, path)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 from .common import PAPER, fmt
+from .continuum import BALL
 from .stability import OSCILLATING, STABLE, explicit_boundary
 from .summary import header_lines, stability_verdicts, summary_lines
 
@@ -287,7 +288,78 @@ def _anatomy(r) -> list[str]:
     return lines
 
 
+def _ball_case(edge_mm=None, start="the") -> str:
+    """The issue's ball case (continuum.BALL) in words, with its edge length when given."""
+    edge = f"edge {edge_mm:g} mm " if edge_mm else ""
+    return (f"{start} issue's tet ball R {BALL['radius_mm']:g} mm ({edge}graded x {BALL['refine_top']:g} toward the top, "
+            f"E {BALL['young'] * 1e-3:g} kPa, nu {BALL['poisson']:g}, fixed below z = {BALL['z_fix'] * 1e3:g} mm) with a rigid "
+            f"sphere R {BALL['sphere'] * 1e3:g} mm pressed {BALL['depth'] * 1e3:g} mm")
+
+
+def _convergence(r) -> list[str]:
+    c = r["convergence"]
+    ico, ball = c["icosphere"], c["ball"]
+    lines = _section_head(
+        "8. Mesh convergence",
+        "The same press at three resolutions, held until steady (implicit): the material model (E 10 kPa, nu 0.45; on "
+        "the surface t 2 mm and a foundation of 1 kPa/mm; a rigid sphere) against the paper's constants (TissueParams, "
+        "the driven vertex, R = 0). Icosphere R 50 mm with a sphere R 10 mm pressed 5 mm at the pole (4 rings around the "
+        f"contact); {_ball_case()} (global; contact radius {c['contact_radius_mm']:.1f} mm by Hertz). Spread = max / min - 1.",
+        ("mesh", "model", *[f"level {i + 1}" for i in range(len(ico["levels"]))], "spread"),
+        ("mesh convergence", r["figures"]["convergence"]),
+    )
+    for name, part, levels in (("icosphere", ico, [f"s {s}, {v} v" for s, v in zip(ico["levels"], ico["vertices"])]),
+                               ("tet ball", ball, [f"{e:g} mm, {v} v" for e, v in zip(ball["edges_mm"], ball["vertices"])])):
+        lines.append(f"| {name} | (resolution) | " + " | ".join(levels) + " | |")
+        for label, forces in part["series"].items():
+            lines.append(f"| {name} | {label} | " + " | ".join(f"{f:.4f} N" for f in forces) + f" | {100 * part['spread'][label]:.1f}% |")
+    worst = max(ico["spread"][next(iter(ico["series"]))], ball["spread"][next(iter(ball["series"]))])
+    paper = min(ico["spread"]["paper's constants, R 0"], ball["spread"]["paper's constants, R 0"])
+    return lines + _paragraphs(
+        f"The material model's force spreads {100 * worst:.1f}% at most over the resolutions "
+        + ("(within the 5% goal); " if worst <= 0.05 else "(over the 5% goal); ")
+        + f"the paper's constants spread {100 * paper:.0f}% or more: one stiffness per edge makes the force follow the mesh. "
+        "Mean surface edge inside the ball's contact disc: "
+        + ", ".join(f"{e:.1f} mm" for e in ball["contact_edge_mm"])
+        + f" against a contact radius of {c['contact_radius_mm']:.1f} mm (docs/calibration.md, \"Mesh independence\", the rule).",
+    )
+
+
+def _against_fem(r) -> list[str]:
+    f = r["against_fem"]
+    intro = (f"{_ball_case(f['edge_mm'], 'The')}, {f['vertices']} vertices: the product (implicit, the material model, held "
+             f"until steady) against quadratic tetrahedra (P2, {f['p2_nodes']} nodes, the same mesh, evaluation/fem.py: "
+             f"{f['p2_force_N']:.4f} N, contact radius {f['p2_contact_radius_mm']:.2f} mm) and Hertz's closed form for two 50 mm "
+             f"spheres ({f['hertz_force_N']:.4f} N, a = {f['hertz_contact_radius_mm']:.2f} mm). Step timed with the sphere held 2 mm in.")
+    columns = ("model", "vertices simulated", "hold force [N]", "error against P2 [%]", "error against the global model [%]", "step [us]")
+    lines = _section_head("9. Against finite elements", intro, columns, ("against finite elements", r["figures"]["against_fem"]))
+    for row in f["rows"]:
+        lines.append(f"| {_rings_label(row['rings'])} | {row['region_vertices']} | {row['force_N']:.4f} | {row['error_vs_fem_pct']:+.1f} | "
+                     f"{row['error_vs_global_pct']:+.2f} | {fmt(row['step_us'], 1)} |")
+    glob = next(row for row in f["rows"] if row["rings"] == "global")
+    need = f["rings_needed"]
+    text = [
+        f"The global spring model is {glob['error_vs_fem_pct']:+.1f}% off the P2 reference: the cost of being a spring model "
+        "(large-strain springs soften under compression, docs/calibration.md, \"Springs under a probe\"). "
+        + (f"A local region needs {need} rings around the sphere's patch to be within {f['within_pct']:g}% of the global model "
+           "(the speed-accuracy figure, section 5, has both errors for each configuration)."
+           if need is not None else f"No local region tried is within {f['within_pct']:g}% of the global model."),
+        "",
+        f"Hertz's closed form is {100 * (f['p2_force_N'] / f['hertz_force_N'] - 1):+.1f}% from P2 on the ball: the ball is not a "
+        "half-space (a = 7 mm against R = 50 mm, and its base is clamped 90 mm below the contact), so Hertz is the order "
+        "of magnitude here, not the reference. "
+        + (f"As the half-space check, P2 on a {'x'.join(str(x) for x in f['block']['size_mm'])} mm block under a sphere R "
+           f"{f['block']['sphere_mm']:g} mm pressed {f['block']['depth_mm']:g} mm gives {1e3 * f['block']['p2_force_N']:.3f} mN "
+           f"against Hertz's {1e3 * f['block']['hertz_force_N']:.3f} mN ({100 * (f['block']['p2_force_N'] / f['block']['hertz_force_N'] - 1):+.1f}%: "
+           "the block's finite size and clamped base stiffen it), contact radius "
+           f"{f['block']['p2_contact_radius_mm']:.2f} against {f['block']['hertz_contact_radius_mm']:.2f} mm."
+           if f["block"] else "The half-space check (P2 on a large block against Hertz) runs in the full settings only."),
+    ]
+    return lines + _paragraphs(*text)
+
+
 def render_results(r) -> str:
-    lines = header_lines(r) + summary_lines(r) + _recovery(r) + _table1(r) + _fig10(r) + _table2(r) + _accuracy(r) + _stability(r) + _anatomy(r)
+    lines = (header_lines(r) + summary_lines(r) + _recovery(r) + _table1(r) + _fig10(r) + _table2(r) + _accuracy(r) + _stability(r)
+             + _anatomy(r) + _convergence(r) + _against_fem(r))
     return "\n".join(lines).rstrip() + "\n"
 
