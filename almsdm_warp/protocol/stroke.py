@@ -11,6 +11,12 @@ the state: a vertex in both regions keeps its position and velocity, a vertex le
 rest only once it is within `tol` of it (so no visible pop). `lead` is the hysteresis: the sphere
 slides about `lead` between two relocations.
 
+The implicit integrator holds sphere 0 in its own solve (the Control's sphere, the pressing sphere's
+law): a backward-Euler step run without the contact and projected after it relaxes the pushed
+vertices inside the sphere, and its force fell a third short of the static equilibrium's
+(docs/stroke.md). The explicit integrator's step is short enough that the projection after it is
+the contact (its reaction is the internal force at the projected positions).
+
 The explicit integrator's substeps are planned once, from the critical step of the whole mesh's
 free vertices, which bounds every region's (a region's stiffness is a principal submatrix of the
 mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem.
@@ -28,7 +34,9 @@ from ..kernels import region_state
 from ..kernels.region_state import reset_vertices_left_behind
 from ..kernels.arrays import struct_from
 from ..kernels.stroke_contact import StrokeSpheres, constrain_spheres
+from ..kernels.arrays import ProbeArrays
 from ..region.region import Region
+from ..sim.model import PROBE_SPHERE
 from .palpation import Palpation, SimulationDiverged, check_probe_radius, replayer
 
 WAKE_TIME = 0.01
@@ -51,6 +59,7 @@ class _Spheres:
         self.count = int(count)
         d = device
         self.centre = wp.zeros(count, dtype=wp.vec3, device=d)
+        self.previous = wp.zeros(count, dtype=wp.vec3, device=d)  # the last frame's, kept by the kernel
         self.reaction = wp.zeros(count, dtype=wp.vec3, device=d)
         self.touching = wp.zeros(count, dtype=wp.int32, device=d)
         self.near_edge = wp.zeros(count, dtype=wp.int32, device=d)
@@ -107,8 +116,11 @@ class ProbeStroke(Palpation):
         super().__init__(mesh, tissue, rings=rings, integrator=integrator, dt=dt, device=device, capture=capture,
                          edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below, substeps=substeps,
                          **solver_kw)
+        if probes > 1 and self.solver.integrator == "implicit":
+            raise ValueError(f"the implicit integrator holds one sphere in its solve: probes must be 1 with it, got {probes}"
+                             " (use integrator='explicit' for several)")
         self.radius = radius
-        """The spheres' radius [m] (the Control's own sphere stays off: this class constrains them)."""
+        """The spheres' radius [m] (the Control's own sphere is on only for the implicit solve, which holds sphere 0)."""
         mean_edge = float(self.mesh.edge_rest_length.mean())
         self.lead = 2.0 * mean_edge if lead is None else float(lead)
         self.guard = 0.5 * mean_edge if guard is None else float(guard)
@@ -128,6 +140,12 @@ class ProbeStroke(Palpation):
         from scipy.spatial import cKDTree
 
         self._tree = cKDTree(self._surface_rest)
+        self._held = int(self.solver.integrator == "implicit")
+        if self._held:
+            # the solve holds sphere 0: the Control's sphere, its centre read from the spheres' array
+            self.control.set_sphere(radius)
+            self.control.set(mode=PROBE_SPHERE)
+            self.control.arrays = struct_from(ProbeArrays, self.control, probe_target=self.spheres.centre)
         n = self.model.particle_count
         if self.region is None:
             self._ring_of = np.zeros(n, dtype=np.int32)
@@ -306,13 +324,17 @@ class ProbeStroke(Palpation):
     def _launch_step(self, a, b):
         sp = self.spheres
         sp.copy_in()
+        if not self._warm:
+            wp.copy(sp.previous, sp.centre)  # the first frame starts where it is
         region_vertex, count, ring = self._region_arrays
         solver = self.solver
-        h = self.dt / self.substeps
-        for _ in range(self.substeps):
+        n = self.substeps
+        h = self.dt / n
+        for s in range(n):
             solver.step(a, b, self.control, h)
             constrain_spheres(self.model, region_vertex, count, ring, self._near_ring, solver.vertex_local, solver.free_count,
-                              self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b)
+                              self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b,
+                              self._held, solver.anchor_scale, (s + 1) / n)
             a, b = b, a
         sp.copy_out()
 
