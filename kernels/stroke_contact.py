@@ -9,7 +9,7 @@ where the last pass left every contact vertex on the sphere. The implicit step h
 own solve (`held`), but only the vertices its test finds in the sphere at the start of a step: those
 on the trailing side of a sliding sphere are released, relax into it within the step and come back
 here. Its m dv / dt is the force at that relaxed end, a third short of the static equilibrium's
-(docs/stroke.md). So with `held`, a second pass reads each contact reaction from the internal force
+(docs/stroke.md). So with `held`, a second launch reads each contact reaction from the internal force
 (kernels/forces.py) at the end of the step, with every contact vertex on the sphere. The same pass tells
 the host, per sphere, how many vertices it touches and whether it came within `guard` of a vertex
 on ring `near_ring` or beyond: there the region no longer holds the contact and must be rebuilt
@@ -51,13 +51,14 @@ def held_centre(spheres: StrokeSpheres, p: int, alpha: float):
     return c0 + alpha * (spheres.centre[p] - c0)
 
 
-@wp.func
-def stroke_reactions(
+@wp.kernel
+def sum_stroke_reactions(
     region_vertex: _INT, vertex_count: int, vertex_local: _INT, free_count: int, surface: _INT, spheres: StrokeSpheres,
     probe_count: int, radius: float, adj_offsets: _INT, adj_vertex: _INT, adj_spring: _VEC, q_rest: _VEC,
-    anchor_ke: _FLOAT, anchor_kd: _FLOAT, anchor_scale: float, alpha: float, q_out: _VEC, qd_out: _VEC,
+    anchor_ke: _FLOAT, anchor_kd: _FLOAT, anchor_scale: float, q_out: _VEC, qd_out: _VEC,
 ):
-    # the implicit step: each contact's reaction from the internal force at the end of the step, eqs. (3)-(6)
+    # one thread, after constrain_stroke_spheres (the implicit step): each contact's reaction from the
+    # internal force at the end of the step, eqs. (3)-(6), summed in local order
     for i in range(vertex_count):
         v = region_vertex[i]
         if surface[v] == 0 or vertex_local[v] >= free_count:
@@ -65,7 +66,7 @@ def stroke_reactions(
         x = q_out[v]
         u = qd_out[v]
         for p in range(probe_count):
-            n, l = sphere_normal(x, held_centre(spheres, p, alpha))
+            n, l = sphere_normal(x, spheres.centre[p])
             if l < radius * (1.0 + HELD_SLACK):
                 f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
                 for k in range(adj_offsets[v], adj_offsets[v + 1]):
@@ -79,8 +80,7 @@ def stroke_reactions(
 def constrain_stroke_spheres(
     region_vertex: _INT, vertex_count: int, vertex_ring: _INT, near_ring: int, vertex_local: _INT, free_count: int,
     surface: _INT, particle_mass: wp.array(dtype=wp.float32), spheres: StrokeSpheres, probe_count: int,
-    radius: float, guard: float, held: int, adj_offsets: _INT, adj_vertex: _INT, adj_spring: _VEC, q_rest: _VEC,
-    anchor_ke: _FLOAT, anchor_kd: _FLOAT, anchor_scale: float, alpha: float, dt: float, q_in: _VEC, qd_in: _VEC, q_out: _VEC, qd_out: _VEC,
+    radius: float, guard: float, held: int, alpha: float, dt: float, q_in: _VEC, qd_in: _VEC, q_out: _VEC, qd_out: _VEC,
 ):
     for p in range(probe_count):
         spheres.reaction[p] = wp.vec3(0.0)
@@ -107,9 +107,6 @@ def constrain_stroke_spheres(
                 spheres.touching[p] = spheres.touching[p] + 1
                 if held == 0:
                     spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n)
-    if held != 0:
-        stroke_reactions(region_vertex, vertex_count, vertex_local, free_count, surface, spheres, probe_count, radius,
-                         adj_offsets, adj_vertex, adj_spring, q_rest, anchor_ke, anchor_kd, anchor_scale, alpha, q_out, qd_out)
     if alpha >= 1.0:
         for p in range(probe_count):
             spheres.previous[p] = spheres.centre[p]  # the frame is done: the next one starts here
@@ -122,21 +119,29 @@ def constrain_spheres(model, region_vertex, vertex_count, vertex_ring, near_ring
     region's first `vertex_count` vertices (`region_vertex`, ring of each mesh vertex `vertex_ring`) are
     gone over; those with `vertex_local` < `free_count` move. held=1 (the implicit step, which held
     sphere 0 in its solve): the reactions are the internal forces at the end of the step (anchors
-    scaled by `anchor_scale`), read by a second pass. alpha: how far the substep is through the frame,
-    (s + 1) / n: the spheres stand that far from their last frame's centres to this one's, and alpha = 1
-    ends the frame.
+    scaled by `anchor_scale`), read by a second launch (sum_stroke_reactions). alpha: how far the
+    substep is through the frame, (s + 1) / n: the spheres stand that far from their last frame's
+    centres to this one's, and alpha = 1 ends the frame.
 
     Arrays are direct arguments, not the structs of kernels/arrays.py: a CPU graph capture walks
     every member of a struct argument: with TissueArrays and RegionArrays here, capturing the step
-    after a relocation took 410 us against 330 us (docs/performance.md)."""
-    dm = model.dmesh
+    after a relocation took 410 us against 330 us (docs/performance.md). The explicit step's launch
+    takes no more than it needs (a capture costs about 10 us of CPU time per argument)."""
     wp.launch(
         constrain_stroke_spheres,
         dim=1,
         inputs=[region_vertex, vertex_count, vertex_ring, near_ring, vertex_local, free_count, surface, model.particle_mass,
-                spheres, count, radius, guard, int(held), dm.adj_offsets, dm.adj_vertex, model.adj_spring,
-                dm.rest_position, model.anchor_ke, model.anchor_kd, float(anchor_scale), float(alpha), dt,
-                state_in.particle_q, state_in.particle_qd],
+                spheres, count, radius, guard, int(held), float(alpha), dt, state_in.particle_q, state_in.particle_qd],
         outputs=[state_out.particle_q, state_out.particle_qd],
         device=model.device,
     )
+    if held:
+        dm = model.dmesh
+        wp.launch(
+            sum_stroke_reactions,
+            dim=1,
+            inputs=[region_vertex, vertex_count, vertex_local, free_count, surface, spheres, count, radius, dm.adj_offsets,
+                    dm.adj_vertex, model.adj_spring, dm.rest_position, model.anchor_ke, model.anchor_kd, float(anchor_scale),
+                    state_out.particle_q, state_out.particle_qd],
+            device=model.device,
+        )
