@@ -24,6 +24,7 @@ mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -161,7 +162,7 @@ class ProbeStroke(Palpation):
             wp.load_module(region_state, device=self.device)  # loaded now, not by the first relocation
         self._views = {}
         self._started = False
-        self._pending = None  # a relocation under way: ("seeds", seeds) then ("built", None)
+        self._pending = None  # a relocation under way: ("seeds", seeds), ("grow", rings left), ("built", None)
         self._warm = False  # the first step runs uncaptured: it loads the kernels outside any capture
         self._fresh = False  # the first step after a relocation runs uncaptured; the next ones capture
 
@@ -253,17 +254,23 @@ class ProbeStroke(Palpation):
 
     def relocate(self, centres) -> None:
         """Rebuild the region around `centres` [m] and the wake now, keeping every vertex's state (see
-        the module). step() spreads the same work over three steps (seeds, build, swap), each under
-        the haptic step's budget."""
+        the module). step() spreads the same work over steps (the seeds; ring 1; each further ring; the
+        swap), each under the haptic step's budget."""
         self._pending = ("seeds", self.seeds(centres))
         while self._pending is not None:
             self._advance_relocation()
 
     def _advance_relocation(self) -> None:
-        stage, seeds = self._pending
+        # the build goes one ring a step (a region built by build_seeds(1) then expand(1) is the one
+        # build_seeds(rings) makes: rings are appended in the same order)
+        stage, work = self._pending
         if stage == "seeds":
-            self._spare.build_seeds(seeds, self.rings, contact=int(seeds[0]))
-            self._pending = ("built", None)
+            self._spare.build_seeds(work, 1, contact=int(work[0]))
+            self._pending = ("grow", self.rings - 1) if self.rings > 1 else ("built", None)
+            return
+        if stage == "grow":
+            self._spare.expand(1)
+            self._pending = ("grow", work - 1) if work > 1 else ("built", None)
             return
         old, region = self.region, self._spare
         if old.vertex_count:
@@ -300,43 +307,65 @@ class ProbeStroke(Palpation):
 
     # -- stepping ------------------------------------------------------------------------------
     def _advance(self) -> None:
-        # one frame: replay the graph of the current state, capturing it (one graph a step) when the
-        # region has changed; the first step ever, and the first after a relocation, run uncaptured
+        # one frame: replay the current state's graphs. After a relocation the frame is captured again,
+        # on the CPU one launch a step (a CPU capture costs about 10 us a launch argument: two launches
+        # in one step reached 500-700 us), on CUDA the whole frame at once; until it is complete the
+        # pieces not yet captured run uncaptured. The first step ever, and the first after a relocation,
+        # run uncaptured.
         graphs = self._graphs
         if graphs is None:
             graphs = self._graphs = [None, None]
         i = self._cur
-        replay = graphs[i]
-        if replay is None:
-            if not self.capture or not self._warm or self._fresh:
-                self._launch_step(self.states[i], self.states[1 - i])
-                self._cur ^= self._parity
-                self._warm, self._fresh = True, False
-                if not self._cpu:
-                    wp.synchronize_device(self.device)
-                return
+        pieces = graphs[i]
+        if pieces is not None and all(pieces):
+            self._cur ^= self._parity
+            for replay in pieces:
+                replay()
+            return
+        calls = self._frame(self.states[i], self.states[1 - i])
+        if not self.capture or not self._warm or self._fresh:
+            for call in calls:
+                call()
+            self._warm, self._fresh = True, False
+        else:
+            if pieces is None:
+                pieces = graphs[i] = [None] * len(calls)
+            k = pieces.index(None)
             with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
-                self._launch_step(self.states[i], self.states[1 - i])
-            replay = graphs[i] = replayer(cap.graph, self.device)
+                calls[k]()
+            pieces[k] = replayer(cap.graph, self.device)
+            for call, replay in zip(calls, pieces):
+                (replay or call)()
         self._cur ^= self._parity
-        replay()
+        if not self._cpu:
+            wp.synchronize_device(self.device)
 
-    def _launch_step(self, a, b):
+    def _frame(self, a, b) -> list:
+        # the frame's launches as calls: on the CPU one a launch group (captured one a step), on CUDA one
         sp = self.spheres
-        sp.copy_in()
         if not self._warm:
             wp.copy(sp.previous, sp.centre)  # the first frame starts where it is
         region_vertex, count, ring = self._region_arrays
         solver = self.solver
         n = self.substeps
         h = self.dt / n
+        calls = []
         for s in range(n):
-            solver.step(a, b, self.control, h)
-            constrain_spheres(self.model, region_vertex, count, ring, self._near_ring, solver.vertex_local, solver.free_count,
-                              self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b,
-                              self._held, solver.anchor_scale, (s + 1) / n)
+            calls.append(functools.partial(solver.step, a, b, self.control, h))
+            calls.append(functools.partial(
+                constrain_spheres, self.model, region_vertex, count, ring, self._near_ring, solver.vertex_local,
+                solver.free_count, self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b,
+                self._held, solver.anchor_scale, (s + 1) / n))
             a, b = b, a
-        sp.copy_out()
+        if self._cpu:
+            return calls
+        return [functools.partial(self._run_on_device, calls)]
+
+    def _run_on_device(self, calls) -> None:
+        self.spheres.copy_in()
+        for call in calls:
+            call()
+        self.spheres.copy_out()
 
     def touch(self, vertex: int, depth: float | None = None) -> None:
         raise TypeError("a ProbeStroke is driven by its spheres' centres: call step(centres), not touch()")
