@@ -254,23 +254,23 @@ class ProbeStroke(Palpation):
 
     def relocate(self, centres) -> None:
         """Rebuild the region around `centres` [m] and the wake now, keeping every vertex's state (see
-        the module). step() spreads the same work over steps (the seeds; ring 1; each further ring; the
+        the module). step() spreads the same work over steps (the seeds; ring 1; the other rings; the
         swap), each under the haptic step's budget."""
         self._pending = ("seeds", self.seeds(centres))
         while self._pending is not None:
             self._advance_relocation()
 
     def _advance_relocation(self) -> None:
-        # the build goes one ring a step (a region built by build_seeds(1) then expand(1) is the one
-        # build_seeds(rings) makes: rings are appended in the same order)
+        # the build takes two steps: ring 1, then the others (build_seeds(1) then expand(rings - 1) make
+        # the region build_seeds(rings) makes: rings are appended in the same order)
         stage, work = self._pending
         if stage == "seeds":
             self._spare.build_seeds(work, 1, contact=int(work[0]))
             self._pending = ("grow", self.rings - 1) if self.rings > 1 else ("built", None)
             return
         if stage == "grow":
-            self._spare.expand(1)
-            self._pending = ("grow", work - 1) if work > 1 else ("built", None)
+            self._spare.expand(work)
+            self._pending = ("built", None)
             return
         old, region = self.region, self._spare
         if old.vertex_count:
@@ -307,11 +307,12 @@ class ProbeStroke(Palpation):
 
     # -- stepping ------------------------------------------------------------------------------
     def _advance(self) -> None:
-        # one frame: replay the current state's graphs. After a relocation the frame is captured again,
-        # on the CPU one launch a step (a CPU capture costs about 10 us a launch argument: two launches
-        # in one step reached 500-700 us), on CUDA the whole frame at once; until it is complete the
-        # pieces not yet captured run uncaptured. The first step ever, and the first after a relocation,
-        # run uncaptured.
+        # one frame: replay the current state's graphs. After a relocation the frame is captured again:
+        # the explicit step's on the CPU one launch a step (a CPU capture costs about 10 us a launch
+        # argument: its two launches in one step reached 500-700 us), the pieces not yet captured running
+        # uncaptured; otherwise the whole frame at once (an implicit frame captured in pieces made more
+        # slow steps than it saved: docs/stroke.md). The first step ever, and the first after a
+        # relocation, run uncaptured.
         graphs = self._graphs
         if graphs is None:
             graphs = self._graphs = [None, None]
@@ -341,7 +342,8 @@ class ProbeStroke(Palpation):
             wp.synchronize_device(self.device)
 
     def _frame(self, a, b) -> list:
-        # the frame's launches as calls: on the CPU one a launch group (captured one a step), on CUDA one
+        # the frame's launches as calls: the explicit step's on the CPU one a launch group (captured one
+        # a step); otherwise one call
         sp = self.spheres
         if not self._warm:
             wp.copy(sp.previous, sp.centre)  # the first frame starts where it is
@@ -357,11 +359,11 @@ class ProbeStroke(Palpation):
                 solver.free_count, self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b,
                 self._held, solver.anchor_scale, (s + 1) / n))
             a, b = b, a
-        if self._cpu:
+        if self._cpu and solver.conditionally_stable:
             return calls
-        return [functools.partial(self._run_on_device, calls)]
+        return [functools.partial(self._run_frame, calls)]
 
-    def _run_on_device(self, calls) -> None:
+    def _run_frame(self, calls) -> None:
         self.spheres.copy_in()
         for call in calls:
             call()
