@@ -117,9 +117,6 @@ class ProbeStroke(Palpation):
         super().__init__(mesh, tissue, rings=rings, integrator=integrator, dt=dt, device=device, capture=capture,
                          edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below, substeps=substeps,
                          **solver_kw)
-        if probes > 1 and self.solver.integrator == "implicit":
-            raise ValueError(f"the implicit integrator holds one sphere in its solve: probes must be 1 with it, got {probes}"
-                             " (use integrator='explicit' for several)")
         self.radius = radius
         """The spheres' radius [m] (the Control's own sphere is on only for the implicit solve, which holds sphere 0)."""
         mean_edge = float(self.mesh.edge_rest_length.mean())
@@ -141,12 +138,8 @@ class ProbeStroke(Palpation):
         from scipy.spatial import cKDTree
 
         self._tree = cKDTree(self._surface_rest)
-        self._held = int(self.solver.integrator == "implicit")
-        if self._held:
-            # the solve holds sphere 0: the Control's sphere, its centre read from the spheres' array
-            self.control.set_sphere(radius)
-            self.control.set(mode=PROBE_SPHERE)
-            self.control.arrays = struct_from(ProbeArrays, self.control, probe_target=self.spheres.centre)
+        self._held = 0
+        self._hold_in_solve()
         n = self.model.particle_count
         if self.region is None:
             self._ring_of = np.zeros(n, dtype=np.int32)
@@ -277,7 +270,8 @@ class ProbeStroke(Palpation):
             reset_vertices_left_behind(self.model, old.region_vertex, old.vertex_count, region, self.states)
         self.region, self._spare = region, old
         self.solver.set_region(region)
-        self.plan_substeps()
+        self.plan_substeps()  # may fall back to the implicit integrator
+        self._hold_in_solve()
         self.vertex = int(region.seed)
         self._ring_of = self.host(region.vertex_ring)
         self._near_ring = max(region.outer_ring - self.margin, 1)
@@ -288,6 +282,18 @@ class ProbeStroke(Palpation):
         if self._started:
             self.relocations += 1
         self._started = True
+
+    def _hold_in_solve(self) -> None:
+        # the implicit solve holds sphere 0: the Control's sphere, its centre read from the spheres' array
+        if self._held or self.solver.integrator != "implicit":
+            return
+        if self.probe_count > 1:
+            raise ValueError(f"the implicit integrator holds one sphere in its solve: probes must be 1 with it, "
+                             f"got {self.probe_count} (use integrator='explicit' for several)")
+        self._held = 1
+        self.control.set_sphere(self.radius)
+        self.control.set(mode=PROBE_SPHERE)
+        self.control.arrays = struct_from(ProbeArrays, self.control, probe_target=self.spheres.centre)
 
     def host(self, array) -> np.ndarray:
         """A host view of a device array: on the CPU one view kept per array (free to read), on CUDA a copy."""
