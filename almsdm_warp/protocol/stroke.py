@@ -351,13 +351,13 @@ class ProbeStroke(Palpation):
         # the frame's launches as calls: the explicit step's on the CPU one a launch group (captured one
         # a step); otherwise one call
         sp = self.spheres
-        if not self._warm:
-            wp.copy(sp.previous, sp.centre)  # the first frame starts where it is
         region_vertex, count, ring = self._region_arrays
         solver = self.solver
         n = self.substeps
         h = self.dt / n
         calls = []
+        if not self._warm:  # the first frame (uncaptured) starts where it is; on CUDA after the centres' copy in
+            calls.append(functools.partial(wp.copy, sp.previous, sp.centre))
         for s in range(n):
             calls.append(functools.partial(solver.step, a, b, self.control, h))
             calls.append(functools.partial(
