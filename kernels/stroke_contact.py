@@ -3,7 +3,14 @@
 After each integrator step, one thread goes over the region's vertices in local order: a free
 surface vertex the step left inside a sphere is put on its surface (the law of
 kernels/probe_contact.py: frictionless, one-sided), and its contact reaction is summed into that
-sphere's feedback force (a gather in a fixed order: the same bits every run). The same pass tells
+sphere's feedback force (a gather in a fixed order: the same bits every run). With the explicit
+step the internal force is the step's own, f = m (v_out - v_in) / dt: the forces at its start,
+where the last pass left every contact vertex on the sphere. The implicit step holds sphere 0 in its
+own solve (`held`), but only the vertices its test finds in the sphere at the start of a step: those
+on the trailing side of a sliding sphere are released, relax into it within the step and come back
+here. Its m dv / dt is the force at that relaxed end, a third short of the static equilibrium's
+(docs/stroke.md). So with `held`, a second launch reads each contact reaction from the internal force
+(kernels/forces.py) at the end of the step, with every contact vertex on the sphere. The same pass tells
 the host, per sphere, how many vertices it touches and whether it came within `guard` of a vertex
 on ring `near_ring` or beyond: there the region no longer holds the contact and must be rebuilt
 around it before the sphere reaches the fixed outer ring.
@@ -12,28 +19,68 @@ around it before the sphere reaches the fixed outer ring.
 import warp as wp
 
 from .arrays import struct_of
+from .integrate_implicit import CONTACT_SLACK
+from .forces import add_spring_force, anchor_force
 from .probe_contact import sphere_contact_reaction, sphere_normal
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
 
+HELD_SLACK = wp.constant(CONTACT_SLACK)
+"""With the implicit step, a vertex within radius x (1 + this) of a centre is on the sphere (float32 positions)."""
+
 _INT = wp.array(dtype=wp.int32)
 _VEC = wp.array(dtype=wp.vec3)
+_FLOAT = wp.array(dtype=wp.float32)
 
 StrokeSpheres = struct_of(
     "StrokeSpheres",
-    "The spheres of a stroke, one entry each: centre [m] in; reaction [N], contact count, near-the-edge flag out.",
-    {"centre": wp.array(dtype=wp.vec3), "reaction": wp.array(dtype=wp.vec3)}
+    "The spheres of a stroke, one entry each: centre [m] in, the last frame's centre [m]; reaction [N], contact count,"
+    " near-the-edge flag out.",
+    {"centre": wp.array(dtype=wp.vec3), "previous": wp.array(dtype=wp.vec3), "reaction": wp.array(dtype=wp.vec3)}
     | {"touching": wp.array(dtype=wp.int32), "near_edge": wp.array(dtype=wp.int32)},
 )
+
+
+@wp.func
+def held_centre(spheres: StrokeSpheres, p: int, alpha: float):
+    # a first-order hold of sphere p across the frame's substeps: alpha = (s + 1) / n of the way from
+    # the last frame's centre to this one's, so that no substep takes a whole frame's move
+    c0 = spheres.previous[p]
+    return c0 + alpha * (spheres.centre[p] - c0)
+
+
+@wp.kernel
+def sum_stroke_reactions(
+    region_vertex: _INT, vertex_count: int, vertex_local: _INT, free_count: int, surface: _INT, spheres: StrokeSpheres,
+    probe_count: int, radius: float, adj_offsets: _INT, adj_vertex: _INT, adj_spring: _VEC, q_rest: _VEC,
+    anchor_ke: _FLOAT, anchor_kd: _FLOAT, anchor_scale: float, q_out: _VEC, qd_out: _VEC,
+):
+    # one thread, after constrain_stroke_spheres (the implicit step): each contact's reaction from the
+    # internal force at the end of the step, eqs. (3)-(6), summed in local order
+    for i in range(vertex_count):
+        v = region_vertex[i]
+        if surface[v] == 0 or vertex_local[v] >= free_count:
+            continue
+        x = q_out[v]
+        u = qd_out[v]
+        for p in range(probe_count):
+            n, l = sphere_normal(x, spheres.centre[p])
+            if l < radius * (1.0 + HELD_SLACK):
+                f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
+                for k in range(adj_offsets[v], adj_offsets[v + 1]):
+                    j = adj_vertex[k]
+                    spring = adj_spring[k]  # (k_ij, d_ij, rest length)
+                    f = add_spring_force(f, x, u, q_out[j], qd_out[j], spring[0], spring[1], spring[2])
+                spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n)
 
 
 @wp.kernel
 def constrain_stroke_spheres(
     region_vertex: _INT, vertex_count: int, vertex_ring: _INT, near_ring: int, vertex_local: _INT, free_count: int,
     surface: _INT, particle_mass: wp.array(dtype=wp.float32), spheres: StrokeSpheres, probe_count: int,
-    radius: float, guard: float, dt: float, q_in: _VEC, qd_in: _VEC, q_out: _VEC, qd_out: _VEC,
+    radius: float, guard: float, held: int, alpha: float, dt: float, q_in: _VEC, qd_in: _VEC, q_out: _VEC, qd_out: _VEC,
 ):
     for p in range(probe_count):
         spheres.reaction[p] = wp.vec3(0.0)
@@ -49,33 +96,52 @@ def constrain_stroke_spheres(
         if free:
             f = particle_mass[v] * (qd_out[v] - qd_in[v]) / dt  # the internal force of the step
         for p in range(probe_count):
-            c = spheres.centre[p]
+            c = held_centre(spheres, p, alpha)
             n, l = sphere_normal(q_out[v], c)
             if outer and l < radius + guard:
                 spheres.near_edge[p] = 1
-            if free and l < radius:
+            if free and l < radius * (1.0 + float(held) * HELD_SLACK):
                 x1 = c + radius * n
                 q_out[v] = x1
                 qd_out[v] = (x1 - q_in[v]) / dt
-                spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n)
                 spheres.touching[p] = spheres.touching[p] + 1
+                if held == 0:
+                    spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n)
+    if alpha >= 1.0:
+        for p in range(probe_count):
+            spheres.previous[p] = spheres.centre[p]  # the frame is done: the next one starts here
 
 
 def constrain_spheres(model, region_vertex, vertex_count, vertex_ring, near_ring, vertex_local, free_count, surface, spheres,
-                      count, radius, guard, dt, state_in, state_out):
+                      count, radius, guard, dt, state_in, state_out, held, anchor_scale, alpha=1.0):
     """Put the free surface vertices a step left inside the spheres (`spheres`, a StrokeSpheres of `count`)
     on their surfaces; write each sphere's reaction [N], contact count and near-the-edge flag. The
     region's first `vertex_count` vertices (`region_vertex`, ring of each mesh vertex `vertex_ring`) are
-    gone over; those with `vertex_local` < `free_count` move.
+    gone over; those with `vertex_local` < `free_count` move. held=1 (the implicit step, which held
+    sphere 0 in its solve): the reactions are the internal forces at the end of the step (anchors
+    scaled by `anchor_scale`), read by a second launch (sum_stroke_reactions). alpha: how far the
+    substep is through the frame, (s + 1) / n: the spheres stand that far from their last frame's
+    centres to this one's, and alpha = 1 ends the frame.
 
     Arrays are direct arguments, not the structs of kernels/arrays.py: a CPU graph capture walks
     every member of a struct argument: with TissueArrays and RegionArrays here, capturing the step
-    after a relocation took 410 us against 330 us (docs/performance.md)."""
+    after a relocation took 410 us against 330 us (docs/performance.md). The explicit step's launch
+    takes no more than it needs (a capture costs about 10 us of CPU time per argument)."""
     wp.launch(
         constrain_stroke_spheres,
         dim=1,
         inputs=[region_vertex, vertex_count, vertex_ring, near_ring, vertex_local, free_count, surface, model.particle_mass,
-                spheres, count, radius, guard, dt, state_in.particle_q, state_in.particle_qd],
+                spheres, count, radius, guard, int(held), float(alpha), dt, state_in.particle_q, state_in.particle_qd],
         outputs=[state_out.particle_q, state_out.particle_qd],
         device=model.device,
     )
+    if held:
+        dm = model.dmesh
+        wp.launch(
+            sum_stroke_reactions,
+            dim=1,
+            inputs=[region_vertex, vertex_count, vertex_local, free_count, surface, spheres, count, radius, dm.adj_offsets,
+                    dm.adj_vertex, model.adj_spring, dm.rest_position, model.anchor_ke, model.anchor_kd, float(anchor_scale),
+                    state_out.particle_q, state_out.particle_qd],
+            device=model.device,
+        )

@@ -152,6 +152,8 @@ def test_every_output_written_whole_and_none_left_from_a_run_that_fails(tmp_path
     np.testing.assert_allclose(op.Get(0.0), rows[0][1:], atol=1e-4)  # the sphere's centre on its path, in mm
     np.testing.assert_allclose(op.Get(100.0), rows[2][1:], atol=1e-4)
     assert probe.GetRadiusAttr().Get() == pytest.approx(R_MM)
+    data = stage.GetPrimAtPath("/Palpation").GetCustomData()
+    assert data["probe"] == "stroke" and "contact_vertex" not in data  # no one vertex for a stroke: the path is the Probe's
 
     # a run that fails half way leaves no file and no temporary
     from almsdm_warp.protocol.palpation import SimulationDiverged

@@ -34,17 +34,23 @@ def vertex_at(mesh, x_mm, y_mm):
     return int(np.argmin(np.linalg.norm(mesh.vertices[:, :2] - np.array([x_mm, y_mm]) * 1e-3, axis=1)))
 
 
-def test_sliding_on_anchors_keeps_winklers_force(device, bed):
+@pytest.mark.parametrize("integrator, substeps", [("explicit", "auto"), ("explicit", 4), ("implicit", "auto")])
+def test_sliding_on_anchors_keeps_winklers_force(device, bed, integrator, substeps):
+    # with 4 substeps a frame, a sphere that took the whole frame's move at the first substep pushed
+    # 14% off Winkler's force while sliding: the first-order hold spreads the move (measured 0.3%)
     mesh, tissue, area = bed
     path = builtin_stroke(mesh, R, depth=DEPTH, length=8e-3, speed=10e-3, vertex=vertex_at(mesh, -4, 0), hold=0.05)
-    stroke = ProbeStroke(mesh, tissue, probe_radius=R, rings=2, device=device, anchor_scale=area)
+    stroke = ProbeStroke(mesh, tissue, probe_radius=R, rings=2, device=device, anchor_scale=area, integrator=integrator,
+                         substeps=substeps)
     force = np.array([stroke.step(c) for c in path.centre])
     _, radial = anchor_references(R, DEPTH)
     held = force[np.flatnonzero(path.phase == 0)[-1], 2]
     # pressed and held: the grid's sum of anchors against the quadrature (a midpoint rule: measured 0.09%)
     np.testing.assert_allclose(held, radial, rtol=0.005)
     # sliding: a frictionless sphere over a foundation pushes as it does at rest (measured within 0.31%;
-    # the grid passing under the sphere and the anchors' dampers are what is left; their drag: 1%)
+    # the grid passing under the sphere and the anchors' dampers are what is left; their drag: 1%), with
+    # either integrator (an implicit step that lets the trailing vertices relax inside the sphere read
+    # a force short of the static one)
     slide = force[path.phase == 1][50:]
     np.testing.assert_allclose(slide[:, 2], held, rtol=0.015)
     assert np.abs(slide[:, :2]).max() < 0.03 * held
@@ -117,6 +123,8 @@ def test_bad_input_names_the_value(bed):
         ProbeStroke(mesh, tissue, probe_radius=R, probes=0)
     with pytest.raises(ValueError, match="rings"):
         ProbeStroke(mesh, tissue, probe_radius=R, rings="global-free")
+    with pytest.raises(ValueError, match="implicit integrator holds one sphere"):
+        ProbeStroke(mesh, tissue, probe_radius=R, probes=2, integrator="implicit")
     stroke = ProbeStroke(mesh, tissue, probe_radius=R, probes=2, device="cpu")
     with pytest.raises(ValueError, match=r"shape \(2, 3\)"):
         stroke.step([0.0, 0.0, 0.01])

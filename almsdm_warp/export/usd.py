@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..protocol.stroke import ProbeStroke
 from ..sim.model import PROBE_OFF
 from .output import atomic_path, discard, publish, temp_path
 
@@ -140,17 +141,20 @@ class UsdRecorder:
         stage.SetEndTimeCode(0)
         root = UsdGeom.Xform.Define(stage, "/Palpation")
         stage.SetDefaultPrim(root.GetPrim())
-        root.GetPrim().SetCustomData(
-            {
-                "dt_s": float(pal.dt),
-                "record_every": self.every,
-                "mesh": pal.mesh.name,
-                "rings": str(pal.rings),
-                "contact_vertex": int(pal.vertex),
-                "integrator": pal.solver.integrator,
-                "normals": self.normals.strategy,
-            }
-        )
+        data = {
+            "dt_s": float(pal.dt),
+            "record_every": self.every,
+            "mesh": pal.mesh.name,
+            "rings": str(pal.rings),
+            "contact_vertex": int(pal.vertex),
+            "integrator": pal.solver.integrator,
+            "normals": self.normals.strategy,
+        }
+        if isinstance(pal, ProbeStroke):
+            # a stroke touches many vertices on its way: the probe's path is the Probe prim's, no one vertex
+            del data["contact_vertex"]
+            data["probe"] = "stroke"
+        root.GetPrim().SetCustomData(data)
         organ = self.organ = UsdGeom.Mesh.Define(stage, "/Palpation/Organ")
         organ.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)  # a triangle mesh: use the normals
         organ.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)  # triangles wound outward

@@ -11,6 +11,12 @@ the state: a vertex in both regions keeps its position and velocity, a vertex le
 rest only once it is within `tol` of it (so no visible pop). `lead` is the hysteresis: the sphere
 slides about `lead` between two relocations.
 
+The implicit integrator holds sphere 0 in its own solve (the Control's sphere, the pressing sphere's
+law): a backward-Euler step run without the contact and projected after it relaxes the pushed
+vertices inside the sphere, and its force fell a third short of the static equilibrium's
+(docs/stroke.md). The explicit integrator's step is short enough that the projection after it is
+the contact (its reaction is the internal force at the projected positions).
+
 The explicit integrator's substeps are planned once, from the critical step of the whole mesh's
 free vertices, which bounds every region's (a region's stiffness is a principal submatrix of the
 mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem.
@@ -18,6 +24,7 @@ mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -28,7 +35,9 @@ from ..kernels import region_state
 from ..kernels.region_state import reset_vertices_left_behind
 from ..kernels.arrays import struct_from
 from ..kernels.stroke_contact import StrokeSpheres, constrain_spheres
+from ..kernels.arrays import ProbeArrays
 from ..region.region import Region
+from ..sim.model import PROBE_SPHERE
 from .palpation import Palpation, SimulationDiverged, check_probe_radius, replayer
 
 WAKE_TIME = 0.01
@@ -51,6 +60,7 @@ class _Spheres:
         self.count = int(count)
         d = device
         self.centre = wp.zeros(count, dtype=wp.vec3, device=d)
+        self.previous = wp.zeros(count, dtype=wp.vec3, device=d)  # the last frame's, kept by the kernel
         self.reaction = wp.zeros(count, dtype=wp.vec3, device=d)
         self.touching = wp.zeros(count, dtype=wp.int32, device=d)
         self.near_edge = wp.zeros(count, dtype=wp.int32, device=d)
@@ -108,7 +118,7 @@ class ProbeStroke(Palpation):
                          edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below, substeps=substeps,
                          **solver_kw)
         self.radius = radius
-        """The spheres' radius [m] (the Control's own sphere stays off: this class constrains them)."""
+        """The spheres' radius [m] (the Control's own sphere is on only for the implicit solve, which holds sphere 0)."""
         mean_edge = float(self.mesh.edge_rest_length.mean())
         self.lead = 2.0 * mean_edge if lead is None else float(lead)
         self.guard = 0.5 * mean_edge if guard is None else float(guard)
@@ -128,6 +138,8 @@ class ProbeStroke(Palpation):
         from scipy.spatial import cKDTree
 
         self._tree = cKDTree(self._surface_rest)
+        self._held = 0
+        self._hold_in_solve()
         n = self.model.particle_count
         if self.region is None:
             self._ring_of = np.zeros(n, dtype=np.int32)
@@ -143,7 +155,7 @@ class ProbeStroke(Palpation):
             wp.load_module(region_state, device=self.device)  # loaded now, not by the first relocation
         self._views = {}
         self._started = False
-        self._pending = None  # a relocation under way: ("seeds", seeds) then ("built", None)
+        self._pending = None  # a relocation under way: ("seeds", seeds), ("grow", rings left), ("built", None)
         self._warm = False  # the first step runs uncaptured: it loads the kernels outside any capture
         self._fresh = False  # the first step after a relocation runs uncaptured; the next ones capture
 
@@ -235,16 +247,22 @@ class ProbeStroke(Palpation):
 
     def relocate(self, centres) -> None:
         """Rebuild the region around `centres` [m] and the wake now, keeping every vertex's state (see
-        the module). step() spreads the same work over three steps (seeds, build, swap), each under
-        the haptic step's budget."""
+        the module). step() spreads the same work over steps (the seeds; ring 1; the other rings; the
+        swap), each under the haptic step's budget."""
         self._pending = ("seeds", self.seeds(centres))
         while self._pending is not None:
             self._advance_relocation()
 
     def _advance_relocation(self) -> None:
-        stage, seeds = self._pending
+        # the build takes two steps: ring 1, then the others (build_seeds(1) then expand(rings - 1) make
+        # the region build_seeds(rings) makes: rings are appended in the same order)
+        stage, work = self._pending
         if stage == "seeds":
-            self._spare.build_seeds(seeds, self.rings, contact=int(seeds[0]))
+            self._spare.build_seeds(work, 1, contact=int(work[0]))
+            self._pending = ("grow", self.rings - 1) if self.rings > 1 else ("built", None)
+            return
+        if stage == "grow":
+            self._spare.expand(work)
             self._pending = ("built", None)
             return
         old, region = self.region, self._spare
@@ -252,7 +270,8 @@ class ProbeStroke(Palpation):
             reset_vertices_left_behind(self.model, old.region_vertex, old.vertex_count, region, self.states)
         self.region, self._spare = region, old
         self.solver.set_region(region)
-        self.plan_substeps()
+        self.plan_substeps()  # may fall back to the implicit integrator
+        self._hold_in_solve()
         self.vertex = int(region.seed)
         self._ring_of = self.host(region.vertex_ring)
         self._near_ring = max(region.outer_ring - self.margin, 1)
@@ -263,6 +282,18 @@ class ProbeStroke(Palpation):
         if self._started:
             self.relocations += 1
         self._started = True
+
+    def _hold_in_solve(self) -> None:
+        # the implicit solve holds sphere 0: the Control's sphere, its centre read from the spheres' array
+        if self._held or self.solver.integrator != "implicit":
+            return
+        if self.probe_count > 1:
+            raise ValueError(f"the implicit integrator holds one sphere in its solve: probes must be 1 with it, "
+                             f"got {self.probe_count} (use integrator='explicit' for several)")
+        self._held = 1
+        self.control.set_sphere(self.radius)
+        self.control.set(mode=PROBE_SPHERE)
+        self.control.arrays = struct_from(ProbeArrays, self.control, probe_target=self.spheres.centre)
 
     def host(self, array) -> np.ndarray:
         """A host view of a device array: on the CPU one view kept per array (free to read), on CUDA a copy."""
@@ -282,39 +313,67 @@ class ProbeStroke(Palpation):
 
     # -- stepping ------------------------------------------------------------------------------
     def _advance(self) -> None:
-        # one frame: replay the graph of the current state, capturing it (one graph a step) when the
-        # region has changed; the first step ever, and the first after a relocation, run uncaptured
+        # one frame: replay the current state's graphs. After a relocation the frame is captured again:
+        # the explicit step's on the CPU one launch a step (a CPU capture costs about 10 us a launch
+        # argument: its two launches in one step reached 500-700 us), the pieces not yet captured running
+        # uncaptured; otherwise the whole frame at once (an implicit frame captured in pieces made more
+        # slow steps than it saved: docs/stroke.md). The first step ever, and the first after a
+        # relocation, run uncaptured.
         graphs = self._graphs
         if graphs is None:
             graphs = self._graphs = [None, None]
         i = self._cur
-        replay = graphs[i]
-        if replay is None:
-            if not self.capture or not self._warm or self._fresh:
-                self._launch_step(self.states[i], self.states[1 - i])
-                self._cur ^= self._parity
-                self._warm, self._fresh = True, False
-                if not self._cpu:
-                    wp.synchronize_device(self.device)
-                return
+        pieces = graphs[i]
+        if pieces is not None and all(pieces):
+            self._cur ^= self._parity
+            for replay in pieces:
+                replay()
+            return
+        calls = self._frame(self.states[i], self.states[1 - i])
+        if not self.capture or not self._warm or self._fresh:
+            for call in calls:
+                call()
+            self._warm, self._fresh = True, False
+        else:
+            if pieces is None:
+                pieces = graphs[i] = [None] * len(calls)
+            k = pieces.index(None)
             with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
-                self._launch_step(self.states[i], self.states[1 - i])
-            replay = graphs[i] = replayer(cap.graph, self.device)
+                calls[k]()
+            pieces[k] = replayer(cap.graph, self.device)
+            for call, replay in zip(calls, pieces):
+                (replay or call)()
         self._cur ^= self._parity
-        replay()
+        if not self._cpu:
+            wp.synchronize_device(self.device)
 
-    def _launch_step(self, a, b):
+    def _frame(self, a, b) -> list:
+        # the frame's launches as calls: the explicit step's on the CPU one a launch group (captured one
+        # a step); otherwise one call
         sp = self.spheres
-        sp.copy_in()
         region_vertex, count, ring = self._region_arrays
         solver = self.solver
-        h = self.dt / self.substeps
-        for _ in range(self.substeps):
-            solver.step(a, b, self.control, h)
-            constrain_spheres(self.model, region_vertex, count, ring, self._near_ring, solver.vertex_local, solver.free_count,
-                              self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b)
+        n = self.substeps
+        h = self.dt / n
+        calls = []
+        if not self._warm:  # the first frame (uncaptured) starts where it is; on CUDA after the centres' copy in
+            calls.append(functools.partial(wp.copy, sp.previous, sp.centre))
+        for s in range(n):
+            calls.append(functools.partial(solver.step, a, b, self.control, h))
+            calls.append(functools.partial(
+                constrain_spheres, self.model, region_vertex, count, ring, self._near_ring, solver.vertex_local,
+                solver.free_count, self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b,
+                self._held, solver.anchor_scale, (s + 1) / n))
             a, b = b, a
-        sp.copy_out()
+        if self._cpu and solver.conditionally_stable:
+            return calls
+        return [functools.partial(self._run_frame, calls)]
+
+    def _run_frame(self, calls) -> None:
+        self.spheres.copy_in()
+        for call in calls:
+            call()
+        self.spheres.copy_out()
 
     def touch(self, vertex: int, depth: float | None = None) -> None:
         raise TypeError("a ProbeStroke is driven by its spheres' centres: call step(centres), not touch()")
