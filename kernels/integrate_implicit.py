@@ -118,7 +118,7 @@ def integrate_region_implicit(
     driven_local = int(-1)
     if driven >= 0:
         driven_local = vertex_local[driven]
-    iterations, r_norm2 = solve_block_cg(
+    iterations, r_norm2, rhs_norm2 = solve_block_cg(
         free_count, driven_local, tissue.adj_offsets, free_vertex, 1, cg.csr_local, cg.csr_block, cg.diag, cg.diag_inv,
         constrained, cg.normal, b_norm2, max_iterations, tolerance, cg.dv, cg.r, cg.p, cg.Ap,
     )
@@ -141,7 +141,7 @@ def integrate_region_implicit(
             q_out[v] = x1
             qd_out[v] = u1
     cg.stats[0] = float(iterations)
-    cg.stats[1] = wp.sqrt(r_norm2 / wp.max(b_norm2, 1.0e-30))
+    cg.stats[1] = wp.sqrt(r_norm2 / wp.max(rhs_norm2, 1.0e-30))
 
 
 def integrate_implicit(model, region_arrays, anchor_scale, state_in, state_out, control, dt, scratch, max_iterations, tolerance):
