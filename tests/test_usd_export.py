@@ -265,3 +265,38 @@ def test_bad_paths_and_arguments(tmp_path):
     with pytest.raises(ValueError, match="unknown normals strategy"):
         UsdRecorder(tmp_path / "x.usda", pal, normals="fast")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_sphere_probe_is_drawn_at_its_size_and_centre(tmp_path):
+    """A palpation with a rigid sphere: the Probe prim has the sphere's radius, and while it presses
+    its centre is the one the step holds the tissue against (every contact vertex at that distance)."""
+    from almsdm_warp.mesh.primitives import icosphere
+    from almsdm_warp.protocol import Palpation
+    from almsdm_warp.tissue.material import Material
+
+    mesh = icosphere(50.0, 3)
+    pal = Palpation(mesh, Material(10e3, 0.45, 1000.0, thickness=2e-3, foundation=1e6, rayleigh_alpha=60.0),
+                    rings=2, device="cpu", probe_radius=10e-3, integrator="implicit")
+    top = int(np.argmax(mesh.vertices[:, 2]))
+    pal.touch(top, 5e-3)
+    path = tmp_path / "sphere.usda"
+    codes = {}
+
+    def hook(k, total):
+        rec.on_press_step(k, total)
+        if k == 100:  # the end of the ramp: pressed 5 mm
+            codes["q"] = pal.positions()
+            codes["centre"] = pal.probe_target
+
+    with UsdRecorder(path, pal, every=100) as rec:
+        rec.frame(0)
+        pal.press(5e-3, 0.1, 0.05, 0.05, record=hook, record_every=100)
+    stage = Usd.Stage.Open(str(path))
+    probe = UsdGeom.Sphere(stage.GetPrimAtPath("/Palpation/Probe"))
+    assert probe.GetRadiusAttr().Get() == pytest.approx(10.0)
+    (translate,) = probe.GetOrderedXformOps()
+    centre_mm = np.asarray(translate.Get(100))
+    np.testing.assert_allclose(centre_mm, codes["centre"] * 1e3, atol=1e-4)
+    # the vertices the sphere holds lie on its surface: none inside, the nearest at its radius
+    d = np.linalg.norm(codes["q"] * 1e3 - centre_mm, axis=1)
+    assert d.min() == pytest.approx(10.0, abs=0.05)

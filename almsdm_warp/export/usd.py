@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..protocol.stroke import ProbeStroke
-from ..sim.model import PROBE_OFF
+from ..sim.model import PROBE_OFF, PROBE_SPHERE
 from .output import atomic_path, discard, publish, temp_path
 
 USD_SUFFIXES = (".usda", ".usdc", ".usd")
@@ -90,7 +90,7 @@ class UsdRecorder:
             pal.press(0.01, record=rec.on_press_step, record_every=rec.every)
     """
 
-    def __init__(self, path, palpation, *, every: int = 1, normals: str = "precomputed", probe_radius: float = 2.5e-3, flush_every: int | None = None, flush_mb: float = 64.0):
+    def __init__(self, path, palpation, *, every: int = 1, normals: str = "precomputed", probe_radius: float | None = None, flush_every: int | None = None, flush_mb: float = 64.0):
         from pxr import Sdf, Usd, UsdGeom, Vt  # usd-core: only here
 
         from ..sim.normals import SurfaceNormals
@@ -103,7 +103,9 @@ class UsdRecorder:
         self.every = int(every)
         self._flush_every = flush_every
         self._flush_bytes = flush_mb * 1e6
-        self.probe_radius = float(probe_radius)
+        # the drawn probe: the palpation's sphere, or a 2.5 mm marker on the paper's one-vertex probe
+        sphere = float(getattr(pal, "probe_radius", 0.0) or 0.0)
+        self.probe_radius = float(probe_radius) if probe_radius is not None else (sphere if sphere > 0 else 2.5e-3)
         mesh = pal.mesh
         self.normals = SurfaceNormals(pal.model.dmesh, pal.device, normals)
         # the exported points: the surface vertices (all of them on a surface mesh), in mesh order
@@ -251,6 +253,8 @@ class UsdRecorder:
         in_contact = pal.probe_mode != PROBE_OFF
         if probe_center is not None:  # a probe on a path: where the path put it
             center = np.asarray(probe_center, dtype=np.float64) * 1e3
+        elif in_contact and pal.probe_mode == PROBE_SPHERE:  # a sphere pressing: its centre, as the step sees it
+            center = pal.probe_target * 1e3
         else:  # a press: its tip on the contact vertex while it presses, at the rest surface once lifted
             tip = q[pal.vertex].astype(np.float64) if in_contact else pal.rest_position()
             outward = -np.asarray(pal.inward_normal(), dtype=np.float64)  # per frame: the probe may have moved

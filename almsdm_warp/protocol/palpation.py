@@ -440,8 +440,13 @@ class Palpation:
 
     @property
     def probe_mode(self) -> int:
-        """PROBE_OFF / PROBE_DISPLACEMENT / PROBE_FORCE, as the next step will see it."""
+        """PROBE_OFF / PROBE_DISPLACEMENT / PROBE_FORCE / PROBE_SPHERE, as the next step will see it."""
         return int(self._mode[0])
+
+    @property
+    def probe_target(self) -> np.ndarray:
+        """The probe's target [m] as the next step will see it (the sphere's centre in sphere mode), a copy."""
+        return np.array(self._target[0], dtype=np.float64)
 
     @property
     def feedback_force(self) -> np.ndarray:
