@@ -19,6 +19,7 @@ import shutil
 import threading
 import time
 import zipfile
+from concurrent.futures import Future
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -418,7 +419,8 @@ class SweepTimes:
 class RingBatches:
     """A plan's BatchPalpations on one device, one per ring count (made when first asked for).
 
-    critical_dt_bound: the whole mesh's critical step (BatchPalpation.critical_dt_bound), or None.
+    critical_dt_bound: the whole mesh's critical step (BatchPalpation.critical_dt_bound), or None, or a
+    Future of it (concurrent.futures), waited for after the region tables are built.
     Where the plan presses a vertex more than once with a ring count, that count's batch gathers each
     chunk's regions from a table of its distinct contacts built once (BatchPalpation.cache_regions;
     the same bits): `tables` (ring count -> RegionTable), shared by the RingBatches of one model."""
@@ -436,13 +438,15 @@ class RingBatches:
             p = self.plan
             batch = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator,
                                    probe_radius=p.probe_radius)
-            batch.critical_dt_bound = self.critical_dt_bound
             if rings in self.tables:
                 batch.region_table = self.tables[rings]
             else:
                 contacts = p.vertices[p.point_rings == rings]
                 if len(np.unique(contacts)) < len(contacts):  # a contact pressed again: its region built once
                     self.tables[rings] = batch.cache_regions(contacts, p.depth)
+            if isinstance(self.critical_dt_bound, Future):
+                self.critical_dt_bound = self.critical_dt_bound.result()
+            batch.critical_dt_bound = self.critical_dt_bound
             self._batches[rings] = batch
         return self._batches[rings]
 
@@ -679,7 +683,6 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
     advance = None if progress is None else progress.advance
     with times.phase("set-up"):
         models = [plan.model(d) for d in devices]
-        bound = sweep_critical_dt(plan, models[0])
     todo = list(todo)
     if not pipeline:
         batches = [RingBatches(plan, m) for m in models]
@@ -693,6 +696,16 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
                 with times.phase("writing"):
                     parts.write(i, columns)
         return
+    bound = Future()  # the critical step, on a thread of its own while the region tables are built
+
+    def critical_dt():
+        try:
+            with times.phase("set-up"):
+                bound.set_result(sweep_critical_dt(plan, models[0]))
+        except BaseException as exc:
+            bound.set_exception(exc)
+
+    threading.Thread(target=critical_dt, name="sweep-critical-dt", daemon=True).start()
     writer, lock, queue = Writer(parts, times), threading.Lock(), iter(todo)
     stop = threading.Event()
 
