@@ -280,6 +280,9 @@ class Parts:
         """Chunks found on disk by open() that did not match their checksum (removed, to be pressed again)."""
         self.written: dict[int, dict] = {}
         """Chunk index -> the columns this process wrote to its file (gather() takes them as they are)."""
+        self.table: dict | None = None
+        """The output's columns, every point, filled in as write() writes each chunk (on the writer's
+        thread, while the next chunks press): gather() returns it when this process wrote every chunk."""
         self._lock = threading.Lock()  # chunks finish on several threads (several GPUs)
 
     @property
@@ -337,10 +340,18 @@ class Parts:
             self.sums[i] = digest[0]
             self._write_manifest()
             self.written[i] = columns
+            if self.table is None:
+                n = len(self.plan.vertices)
+                self.table = {c: np.empty(n, dtype=np.asarray(columns[c]).dtype) for c in COLUMNS}
+            begin, end = self.plan.chunks[i]
+            for c in COLUMNS:
+                self.table[c][begin:end] = columns[c]
 
     def gather(self) -> dict:
         """Every chunk's columns, in point order: those this process wrote from memory, the others read
         back; InputError for a chunk found damaged."""
+        if len(self.written) == len(self.plan.chunks):
+            return self.table
         parts = []
         for i in range(len(self.plan.chunks)):
             if i in self.written:
