@@ -6,8 +6,10 @@ points; each chunk is pressed as one batch (BatchPalpation) on one device and wr
 its own file, atomically, beside the output (``OUT.parts/``), so an interrupted sweep resumes
 from what it wrote. Chunks go, in order, to whichever device given is free (a host thread a GPU),
 where the next chunk is built and launched while one presses and the results are read back and
-written on the side (run_local); or to Ray actors of one GPU each (``ray`` extra). When all
-are done they are gathered, in point order, into the output (.csv or .npz) and the parts removed.
+written on the side (run_local), each distinct contact's region built once a sweep and each
+chunk's regions gathered from that table on the device (RingBatches); or to Ray actors of one GPU
+each (``ray`` extra). When all are done they are gathered, in point order, into the output (.csv
+or .npz) and the parts removed.
 """
 
 from __future__ import annotations
