@@ -147,6 +147,45 @@ def build_regions(dmesh, seed_offsets, seeds, rings, support, arrays):
 
 
 @wp.kernel
+def gather_batch_regions(table: BatchRegionArrays, rows: wp.array(dtype=wp.int32), width: int, threads: int, out: BatchRegionArrays):
+    # palpation b's region is row rows[b] of the table, copied whole (capacities equal): its `threads`
+    # threads (b, t) copy elements t, t + threads, ... of each of its rows (on CUDA one a word, so
+    # consecutive threads write consecutive words; on the CPU one a palpation, a loop)
+    b, t = wp.tid()
+    r = rows[b]
+    j = t
+    while j < width:
+        if j < out.region_vertex.shape[1]:
+            out.region_vertex[b, j] = table.region_vertex[r, j]
+        if j < out.local_offsets.shape[1]:
+            out.local_offsets[b, j] = table.local_offsets[r, j]
+        if j < out.ring_offsets.shape[1]:
+            out.ring_offsets[b, j] = table.ring_offsets[r, j]
+        if j < out.local_neighbour.shape[1]:
+            out.local_neighbour[b, j] = table.local_neighbour[r, j]
+            out.local_edge[b, j] = table.local_edge[r, j]
+            out.local_owner[b, j] = table.local_owner[r, j]
+            out.local_spring[b, j] = table.local_spring[r, j]
+            out.spring_entry[b, j] = table.spring_entry[r, j]
+        if j == 0:
+            out.region_count[b] = table.region_count[r]
+            out.free_count[b] = table.free_count[r]
+            out.spring_count[b] = table.spring_count[r]
+            out.entry_count[b] = table.entry_count[r]
+            out.status[b] = table.status[r]
+        j += threads
+
+
+def gather_regions(table, rows, out):
+    """Each palpation b of `out` (BatchRegions) takes row rows[b] of `table` (BatchRegions of the same
+    capacities, built by build_regions): its region, topology and counts, the same bits (one launch)."""
+    width = max(out.region_vertex.shape[1], out.local_offsets.shape[1], out.ring_offsets.shape[1], out.local_neighbour.shape[1])
+    threads = width if rows.device.is_cuda else 1
+    wp.launch(gather_batch_regions, dim=(len(rows), threads), inputs=[table.arrays, rows, width, threads, out.arrays],
+              device=rows.device)
+
+
+@wp.kernel
 def rest_batch_state(
     regions: BatchRegionArrays,
     tissue: TissueArrays,

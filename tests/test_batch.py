@@ -105,6 +105,39 @@ def test_batch_repeated_vertices(device, stomach):
     assert res.recovery_error[0] == res.recovery_error[2]
 
 
+@pytest.mark.parametrize("radius", [0.0, 0.004])
+def test_region_table_gathers_the_built_regions(stomach, radius):
+    # a batch of repeated contacts gathered from the table of its distinct ones against the same batch
+    # built contact by contact: every region array, the counts, the contacts' local index and the press
+    # equal, bit for bit (with a sphere, patches of the press's depth)
+    contacts = np.array([693, 5, 693, 311, 5, 1001])
+    built = BatchPalpation(stomach, rings=2, device="cpu", probe_radius=radius)
+    cached = BatchPalpation(model=built.model, rings=2, probe_radius=radius)
+    table = cached.cache_regions([1001, 5, 311, 693, 5], depth=SHORT["depth"])
+    np.testing.assert_array_equal(table.vertices, [5, 311, 693, 1001])
+    a, b = built.touch(contacts, SHORT["depth"]).regions, cached.touch(contacts, SHORT["depth"]).regions
+    assert cached._region_host is not None  # gathered, not built
+    counts = {n: getattr(a, n).numpy() for n in ("region_count", "free_count", "entry_count", "spring_count", "status")}
+    for n, c in counts.items():
+        np.testing.assert_array_equal(getattr(b, n).numpy(), c, err_msg=n)
+    np.testing.assert_array_equal(b.ring_offsets.numpy(), a.ring_offsets.numpy())
+    rows = {"region_vertex": "region_count", "local_offsets": "free_count", "local_neighbour": "entry_count",
+            "local_edge": "entry_count", "local_owner": "entry_count", "local_spring": "entry_count",
+            "spring_entry": "spring_count"}
+    for name, count in rows.items():
+        x, y = getattr(a, name).numpy(), getattr(b, name).numpy()
+        for k, n in enumerate(counts[count] + (name == "local_offsets")):
+            np.testing.assert_array_equal(y[k, :n], x[k, :n], err_msg=f"{name} of palpation {k}")
+    np.testing.assert_array_equal(cached.contact_local.numpy(), built.contact_local.numpy())
+    ra, rb = built.press(**SHORT), cached.press(**SHORT)
+    for name in ("peak_force", "hold_force", "recovery_error"):
+        np.testing.assert_array_equal(getattr(rb, name), getattr(ra, name), err_msg=name)
+    # a contact the table lacks is built as before
+    cached.touch([693, 0], SHORT["depth"])
+    assert cached._region_host is None
+    np.testing.assert_array_equal(cached.region(1), built.touch([0], SHORT["depth"]).region(0))
+
+
 def test_batch_rejects_bad_vertices(stomach):
     bp = BatchPalpation(stomach, rings=2, device="cpu")
     with pytest.raises(ValueError, match="outside the mesh"):

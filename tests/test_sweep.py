@@ -48,6 +48,27 @@ def test_more_points_than_vertices_snap_to_the_nearest(stomach):
     np.testing.assert_allclose(np.linalg.norm(points - stomach.vertices[vertices], axis=1), d.min(axis=1))
 
 
+def test_area_uniform_points_are_trimeshs_and_uniform(stomach):
+    # the same points as trimesh's sampler for the same seed (so a sweep's plan, and its resume, are
+    # unchanged), and uniform by area: each triangle's share of points against its share of the area
+    import trimesh
+
+    tm = trimesh.Trimesh(vertices=stomach.vertices, faces=stomach.triangles, process=False)
+    for n, seed in ((1, 0), (4097, 3)):
+        np.testing.assert_array_equal(sw.area_uniform_points(stomach.vertices, stomach.triangles, n, seed),
+                                      trimesh.sample.sample_surface(tm, n, seed=seed)[0])
+    n = 200000
+    points = sw.area_uniform_points(stomach.vertices, stomach.triangles, n, 1)
+    # the z-band below the median height holds the share of area below it (areas of the triangles'
+    # pieces are not needed: triangles wholly below or above the band's edge bound the share)
+    t = stomach.vertices[stomach.triangles]
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    z = np.median(points[:, 2])
+    below, above = area[t[:, :, 2].max(axis=1) <= z].sum(), area[t[:, :, 2].min(axis=1) > z].sum()
+    share = np.mean(points[:, 2] <= z) * area.sum()
+    assert below - 0.01 * area.sum() <= share <= area.sum() - above + 0.01 * area.sum()
+
+
 def test_tables_round_trip(tmp_path):
     rng = np.random.default_rng(1)
     cols = {c: rng.normal(size=9) for c in sw.COLUMNS}

@@ -101,35 +101,72 @@ class BatchResult:
 class BatchRegions:
     """Compacted per-palpation regions of fixed capacity, on the device (see kernels/batch_rings.py)."""
 
-    def __init__(self, batch_size: int, vertex_capacity: int, entry_capacity: int, rings: int, device):
+    def __init__(self, batch_size: int, vertex_capacity: int, entry_capacity: int, rings: int, device, zeros=True):
+        # zeros=False: left uninitialised, for a gather that writes every element (RegionTable.gather)
         B, cv, ce, d = batch_size, vertex_capacity, entry_capacity, device
+        self.rings = rings
+        alloc = wp.zeros if zeros else wp.empty
         self.vertex_capacity = cv
         self.entry_capacity = ce
-        self.region_vertex = wp.zeros((B, cv), dtype=wp.int32, device=d)
+        self.region_vertex = alloc((B, cv), dtype=wp.int32, device=d)
         """Mesh id of each region vertex in local order (ring after ring), shape [B, capacity]."""
-        self.ring_offsets = wp.zeros((B, rings + 2), dtype=wp.int32, device=d)
+        self.ring_offsets = alloc((B, rings + 2), dtype=wp.int32, device=d)
         """Ring r of palpation b is region_vertex[b, ring_offsets[b, r]:ring_offsets[b, r + 1]]."""
-        self.region_count = wp.zeros(B, dtype=wp.int32, device=d)
-        self.free_count = wp.zeros(B, dtype=wp.int32, device=d)
+        self.region_count = alloc(B, dtype=wp.int32, device=d)
+        self.free_count = alloc(B, dtype=wp.int32, device=d)
         """Free vertices (all but the fixed outer ring): the first free_count in local order."""
-        self.local_offsets = wp.zeros((B, cv + 1), dtype=wp.int32, device=d)
+        self.local_offsets = alloc((B, cv + 1), dtype=wp.int32, device=d)
         """CSR offsets of the free vertices' neighbour lists, shape [B, capacity + 1]."""
-        self.local_neighbour = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        self.local_neighbour = alloc((B, ce), dtype=wp.int32, device=d)
         """Local index of each CSR neighbour (mesh CSR order), shape [B, entry capacity]."""
-        self.local_edge = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        self.local_edge = alloc((B, ce), dtype=wp.int32, device=d)
         """Mesh edge id (spring) of each CSR entry, shape [B, entry capacity]."""
-        self.local_owner = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        self.local_owner = alloc((B, ce), dtype=wp.int32, device=d)
         """Local index of the free vertex each CSR entry belongs to, shape [B, entry capacity]."""
-        self.local_spring = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        self.local_spring = alloc((B, ce), dtype=wp.int32, device=d)
         """Per CSR entry: s + 1 when it reads spring s as is, -(s + 1) negated (its mirror entry's)."""
-        self.spring_entry = wp.zeros((B, ce), dtype=wp.int32, device=d)
+        self.spring_entry = alloc((B, ce), dtype=wp.int32, device=d)
         """The CSR entry that computes each spring (each spring of the region once), [B, entry capacity]."""
-        self.spring_count = wp.zeros(B, dtype=wp.int32, device=d)
-        self.entry_count = wp.zeros(B, dtype=wp.int32, device=d)
+        self.spring_count = alloc(B, dtype=wp.int32, device=d)
+        self.entry_count = alloc(B, dtype=wp.int32, device=d)
         """CSR entries of each palpation's free vertices (its local_offsets[b, free_count[b]])."""
-        self.status = wp.zeros(B, dtype=wp.int32, device=d)
+        self.status = alloc(B, dtype=wp.int32, device=d)
         self.arrays = struct_from(BatchRegionArrays, self)
         """The arrays above as one kernel argument (kernels/arrays.py)."""
+
+
+class RegionTable:
+    """The regions of distinct contacts, built once (a BatchRegions row each) and gathered by index.
+
+    A sweep presses each vertex of a mesh many times (1e6 points on 1,002 vertices); the table builds
+    each distinct contact's region once (with a sphere, for one patch depth), and a batch of those
+    contacts takes its regions from it with one gather launch and no read-back: the counts the batch
+    plans with and each contact's local index are host copies taken once here."""
+
+    def __init__(self, vertices: np.ndarray, patch_depth, regions: BatchRegions, contact_local: np.ndarray):
+        self.vertices = vertices
+        """The distinct contact vertices, sorted, int64: row r holds vertices[r]'s region."""
+        self.patch_depth = patch_depth
+        """Depth [m] the sphere's patches were sized for, or None (no sphere)."""
+        self.regions = regions
+        self.counts = tuple(host_copy(a) for a in (regions.region_count, regions.free_count, regions.entry_count,
+                                                   regions.spring_count))
+        """Host copies of region_count, free_count, entry_count and spring_count, a row each."""
+        self.contact_local = contact_local
+
+    def rows(self, vertices: np.ndarray, patch_depth) -> "np.ndarray | None":
+        """Each of `vertices`' row, or None where one is not in the table (or the patch depth differs)."""
+        if patch_depth != self.patch_depth:
+            return None
+        rows = np.minimum(np.searchsorted(self.vertices, vertices), len(self.vertices) - 1)
+        return rows if np.array_equal(self.vertices[rows], vertices) else None
+
+    def gather(self, rows: np.ndarray) -> BatchRegions:
+        """The regions of the contacts at `rows`, as a build of them gives them (the same bits)."""
+        t = self.regions
+        out = BatchRegions(len(rows), t.vertex_capacity, t.entry_capacity, t.rings, t.region_vertex.device, zeros=False)
+        br.gather_regions(t, wp.array(rows.astype(np.int32), dtype=wp.int32, device=out.region_vertex.device), out)
+        return out
 
 
 class BatchPalpation:
@@ -210,6 +247,9 @@ class BatchPalpation:
         self._capacity = capacity
         self.batch_size = 0
         self.regions = None
+        self.region_table = None
+        """A RegionTable (cache_regions) that build() gathers from where it holds every contact, or None."""
+        self._region_host = None  # host copies of the regions' counts where build() has them without a read-back
         self.vertices = np.zeros(0, dtype=np.int64)
         offsets = self.mesh.adjacency[0]
         self._max_degree = int(np.diff(offsets).max(initial=1))
@@ -221,17 +261,46 @@ class BatchPalpation:
         return self.build(vertices, depth).plan()
 
     def build(self, vertices, depth=None) -> "BatchPalpation":
-        """touch()'s first half: the regions of `vertices` (and the sphere's patches), built on the device."""
+        """touch()'s first half: the regions of `vertices` (and the sphere's patches), built on the device,
+        or gathered from region_table where it holds them all (the same bits)."""
         self.vertices = self._checked_vertices(vertices)
         self.batch_size = len(self.vertices)
         if self.probe_radius > 0:
             self.patch_depth = PATCH_DEPTH if depth is None else float(depth)
-            offsets, seeds = sphere_patches(self.model, self.vertices, self.probe_radius, self.patch_depth)
-        else:
-            offsets, seeds = np.arange(self.batch_size + 1, dtype=np.int32), self.vertices.astype(np.int32)
-        self.regions = self._build_regions(offsets, seeds)
+        table = self.region_table
+        rows = None if table is None else table.rows(self.vertices, self.patch_depth)
+        if rows is not None:
+            self.regions = table.gather(rows)
+            self._region_host = tuple(c[rows] for c in table.counts)
+            self._find_contacts(table.contact_local[rows])
+            return self
+        self._region_host = None
+        self.regions = self._build_seeds(self.vertices)
         self._find_contacts()
         return self
+
+    def _build_seeds(self, vertices) -> BatchRegions:
+        # each contact's ring 0: the vertex itself, or the sphere's patch at patch_depth
+        if self.probe_radius > 0:
+            offsets, seeds = sphere_patches(self.model, vertices, self.probe_radius, self.patch_depth)
+        else:
+            offsets, seeds = np.arange(len(vertices) + 1, dtype=np.int32), vertices.astype(np.int32)
+        return self._build_regions(offsets, seeds)
+
+    def cache_regions(self, vertices, depth=None) -> RegionTable:
+        """Build the regions of the distinct `vertices` once (with a sphere, for patches `depth` [m] deep,
+        default PATCH_DEPTH) into region_table: build() of contacts among them then gathers their
+        regions from it instead of building them (the same bits). Returns the table (a batch of the
+        same model, rings and probe may share it: assign its region_table)."""
+        distinct = np.unique(self._checked_vertices(vertices))
+        patch_depth = None
+        if self.probe_radius > 0:
+            patch_depth = self.patch_depth = PATCH_DEPTH if depth is None else float(depth)
+        regions = self._build_seeds(distinct)
+        rv = host_copy(regions.region_vertex)
+        local = np.argmax(rv == distinct[:, None], axis=1).astype(np.int32)
+        self.region_table = RegionTable(distinct, patch_depth, regions, local)
+        return self.region_table
 
     def plan(self) -> "BatchPalpation":
         """touch()'s second half, after build(): the kernel, substeps and states of those regions."""
@@ -288,10 +357,11 @@ class BatchPalpation:
                                  f"(below the fixed plane): the probe cannot move it")
         return verts.astype(np.int64)
 
-    def _find_contacts(self) -> None:
+    def _find_contacts(self, local=None) -> None:
         # each contact vertex's local index (ring 0 is sorted, so a sphere's contact may be anywhere in it)
-        rv = self.regions.region_vertex.numpy()
-        local = np.argmax(rv == self.vertices[:, None], axis=1).astype(np.int32)
+        if local is None:
+            rv = self.regions.region_vertex.numpy()
+            local = np.argmax(rv == self.vertices[:, None], axis=1).astype(np.int32)
         self.contact_local = wp.array(local, dtype=wp.int32, device=self.device)
         """Local index of each palpation's contact vertex in its region, int32 [B]."""
         self._contact_local = local
@@ -327,10 +397,12 @@ class BatchPalpation:
     def _choose_kernel(self) -> None:
         # the kernels' capacities: the largest region of this batch, not the build's guess
         regions = self.regions
-        counts = self.region_vertex_counts = host_copy(regions.region_count)
-        free = self.free_vertex_counts = host_copy(regions.free_count)
-        entries = int(host_copy(regions.entry_count).max(initial=1))
-        springs = int(host_copy(regions.spring_count).max(initial=1))
+        host = self._region_host or tuple(host_copy(a) for a in (regions.region_count, regions.free_count,
+                                                                 regions.entry_count, regions.spring_count))
+        counts = self.region_vertex_counts = host[0]
+        free = self.free_vertex_counts = host[1]
+        entries = int(host[2].max(initial=1))
+        springs = int(host[3].max(initial=1))
         self.vertex_capacity = _pow2(int(counts.max()), 16)
         self.entry_capacity = _pow2(entries, 16)
         self.fast_plan = self._fast_plan(int(counts.max()), int(free.max()), entries, springs)

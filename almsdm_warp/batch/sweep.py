@@ -6,8 +6,10 @@ points; each chunk is pressed as one batch (BatchPalpation) on one device and wr
 its own file, atomically, beside the output (``OUT.parts/``), so an interrupted sweep resumes
 from what it wrote. Chunks go, in order, to whichever device given is free (a host thread a GPU),
 where the next chunk is built and launched while one presses and the results are read back and
-written on the side (run_local); or to Ray actors of one GPU each (``ray`` extra). When all
-are done they are gathered, in point order, into the output (.csv or .npz) and the parts removed.
+written on the side (run_local), each distinct contact's region built once a sweep and each
+chunk's regions gathered from that table on the device (RingBatches); or to Ray actors of one GPU
+each (``ray`` extra). When all are done they are gathered, in point order, into the output (.csv
+or .npz) and the parts removed.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import shutil
 import threading
 import time
 import zipfile
+from concurrent.futures import Future
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,6 +57,30 @@ def farthest_points(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
     return chosen
 
 
+def area_uniform_points(vertices: np.ndarray, triangles: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
+    """`n` points [n, 3] uniform by area over the triangles, from np.random.default_rng(seed).
+
+    Each point picks a triangle with probability proportional to its area (the areas' cumulative sum
+    searched with a uniform number), then a point uniform in it (two uniform numbers u, v; where
+    u + v > 1 they are folded back as 1 - u, 1 - v). The draws and the arithmetic are trimesh's
+    ``sample.sample_surface``, so the points are its bits for the same seed, without building a mesh
+    object or its (n, 2, 3) temporaries."""
+    p = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles)
+    o = p[t[:, 0]]
+    e1, e2 = p[t[:, 1]] - o, p[t[:, 2]] - o
+    # the area as trimesh computes it: |(v1 - v0) x (v2 - v1)| / 2
+    c = np.cross(e1, p[t[:, 2]] - p[t[:, 1]])
+    cum = np.cumsum(np.sqrt((c**2).sum(axis=1)) / 2.0)
+    rng = np.random.default_rng(seed)
+    face = np.searchsorted(cum, rng.random(n) * cum[-1])
+    uv = rng.random((n, 2))
+    fold = uv.sum(axis=1) > 1.0
+    uv[fold] -= 1.0
+    np.abs(uv, out=uv)
+    return e1[face] * uv[:, :1] + e2[face] * uv[:, 1:] + o[face]
+
+
 def sample_points(mesh, n: int, seed: int = 0):
     """`n` contact points spread evenly over the surface: (points [n, 3] m, contact vertex [n]).
 
@@ -71,15 +98,13 @@ def sample_points(mesh, n: int, seed: int = 0):
         start = int(np.flatnonzero(surface == top_vertex(mesh))[0])  # its index among the surface vertices
         idx = surface[farthest_points(v[surface], n, start)]
         return v[idx].copy(), idx.astype(np.int64)
-    import trimesh
     from scipy.spatial import cKDTree
 
-    tm = trimesh.Trimesh(vertices=v, faces=mesh.triangles, process=False)
     if n <= FPS_MAX:
-        dense, _ = trimesh.sample.sample_surface(tm, 3 * n, seed=seed)
+        dense = area_uniform_points(v, mesh.triangles, 3 * n, seed)
         pts = dense[farthest_points(dense, n, int(np.argmax(dense[:, 2])))]
     else:  # farthest-point sampling costs n x 3n: beyond FPS_MAX, area-uniform random points
-        pts, _ = trimesh.sample.sample_surface(tm, n, seed=seed)
+        pts = area_uniform_points(v, mesh.triangles, n, seed)
     _, near = cKDTree(v[surface]).query(pts, workers=-1)  # every core: the same nearest vertices
     return pts, surface[near].astype(np.int64)
 
@@ -257,6 +282,9 @@ class Parts:
         """Chunks found on disk by open() that did not match their checksum (removed, to be pressed again)."""
         self.written: dict[int, dict] = {}
         """Chunk index -> the columns this process wrote to its file (gather() takes them as they are)."""
+        self.table: dict | None = None
+        """The output's columns, every point, filled in as write() writes each chunk (on the writer's
+        thread, while the next chunks press): gather() returns it when this process wrote every chunk."""
         self._lock = threading.Lock()  # chunks finish on several threads (several GPUs)
 
     @property
@@ -314,10 +342,18 @@ class Parts:
             self.sums[i] = digest[0]
             self._write_manifest()
             self.written[i] = columns
+            if self.table is None:
+                n = len(self.plan.vertices)
+                self.table = {c: np.empty(n, dtype=np.asarray(columns[c]).dtype) for c in COLUMNS}
+            begin, end = self.plan.chunks[i]
+            for c in COLUMNS:
+                self.table[c][begin:end] = columns[c]
 
     def gather(self) -> dict:
         """Every chunk's columns, in point order: those this process wrote from memory, the others read
         back; InputError for a chunk found damaged."""
+        if len(self.written) == len(self.plan.chunks):
+            return self.table
         parts = []
         for i in range(len(self.plan.chunks)):
             if i in self.written:
@@ -396,11 +432,16 @@ class SweepTimes:
 class RingBatches:
     """A plan's BatchPalpations on one device, one per ring count (made when first asked for).
 
-    critical_dt_bound: the whole mesh's critical step (BatchPalpation.critical_dt_bound), or None."""
+    critical_dt_bound: the whole mesh's critical step (BatchPalpation.critical_dt_bound), or None, or a
+    Future of it (concurrent.futures), waited for after the region tables are built.
+    Where the plan presses a vertex more than once with a ring count, that count's batch gathers each
+    chunk's regions from a table of its distinct contacts built once (BatchPalpation.cache_regions;
+    the same bits): `tables` (ring count -> RegionTable), shared by the RingBatches of one model."""
 
-    def __init__(self, plan: SweepPlan, model, critical_dt_bound=None):
+    def __init__(self, plan: SweepPlan, model, critical_dt_bound=None, tables: dict | None = None):
         self.plan, self.model, self.device = plan, model, model.device
         self.critical_dt_bound = critical_dt_bound
+        self.tables = {} if tables is None else tables
         self._batches = {}
 
     def get(self, rings: int):
@@ -410,6 +451,14 @@ class RingBatches:
             p = self.plan
             batch = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator,
                                    probe_radius=p.probe_radius)
+            if rings in self.tables:
+                batch.region_table = self.tables[rings]
+            else:
+                contacts = p.vertices[p.point_rings == rings]
+                if len(np.unique(contacts)) < len(contacts):  # a contact pressed again: its region built once
+                    self.tables[rings] = batch.cache_regions(contacts, p.depth)
+            if isinstance(self.critical_dt_bound, Future):
+                self.critical_dt_bound = self.critical_dt_bound.result()
             batch.critical_dt_bound = self.critical_dt_bound
             self._batches[rings] = batch
         return self._batches[rings]
@@ -448,8 +497,9 @@ class Lane:
 
         self.batches, self.times, self.device = batches, times, batches.device
         self.stream = wp.Stream(self.device) if self.device.is_cuda else None
-        for k in np.unique(batches.plan.point_rings):  # made now: their set-up reads on the null stream
-            batches.get(int(k))
+        with times.phase("region build"):  # made now: their set-up (and region tables) read on the null stream
+            for k in np.unique(batches.plan.point_rings):
+                batches.get(int(k))
         self.started = []
         """(indices in the chunk, batch, pinned (peak, hold, q0), events) of the chunk in flight."""
         self._pinned = {}
@@ -646,7 +696,6 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
     advance = None if progress is None else progress.advance
     with times.phase("set-up"):
         models = [plan.model(d) for d in devices]
-        bound = sweep_critical_dt(plan, models[0])
     todo = list(todo)
     if not pipeline:
         batches = [RingBatches(plan, m) for m in models]
@@ -660,6 +709,16 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
                 with times.phase("writing"):
                     parts.write(i, columns)
         return
+    bound = Future()  # the critical step, on a thread of its own while the region tables are built
+
+    def critical_dt():
+        try:
+            with times.phase("set-up"):
+                bound.set_result(sweep_critical_dt(plan, models[0]))
+        except BaseException as exc:
+            bound.set_exception(exc)
+
+    threading.Thread(target=critical_dt, name="sweep-critical-dt", daemon=True).start()
     writer, lock, queue = Writer(parts, times), threading.Lock(), iter(todo)
     stop = threading.Event()
 
@@ -668,7 +727,8 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
             return None if stop.is_set() else next(queue, None)
 
     def work(lanes):
-        run_device(plan, [RingBatches(plan, m, bound) for m in lanes], take, writer.put, times, advance)
+        tables = {id(m): {} for m in lanes}  # a model's region tables, shared by its lanes
+        run_device(plan, [RingBatches(plan, m, bound, tables[id(m)]) for m in lanes], take, writer.put, times, advance)
 
     cuda = [m for m in models if m.device.is_cuda]
     if len(cuda) == len(models) and len({m.device.alias for m in cuda}) == len(cuda):
