@@ -169,7 +169,7 @@ def test_ray_actor_presses_the_serial_bits(stomach, tmp_path):
     from almsdm_warp.tissue.params import TissueParams
 
     plan = sw.SweepPlan(stomach, TissueParams(), None, None, 2, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 4)
-    actor = sw.SweepDevice(plan, False, sw.sweep_critical_dt(plan, plan.model("cpu")))
+    actor = sw.SweepDevice(plan, False, sw.sweep_critical_dt(plan))
     serial = plan.batch("cpu")
     for i, (begin, end) in enumerate(plan.chunks):
         expected = sw.press_chunk(serial, plan, begin, end)()

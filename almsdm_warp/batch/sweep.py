@@ -175,6 +175,13 @@ class SweepPlan:
         """The batches of this plan on `device`, one per ring count (with `model`, made on that device, when given)."""
         return RingBatches(self, model if model is not None else self.model(device))
 
+    def critical_dt(self) -> float:
+        """The whole mesh's critical step [s] (Model.critical_dt at rest, a bound of every region's),
+        computed once a plan: the command line's cost check and the sweep's substeps share it."""
+        if "_critical_dt" not in self.__dict__:
+            self.__dict__["_critical_dt"] = self.model("cpu").critical_dt()
+        return self.__dict__["_critical_dt"]
+
     def model(self, device):
         from ..sim.model import Model
 
@@ -714,7 +721,7 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
     def critical_dt():
         try:
             with times.phase("set-up"):
-                bound.set_result(sweep_critical_dt(plan, models[0]))
+                bound.set_result(sweep_critical_dt(plan))
         except BaseException as exc:
             bound.set_exception(exc)
 
@@ -762,10 +769,10 @@ def _run_threads(work, groups, stop, writer):
     writer.close()
 
 
-def sweep_critical_dt(plan: SweepPlan, model) -> float | None:
+def sweep_critical_dt(plan: SweepPlan) -> float | None:
     """The whole mesh's critical step [s] (a bound of every region's, BatchPalpation.critical_dt_bound)
     for an explicit plan, computed once a sweep; None for an implicit one."""
-    return model.critical_dt() if plan.integrator == "explicit" else None
+    return plan.critical_dt() if plan.integrator == "explicit" else None
 
 
 class SweepDevice:
@@ -798,7 +805,7 @@ def run_ray(plan: SweepPlan, parts: Parts, todo: list[int], gpu: bool, address=N
         ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
     device = ray.remote(num_gpus=1, num_cpus=1)(SweepDevice) if gpu else ray.remote(num_cpus=1)(SweepDevice)
     plan_ref = ray.put(plan)
-    bound = sweep_critical_dt(plan, plan.model("cpu"))
+    bound = sweep_critical_dt(plan)
     count = max(1, min(len(todo), int(ray.cluster_resources().get("GPU" if gpu else "CPU", 1))))
     actors = [device.remote(plan_ref, gpu, bound) for _ in range(count)]
     queue, pending = list(todo), {}

@@ -175,7 +175,7 @@ def _substeps(plan) -> int:
     every region's), or 1 after switching the plan to the implicit integrator past LIMITS["substeps"]."""
     if plan.integrator != "explicit":
         return 1
-    crit = plan.model("cpu").critical_dt()
+    crit = plan.critical_dt()
     n = substeps_for(plan.dt, crit)
     if n > LIMITS["substeps"]:
         print(f"note: the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {plan.dt * 1e3:g} ms "
