@@ -293,7 +293,8 @@ class ProbeStroke(Palpation):
         # the region build_seeds(rings) makes: rings are appended in the same order)
         stage, work = self._pending
         if stage == "seeds":
-            self._spare.build_seeds(work, 1, contact=int(work[0]))
+            # ring 1 only; its local indices and springs are left to the expand that follows
+            self._spare.build_seeds(work, 1, contact=int(work[0]), index=self.rings <= 1)
             self._pending = ("grow", self.rings - 1) if self.rings > 1 else ("built", None)
             return
         if stage == "grow":
