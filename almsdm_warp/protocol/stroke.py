@@ -237,6 +237,11 @@ class ProbeStroke(Palpation):
         """Vertices each sphere touched in the last step, shape [probes], int (0: lifted off)."""
         return self._touching.astype(np.int64)
 
+    @property
+    def relocating(self) -> bool:
+        """True while a relocation spread over steps is under way: the next step goes on with it."""
+        return self._pending is not None
+
     def region_vertex_ids(self) -> np.ndarray:
         """Mesh ids of the region's vertices (every vertex for the global model), host copy."""
         if self.region is None:
