@@ -19,7 +19,9 @@ the contact (its reaction is the internal force at the projected positions).
 
 The explicit integrator's substeps are planned once, from the critical step of the whole mesh's
 free vertices, which bounds every region's (a region's stiffness is a principal submatrix of the
-mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem.
+mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem. Nor does it capture a graph:
+the explicit frame reads the region's counts from a device array (kernels/stroke_step.py), and the
+graphs captured at the first step, one per region buffer and state, serve every region.
 """
 
 from __future__ import annotations
