@@ -53,13 +53,14 @@ def held_centre(spheres: StrokeSpheres, p: int, alpha: float):
 
 @wp.kernel
 def sum_stroke_reactions(
-    region_vertex: _INT, vertex_count: int, vertex_local: _INT, free_count: int, surface: _INT, spheres: StrokeSpheres,
+    region_vertex: _INT, counts: _INT, vertex_local: _INT, surface: _INT, spheres: StrokeSpheres,
     probe_count: int, radius: float, adj_offsets: _INT, adj_vertex: _INT, adj_spring: _VEC, q_rest: _VEC,
     anchor_ke: _FLOAT, anchor_kd: _FLOAT, anchor_scale: float, q_out: _VEC, qd_out: _VEC,
 ):
     # one thread, after constrain_stroke_spheres (the implicit step): each contact's reaction from the
     # internal force at the end of the step, eqs. (3)-(6), summed in local order
-    for i in range(vertex_count):
+    free_count = counts[0]
+    for i in range(counts[1]):
         v = region_vertex[i]
         if surface[v] == 0 or vertex_local[v] >= free_count:
             continue
@@ -78,15 +79,16 @@ def sum_stroke_reactions(
 
 @wp.kernel
 def constrain_stroke_spheres(
-    region_vertex: _INT, vertex_count: int, vertex_ring: _INT, near_ring: int, vertex_local: _INT, free_count: int,
-    surface: _INT, particle_mass: wp.array(dtype=wp.float32), spheres: StrokeSpheres, probe_count: int,
+    region_vertex: _INT, counts: _INT, vertex_ring: _INT, vertex_local: _INT, surface: _INT, particle_mass: wp.array(dtype=wp.float32), spheres: StrokeSpheres, probe_count: int,
     radius: float, guard: float, held: int, alpha: float, dt: float, q_in: _VEC, qd_in: _VEC, q_out: _VEC, qd_out: _VEC,
 ):
     for p in range(probe_count):
         spheres.reaction[p] = wp.vec3(0.0)
         spheres.touching[p] = 0
         spheres.near_edge[p] = 0
-    for i in range(vertex_count):
+    free_count = counts[0]
+    near_ring = counts[2]
+    for i in range(counts[1]):
         v = region_vertex[i]
         if surface[v] == 0:
             continue
@@ -112,12 +114,14 @@ def constrain_stroke_spheres(
             spheres.previous[p] = spheres.centre[p]  # the frame is done: the next one starts here
 
 
-def constrain_spheres(model, region_vertex, vertex_count, vertex_ring, near_ring, vertex_local, free_count, surface, spheres,
+def constrain_spheres(model, region_vertex, counts, vertex_ring, vertex_local, surface, spheres,
                       count, radius, guard, dt, state_in, state_out, held, anchor_scale, alpha=1.0):
     """Put the free surface vertices a step left inside the spheres (`spheres`, a StrokeSpheres of `count`)
-    on their surfaces; write each sphere's reaction [N], contact count and near-the-edge flag. The
-    region's first `vertex_count` vertices (`region_vertex`, ring of each mesh vertex `vertex_ring`) are
-    gone over; those with `vertex_local` < `free_count` move. held=1 (the implicit step, which held
+    on their surfaces; write each sphere's reaction [N], contact count and near-the-edge flag. `counts`
+    (device int32, laid out as kernels/stroke_step.STROKE_COUNTS, read when the launch runs, so that a
+    captured launch serves every region): the region's first vertex_count vertices (`region_vertex`,
+    ring of each mesh vertex `vertex_ring`) are gone over; those with `vertex_local` < free_count move,
+    and one on ring near_ring or beyond that comes within `guard` of a sphere sets its flag. held=1 (the implicit step, which held
     sphere 0 in its solve): the reactions are the internal forces at the end of the step (anchors
     scaled by `anchor_scale`), read by a second launch (sum_stroke_reactions). alpha: how far the
     substep is through the frame, (s + 1) / n: the spheres stand that far from their last frame's
@@ -130,7 +134,7 @@ def constrain_spheres(model, region_vertex, vertex_count, vertex_ring, near_ring
     wp.launch(
         constrain_stroke_spheres,
         dim=1,
-        inputs=[region_vertex, vertex_count, vertex_ring, near_ring, vertex_local, free_count, surface, model.particle_mass,
+        inputs=[region_vertex, counts, vertex_ring, vertex_local, surface, model.particle_mass,
                 spheres, count, radius, guard, int(held), float(alpha), dt, state_in.particle_q, state_in.particle_qd],
         outputs=[state_out.particle_q, state_out.particle_qd],
         device=model.device,
@@ -140,7 +144,7 @@ def constrain_spheres(model, region_vertex, vertex_count, vertex_ring, near_ring
         wp.launch(
             sum_stroke_reactions,
             dim=1,
-            inputs=[region_vertex, vertex_count, vertex_local, free_count, surface, spheres, count, radius, dm.adj_offsets,
+            inputs=[region_vertex, counts, vertex_local, surface, spheres, count, radius, dm.adj_offsets,
                     dm.adj_vertex, model.adj_spring, dm.rest_position, model.anchor_ke, model.anchor_kd, float(anchor_scale),
                     state_out.particle_q, state_out.particle_qd],
             device=model.device,

@@ -132,3 +132,39 @@ def test_bad_input_names_the_value(bed):
         stroke.step([[0.0, 0.0, math.nan], [0.0, 0.0, 0.01]])
     with pytest.raises(ValueError, match="speed"):
         builtin_stroke(mesh, R, speed=0.0)
+
+
+def test_relocations_replay_the_frames_captured_at_the_start(device, monkeypatch):
+    # the explicit frame reads the region's counts from device arrays: the graphs captured at the
+    # first step (one per region buffer and state) must step every later region as an uncaptured run
+    # does, bit for bit (a graph that kept the first region's counts would integrate the wrong vertices)
+    mesh = primitives.icosphere(40.0, 3)
+    path = builtin_stroke(mesh, R, depth=6e-3, length=20e-3, speed=40e-3)
+    captures = []
+    capture = ProbeStroke._capture
+    monkeypatch.setattr(ProbeStroke, "_capture", lambda self, frame: captures.append(self.relocations) or capture(self, frame))
+    runs = []
+    for captured in (True, False):
+        stroke = ProbeStroke(mesh, probe_radius=R, rings=3, device=device, capture=captured)
+        runs.append((np.array([stroke.step(c) for c in path.centre]), stroke.positions(), stroke.relocations))
+    (f, q, moved), (f0, q0, moved0) = runs
+    assert moved == moved0 >= 2
+    assert captures == [0, 0, 0, 0]  # two buffers x two states, before the region first moved
+    np.testing.assert_array_equal(f, f0)
+    np.testing.assert_array_equal(q, q0)
+    assert np.linalg.norm(f[path.phase == 1], axis=1).min() > 0.1  # pressed all along the slide
+
+
+def test_a_build_spread_over_steps_is_the_same_region(device):
+    # ring 1 without its local indices and springs, then the other rings: the region one build makes
+    from almsdm_warp.region.region import Region
+
+    mesh = primitives.icosphere(40.0, 3)
+    seeds = np.array([0, 5, 17, 40])
+    spread = Region(mesh, device).build_seeds(seeds, 1, contact=5, index=False).expand(3)
+    whole = Region(mesh, device).build_seeds(seeds, 4, contact=5)
+    np.testing.assert_array_equal(spread.vertices(), whole.vertices())
+    np.testing.assert_array_equal(spread.vertex_local.numpy(), whole.vertex_local.numpy())
+    np.testing.assert_array_equal(spread.boundary(), whole.boundary())
+    np.testing.assert_array_equal(np.sort(spread.springs()), np.sort(whole.springs()))
+    assert spread.free_count == whole.free_count and spread.spring_count == whole.spring_count

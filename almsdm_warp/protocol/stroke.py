@@ -19,7 +19,9 @@ the contact (its reaction is the internal force at the projected positions).
 
 The explicit integrator's substeps are planned once, from the critical step of the whole mesh's
 free vertices, which bounds every region's (a region's stiffness is a principal submatrix of the
-mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem.
+mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem. Nor does it capture a graph:
+the explicit frame reads the region's counts from a device array (kernels/stroke_step.py), and the
+graphs captured at the first step, one per region buffer and state, serve every region.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from ..kernels import region_state
 from ..kernels.region_state import reset_vertices_left_behind
 from ..kernels.arrays import struct_from
 from ..kernels.stroke_contact import StrokeSpheres, constrain_spheres
+from ..kernels.stroke_step import STROKE_COUNTS, integrate_stroke
 from ..kernels.arrays import ProbeArrays
 from ..region.region import Region
 from ..sim.model import PROBE_SPHERE
@@ -81,6 +84,35 @@ class _Spheres:
         if not self.cpu:
             for n in ("reaction", "touching", "near_edge"):
                 wp.copy(self.pinned[n], getattr(self, n))
+
+
+class _Slot:
+    """One region buffer as the stroke's frame reads it: arrays whose addresses never change and the
+    counts (kernels/stroke_step.STROKE_COUNTS) in a device array, so that a frame captured once serves
+    every region built into this buffer. `own`: the free vertices and local indices are copied here
+    (a model with supports, whose solver reorders them into new arrays at each region); otherwise the
+    region's (or the global solver's) own arrays, which are never replaced."""
+
+    def __init__(self, region_vertex, vertex_ring, free_vertex, vertex_local, device, own):
+        d = wp.get_device(device)
+        self.region_vertex, self.vertex_ring = region_vertex, vertex_ring
+        self.own = own
+        if own:
+            free_vertex = wp.zeros(region_vertex.shape[0], dtype=wp.int32, device=d)
+            vertex_local = wp.zeros(vertex_ring.shape[0], dtype=wp.int32, device=d)
+        self.free_vertex, self.vertex_local = free_vertex, vertex_local
+        self.counts = wp.zeros(len(STROKE_COUNTS), dtype=wp.int32, device=d)
+        self._pinned = None if d.is_cpu else wp.zeros(len(STROKE_COUNTS), dtype=wp.int32, device="cpu", pinned=True)
+        self._host = (self.counts if d.is_cpu else self._pinned).numpy()
+
+    def load(self, solver, vertex_count, near_ring) -> None:
+        """Take the solver's free set (just set to this buffer's region) and the region's counts."""
+        if self.own:
+            wp.copy(self.free_vertex, solver.free_vertex, count=int(solver.free_vertex.shape[0]))
+            wp.copy(self.vertex_local, solver.vertex_local)
+        self._host[:] = (solver.free_count, vertex_count, near_ring)
+        if self._pinned is not None:  # stream-ordered: the next frame reads the new counts
+            wp.copy(self.counts, self._pinned)
 
 
 class ProbeStroke(Palpation):
@@ -141,23 +173,28 @@ class ProbeStroke(Palpation):
         self._held = 0
         self._hold_in_solve()
         n = self.model.particle_count
+        self._near_ring = 1 << 30
+        own = bool(self.model.support_count)
         if self.region is None:
             self._ring_of = np.zeros(n, dtype=np.int32)
-            self._near_ring = 1 << 30
-            every = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
-            self._region_arrays = (every, n, wp.zeros(n, dtype=wp.int32, device=self.device))  # the whole mesh, ring 0
+            solver = self.solver  # the whole mesh, ring 0
+            self._slots = [_Slot(solver.free_vertex, wp.zeros(n, dtype=wp.int32, device=self.device), solver.free_vertex,
+                                 solver.vertex_local, self.device, False)]
+            self._slots[0].load(solver, n, self._near_ring)
             self.vertex = int(surface[0])
         else:
             self._ring_of = np.full(n, -1, dtype=np.int32)
-            self._near_ring = 1 << 30
-            self._region_arrays = None
             self._spare = Region(self.model.dmesh)  # the next region is built here while this one steps
+            self._slots = [_Slot(r.region_vertex, r.vertex_ring, r.region_vertex, r.vertex_local, self.device, own)
+                           for r in (self.region, self._spare)]
             wp.load_module(region_state, device=self.device)  # loaded now, not by the first relocation
+        self._slot = 0  # self._slots[_slot] holds the current region
+        self._frames = None  # the explicit frames: [slot][state], captured once at the first step
         self._views = {}
         self._started = False
         self._pending = None  # a relocation under way: ("seeds", seeds), ("grow", rings left), ("built", None)
         self._warm = False  # the first step runs uncaptured: it loads the kernels outside any capture
-        self._fresh = False  # the first step after a relocation runs uncaptured; the next ones capture
+        self._fresh = False  # (implicit) the first step after a relocation runs uncaptured; the next one captures
 
     # -- the API -------------------------------------------------------------------------------
     def step(self, centres) -> np.ndarray:
@@ -201,6 +238,11 @@ class ProbeStroke(Palpation):
     def touching(self) -> np.ndarray:
         """Vertices each sphere touched in the last step, shape [probes], int (0: lifted off)."""
         return self._touching.astype(np.int64)
+
+    @property
+    def relocating(self) -> bool:
+        """True while a relocation spread over steps is under way: the next step goes on with it."""
+        return self._pending is not None
 
     def region_vertex_ids(self) -> np.ndarray:
         """Mesh ids of the region's vertices (every vertex for the global model), host copy."""
@@ -258,7 +300,8 @@ class ProbeStroke(Palpation):
         # the region build_seeds(rings) makes: rings are appended in the same order)
         stage, work = self._pending
         if stage == "seeds":
-            self._spare.build_seeds(work, 1, contact=int(work[0]))
+            # ring 1 only; its local indices and springs are left to the expand that follows
+            self._spare.build_seeds(work, 1, contact=int(work[0]), index=self.rings <= 1)
             self._pending = ("grow", self.rings - 1) if self.rings > 1 else ("built", None)
             return
         if stage == "grow":
@@ -270,12 +313,15 @@ class ProbeStroke(Palpation):
             reset_vertices_left_behind(self.model, old.region_vertex, old.vertex_count, region, self.states)
         self.region, self._spare = region, old
         self.solver.set_region(region)
-        self.plan_substeps()  # may fall back to the implicit integrator
-        self._hold_in_solve()
+        if not self._started:
+            self.plan_substeps()  # for the whole mesh (region_critical_dt): once; may fall back to implicit
+            self._hold_in_solve()
+        self._graphs = None  # (implicit) the solver's free count changed: its frame is captured again
         self.vertex = int(region.seed)
         self._ring_of = self.host(region.vertex_ring)
         self._near_ring = max(region.outer_ring - self.margin, 1)
-        self._region_arrays = (region.region_vertex, region.vertex_count, region.vertex_ring)
+        self._slot ^= 1
+        self._slots[self._slot].load(self.solver, region.vertex_count, self._near_ring)
         self._near[:] = 0
         self._fresh = True
         self._pending = None
@@ -313,45 +359,46 @@ class ProbeStroke(Palpation):
 
     # -- stepping ------------------------------------------------------------------------------
     def _advance(self) -> None:
-        # one frame: replay the current state's graphs. After a relocation the frame is captured again:
-        # the explicit step's on the CPU one launch a step (a CPU capture costs about 10 us a launch
-        # argument: its two launches in one step reached 500-700 us), the pieces not yet captured running
-        # uncaptured; otherwise the whole frame at once (an implicit frame captured in pieces made more
-        # slow steps than it saved: docs/stroke.md). The first step ever, and the first after a
-        # relocation, run uncaptured.
+        # one frame. The explicit frame reads its counts and the region's arrays from the current
+        # buffer (_Slot): one graph per buffer and state, captured at the end of the first step, serves
+        # every region, so a relocation captures nothing. The implicit solve takes its free count as a
+        # scalar (kernels/integrate_implicit.py): its frame is captured again after each relocation,
+        # at the second step (the first runs uncaptured).
+        i = self._cur
+        if self._frames is not None:
+            self._frames[self._slot][i]()
+            self._cur ^= self._parity
+            return
         graphs = self._graphs
         if graphs is None:
             graphs = self._graphs = [None, None]
-        i = self._cur
-        pieces = graphs[i]
-        if pieces is not None and all(pieces):
+        if graphs[i] is not None:
             self._cur ^= self._parity
-            for replay in pieces:
-                replay()
+            graphs[i]()
             return
-        calls = self._frame(self.states[i], self.states[1 - i])
-        if not self.capture or not self._warm or self._fresh:
-            for call in calls:
-                call()
+        frame = self._frame(self.states[i], self.states[1 - i], self._slots[self._slot])
+        explicit = self.solver.conditionally_stable
+        if not self.capture or not self._warm or self._fresh or explicit:
+            frame()
             self._warm, self._fresh = True, False
         else:
-            if pieces is None:
-                pieces = graphs[i] = [None] * len(calls)
-            k = pieces.index(None)
-            with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
-                calls[k]()
-            pieces[k] = replayer(cap.graph, self.device)
-            for call, replay in zip(calls, pieces):
-                (replay or call)()
+            graphs[i] = self._capture(frame)
+            graphs[i]()
         self._cur ^= self._parity
         if not self._cpu:
             wp.synchronize_device(self.device)
+        if explicit and self.capture:
+            self._frames = [[self._capture(self._frame(self.states[k], self.states[1 - k], slot)) for k in (0, 1)]
+                            for slot in self._slots]
 
-    def _frame(self, a, b) -> list:
-        # the frame's launches as calls: the explicit step's on the CPU one a launch group (captured one
-        # a step); otherwise one call
+    def _capture(self, frame):
+        with wp.ScopedCapture(device=self.device, force_module_load=False) as cap:
+            frame()
+        return replayer(cap.graph, self.device)
+
+    def _frame(self, a, b, slot):
+        # the frame's launches as one call, from the buffer `slot`'s arrays
         sp = self.spheres
-        region_vertex, count, ring = self._region_arrays
         solver = self.solver
         n = self.substeps
         h = self.dt / n
@@ -359,15 +406,17 @@ class ProbeStroke(Palpation):
         if not self._warm:  # the first frame (uncaptured) starts where it is; on CUDA after the centres' copy in
             calls.append(functools.partial(wp.copy, sp.previous, sp.centre))
         for s in range(n):
-            calls.append(functools.partial(solver.step, a, b, self.control, h))
+            if solver.conditionally_stable:
+                calls.append(functools.partial(integrate_stroke, self.model, slot.free_vertex, slot.counts,
+                                               solver.anchor_scale, a, b, h))
+            else:
+                calls.append(functools.partial(solver.step, a, b, self.control, h))
             calls.append(functools.partial(
-                constrain_spheres, self.model, region_vertex, count, ring, self._near_ring, solver.vertex_local,
-                solver.free_count, self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b,
-                self._held, solver.anchor_scale, (s + 1) / n))
+                constrain_spheres, self.model, slot.region_vertex, slot.counts, slot.vertex_ring, slot.vertex_local,
+                self.control.probe_surface, sp.arrays, sp.count, self.radius, self.guard, h, a, b, self._held,
+                solver.anchor_scale, (s + 1) / n))
             a, b = b, a
-        if self._cpu and solver.conditionally_stable:
-            return calls
-        return [functools.partial(self._run_frame, calls)]
+        return functools.partial(self._run_frame, calls)
 
     def _run_frame(self, calls) -> None:
         self.spheres.copy_in()

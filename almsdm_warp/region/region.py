@@ -116,11 +116,12 @@ class Region:
         self._grow(rings)
         return self
 
-    def build_seeds(self, seeds, rings: int, contact: int | None = None) -> "Region":
+    def build_seeds(self, seeds, rings: int, contact: int | None = None, *, index: bool = True) -> "Region":
         """Build the region of `rings` rings around several seed vertices (ring 0: all of them; ring r:
         the vertices r hops from the nearest), clearing any old region first. `contact`: the vertex
         the region is read at (`seed`; default the smallest seed), e.g. a spherical probe's contact
-        in the middle of its patch."""
+        in the middle of its patch. index=False leaves the local indices, the fixed ring and the springs
+        to the expand() that must follow (a build spread over steps computes them once)."""
         seeds = np.unique(check_vertices(self.dmesh.mesh, seeds))
         if len(seeds) == 0:
             raise ValueError("a region needs at least one seed vertex")
@@ -135,7 +136,7 @@ class Region:
         self.seeds = seeds
         self.rings = 0
         self.ring_offsets = np.array([0, len(seeds)], dtype=np.int64)
-        self._grow(rings)
+        self._grow(rings, index)
         return self
 
     def expand(self, rings: int = 1) -> "Region":
@@ -155,7 +156,7 @@ class Region:
         self.ring_offsets = np.zeros(1, dtype=np.int64)
         self.spring_count = 0
 
-    def _grow(self, rings: int) -> None:
+    def _grow(self, rings: int, index: bool = True) -> None:
         dm = self.dmesh
         offsets = list(self.ring_offsets)
         for done in range(rings):
@@ -171,7 +172,8 @@ class Region:
             rk.sort_region_ring(self, end, new_end)
             offsets.append(new_end)
         self.ring_offsets = np.asarray(offsets, dtype=np.int64)
-        self._compact()
+        if index:
+            self._compact()
 
     def _compact(self) -> None:
         # local indices, ring and boundary flags, then the springs (each edge once)
