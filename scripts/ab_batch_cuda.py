@@ -2,7 +2,7 @@
 
     python scripts/ab_batch_cuda.py OLD_CHECKOUT [--device cuda:0] [--batch 100000] [--rings 4]
         [--alternations 5] [--repeats 3] [--mesh scenes/stomach.obj] [--json out.json]
-        [--probe-radius-mm 5] [--youngs-modulus-kpa 5] [--scene stomach]
+        [--probe-radius-mm 5] [--youngs-modulus-kpa 5] [--scene stomach] [--scene-rings K] [--threads T]
 
 OLD_CHECKOUT is the root of another source checkout of this project (e.g. made by
 `git worktree add /tmp/old <commit>`). Each alternation runs one subprocess on the old checkout,
@@ -24,12 +24,15 @@ Then the shipped scene `--scene` (default stomach; "none" skips it) as it is, on
 its mesh, tissue, probe, supports, rings and press, its dt the scene's model's critical step as
 `almsdm bench` takes it, contacts on the surface vertices its support leaves free; with the
 median and largest region (vertices, springs) and the fast kernel's plan, so that the new tissue
-model's figure stands beside the paper probe's in one run.
+model's figure stands beside the paper probe's in one run. `--scene-rings` overrides the scene's
+ring count (to compare two counts); `--threads` sets the fast kernel's threads a block for the
+sphere and scene runs (default: the batch's plan).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import statistics
@@ -71,7 +74,7 @@ def worker(args) -> None:
 
     press, surface, options = PRESS, None, {}
     if args.worker_scene:  # only this checkout's run is asked for it
-        scene, mesh = scene_model(args.worker_scene)
+        scene, mesh = scene_model(args.worker_scene, args.scene_rings)
         surface = free_surface(mesh, scene.fixed_below)
         press = (scene.press.depth, scene.press.ramp, scene.press.hold, scene.press.settle)
         options = dict(tissue=scene.tissue, rings=scene.rings, probe_radius=scene.probe_radius, fixed_below=scene.fixed_below)
@@ -82,6 +85,8 @@ def worker(args) -> None:
             options.update(tissue=tissue_of(args.youngs_modulus_kpa), probe_radius=args.probe_radius_mm * 1e-3)
     if surface is None:
         surface = mesh.surface_vertices
+    if args.threads and (args.worker_scene or args.probe_radius_mm):
+        options["threads"] = args.threads
     surface = np.random.default_rng(0).permutation(surface)
     vertices = np.resize(surface, args.batch).astype(np.int64)
     bp = BatchPalpation(mesh, dt=args.dt, device=args.device, **options).touch(vertices)
@@ -113,13 +118,15 @@ def worker(args) -> None:
     print("AB_ROW " + json.dumps(row), flush=True)
 
 
-def scene_model(name: str):
-    """(scene, mesh) of a shipped scene's name or a scene file's path."""
+def scene_model(name: str, rings=None):
+    """(scene, mesh) of a shipped scene's name or a scene file's path; `rings` overrides its ring count."""
     from almsdm_warp.scene.loader import default_scene_path, load_scene
 
     scene = load_scene(name if name.endswith(".toml") else default_scene_path(name))
-    if not isinstance(scene.rings, int):
+    if rings is None and not isinstance(scene.rings, int):
         raise SystemExit(f"scene {scene.name} sizes its region during each press (rings = {scene.rings!r}): a batch needs a ring count")
+    if rings is not None:
+        scene = dataclasses.replace(scene, rings=int(rings))
     return scene, scene.load_mesh()
 
 
@@ -148,6 +155,10 @@ def run_side(checkout: Path, args, dt: float, sphere: bool = False, scene: str |
     cmd += ["--probe-radius-mm", repr(args.probe_radius_mm) if sphere else "0", "--youngs-modulus-kpa", repr(args.youngs_modulus_kpa)]
     if scene:
         cmd += ["--worker-scene", scene]
+        if args.scene_rings is not None:
+            cmd += ["--scene-rings", str(args.scene_rings)]
+    if args.threads:
+        cmd += ["--threads", str(args.threads)]
     out = subprocess.run(cmd, cwd=checkout, env=env, capture_output=True, text=True)
     rows = [json.loads(line[len("AB_ROW "):]) for line in out.stdout.splitlines() if line.startswith("AB_ROW ")]
     if out.returncode != 0 or not rows:
@@ -188,6 +199,8 @@ def main(argv=None):
     ap.add_argument("--probe-radius-mm", type=float, default=5.0, help="the sphere case's probe [mm] on this checkout (0: none)")
     ap.add_argument("--youngs-modulus-kpa", type=float, default=5.0, help="the sphere case's material [kPa] (0: per-spring constants)")
     ap.add_argument("--scene", default="stomach", help="a shipped scene's name or a scene file, measured as it is on this checkout (none: skip)")
+    ap.add_argument("--scene-rings", type=int, default=None, help="rings for the scene run (default: the scene's [region] rings)")
+    ap.add_argument("--threads", type=int, default=None, help="the fast kernel's threads a block in the sphere and scene runs (default: the batch's plan)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--worker-scene", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -207,7 +220,7 @@ def main(argv=None):
     init_warp()
     dt = args.dt if args.dt is not None else auto_dt(Model(load_mesh(args.mesh), None, "cpu"))
     dt_sphere = args.dt if args.dt is not None else auto_dt(Model(load_mesh(args.mesh), tissue_of(args.youngs_modulus_kpa), "cpu"))
-    scene = None if args.scene.lower() == "none" else scene_model(args.scene)[0]
+    scene = None if args.scene.lower() == "none" else scene_model(args.scene, args.scene_rings)[0]
     print(f"A: {old}\nB: {ROOT}\n{args.mesh.name}, {args.rings} rings, B = {args.batch}, dt {dt * 1e3:g} ms, device {args.device}", flush=True)
     print("| alternation | A region-steps/s | B region-steps/s | B / A |")
     print("|---|---|---|---|")
