@@ -26,7 +26,8 @@ its mesh, tissue, probe, supports, rings and press, its dt the scene's model's c
 median and largest region (vertices, springs) and the fast kernel's plan, so that the new tissue
 model's figure stands beside the paper probe's in one run. `--scene-rings` overrides the scene's
 ring count (to compare two counts); `--threads` sets the fast kernel's threads a block for the
-sphere and scene runs (default: the batch's plan).
+sphere and scene runs (default: the batch's plan); `--ab-all` runs the sphere and scene cases on
+the old checkout too, alternated with this one's (an A/B of the sphere's kernel).
 """
 
 from __future__ import annotations
@@ -166,22 +167,55 @@ def run_side(checkout: Path, args, dt: float, sphere: bool = False, scene: str |
     return rows[0]
 
 
-def measure_scene(args, scene, med: dict) -> dict:
-    """The shipped scene as it is, `alternations` runs on this checkout; adds its median to `med`."""
+def alternate(args, old: Path, dt: float, **side) -> dict:
+    """`alternations` runs of one case on this checkout (B), and on the old one (A) first with --ab-all;
+    prints a row each and returns {"A": rows, "B": rows}."""
+    rows = {"A": [], "B": []}
+    for i in range(args.alternations):
+        if args.ab_all:
+            rows["A"].append(run_side(old, args, dt, **side))
+        rows["B"].append(run_side(ROOT, args, dt, **side))
+        a = f"{rows['A'][-1]['region_steps_per_s']:.4e}" if args.ab_all else ""
+        ratio = f"{rows['B'][-1]['region_steps_per_s'] / rows['A'][-1]['region_steps_per_s']:.4f}" if args.ab_all else ""
+        print(f"| {i + 1} | {a} | {rows['B'][-1]['region_steps_per_s']:.4e} | {ratio} |", flush=True)
+    return rows
+
+
+def summary(name: str, rows: dict, med: dict) -> None:
+    """Print a case's medians (B, and B / A with --ab-all), its ratio to B's paper probe and its sizes; adds B's median to `med`."""
+    b = med[f"B_{name}"] = statistics.median(r["region_steps_per_s"] for r in rows["B"])
+    ab = ""
+    if rows["A"]:
+        a = med[f"A_{name}"] = statistics.median(r["region_steps_per_s"] for r in rows["A"])
+        ab = f"A {a:.4e}, B / A {b / a:.4f}; "
+    print(f"median region-steps/s: B {name} {b:.4e} ({rows['B'][0]['kernel']}), {ab}{b / med['B']:.4f} x B's paper probe; "
+          f"median peak force {rows['B'][0]['peak_force_N_median']:.6f} N")
+    print(f"{name}: {sizes(rows['B'][0])}", flush=True)
+
+
+def measure_sphere(args, old: Path, med: dict) -> dict:
+    """The sphere case (`--probe-radius-mm` on a membrane of `--youngs-modulus-kpa`) on the stomach mesh."""
+    from almsdm_warp import load_mesh
+    from almsdm_warp.batch.sweep import auto_dt
+    from almsdm_warp.sim.model import Model
+
+    dt = args.dt if args.dt is not None else auto_dt(Model(load_mesh(args.mesh), tissue_of(args.youngs_modulus_kpa), "cpu"))
+    print(f"with a {args.probe_radius_mm:g} mm sphere, E {args.youngs_modulus_kpa:g} kPa, dt {dt * 1e3:g} ms:", flush=True)
+    rows = alternate(args, old, dt, sphere=True)
+    summary("sphere", rows, med)
+    return {"dt_sphere": dt, "runs_sphere": rows}
+
+
+def measure_scene(args, old: Path, scene, med: dict) -> dict:
+    """The shipped scene as it is: its mesh, tissue, probe, supports, rings and press."""
     from almsdm_warp.batch.sweep import auto_dt
     from almsdm_warp.sim.model import Model
 
     mesh = scene.load_mesh()
     dt = args.dt if args.dt is not None else auto_dt(Model(mesh, scene.tissue, "cpu", fixed_below=scene.fixed_below))
-    print(f"B on the {scene.summary()}; probe R {scene.probe_radius * 1e3:g} mm, dt {dt * 1e3:g} ms:", flush=True)
-    rows = []
-    for i in range(args.alternations):
-        rows.append(run_side(ROOT, args, dt, scene=str(scene.path)))
-        print(f"| {i + 1} | | {rows[-1]['region_steps_per_s']:.4e} | |", flush=True)
-    med["B_scene"] = statistics.median(r["region_steps_per_s"] for r in rows)
-    print(f"scene {scene.name}: {sizes(rows[0])}")
-    print(f"median region-steps/s: B scene {scene.name} {med['B_scene']:.4e}, {med['B_scene'] / med['B']:.4f} x B's paper probe; "
-          f"median peak force {rows[0]['peak_force_N_median']:.6f} N", flush=True)
+    print(f"the {scene.summary()}; probe R {scene.probe_radius * 1e3:g} mm, dt {dt * 1e3:g} ms:", flush=True)
+    rows = alternate(args, old, dt, scene=str(scene.path))
+    summary("scene", rows, med)
     return {"scene": str(scene.path), "dt_scene": dt, "runs_scene": rows}
 
 
@@ -201,6 +235,7 @@ def main(argv=None):
     ap.add_argument("--scene", default="stomach", help="a shipped scene's name or a scene file, measured as it is on this checkout (none: skip)")
     ap.add_argument("--scene-rings", type=int, default=None, help="rings for the scene run (default: the scene's [region] rings)")
     ap.add_argument("--threads", type=int, default=None, help="the fast kernel's threads a block in the sphere and scene runs (default: the batch's plan)")
+    ap.add_argument("--ab-all", action="store_true", help="run the sphere and scene cases on the old checkout too, alternated (it must hold them)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--worker-scene", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -219,7 +254,6 @@ def main(argv=None):
 
     init_warp()
     dt = args.dt if args.dt is not None else auto_dt(Model(load_mesh(args.mesh), None, "cpu"))
-    dt_sphere = args.dt if args.dt is not None else auto_dt(Model(load_mesh(args.mesh), tissue_of(args.youngs_modulus_kpa), "cpu"))
     scene = None if args.scene.lower() == "none" else scene_model(args.scene, args.scene_rings)[0]
     print(f"A: {old}\nB: {ROOT}\n{args.mesh.name}, {args.rings} rings, B = {args.batch}, dt {dt * 1e3:g} ms, device {args.device}", flush=True)
     print("| alternation | A region-steps/s | B region-steps/s | B / A |")
@@ -239,18 +273,9 @@ def main(argv=None):
     print(f"paper probe: {sizes(rows['B'][0])}")
     out = {"dt": dt, "median": med, "runs": rows}
     if args.probe_radius_mm:
-        print(f"B with a {args.probe_radius_mm:g} mm sphere, E {args.youngs_modulus_kpa:g} kPa, dt {dt_sphere * 1e3:g} ms:", flush=True)
-        sphere_rows = []
-        for i in range(args.alternations):
-            sphere_rows.append(run_side(ROOT, args, dt_sphere, sphere=True))
-            print(f"| {i + 1} | | {sphere_rows[-1]['region_steps_per_s']:.4e} | |", flush=True)
-        med["B_sphere"] = statistics.median(r["region_steps_per_s"] for r in sphere_rows)
-        print(f"median region-steps/s: B sphere {med['B_sphere']:.4e} ({sphere_rows[0]['kernel']}), "
-              f"{med['B_sphere'] / med['B']:.4f} x B's paper probe; median peak force {sphere_rows[0]['peak_force_N_median']:.6f} N")
-        print(f"sphere case: {sizes(sphere_rows[0])}")
-        out.update(dt_sphere=dt_sphere, runs_sphere=sphere_rows)
+        out.update(measure_sphere(args, old, med))
     if scene is not None:
-        out.update(measure_scene(args, scene, med))
+        out.update(measure_scene(args, old, scene, med))
     if args.json:
         args.json.write_text(json.dumps(out, indent=1) + "\n")
 
