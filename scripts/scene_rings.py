@@ -6,7 +6,7 @@ not hold (starting from the top vertex), with each integrator: the peak force of
 (the same springs, anchors and supports over the whole mesh, no ring boundary) and of 1..`--max-rings`
 rings; the worst relative error over the contacts per ring count (of the peak, and of the force at
 the end of the hold), and the smallest ring count within `--tol` of the peak at every contact. With a sphere the region grows from the patch the sphere covers at
-the press depth, as the command line's.
+the press depth, as the command line's. A scene with a lesion adds the contact nearest the lesion.
 
     python scripts/scene_rings.py [--scenes stomach liver] [--contacts 12] [--max-rings 4] [--tol 0.01]
 """
@@ -32,15 +32,21 @@ def contacts(mesh, scene, n: int) -> np.ndarray:
     if scene.fixed_below is not None:
         surface = surface[v[surface, 2] >= scene.fixed_below]
     start = int(np.flatnonzero(surface == top_vertex(mesh))[0])
-    return surface[farthest_points(v[surface], n, start)]
+    picked = surface[farthest_points(v[surface], n, start)]
+    if scene.lesion is None:
+        return picked
+    # and the surface vertex nearest the lesion's centre, where the stiffer tissue is pressed
+    near = int(surface[np.argmin(np.linalg.norm(v[surface] - np.asarray(scene.lesion.center), axis=1))])
+    return np.append(picked[picked != near], near)
 
 
 def press_forces(mesh, scene, rings, vertex: int, integrator: str, dt: float) -> tuple[float, float, int]:
     """(peak force [N] of the scene's press at `vertex`, force at the end of the hold [N], region
     vertices; the whole mesh for "global")."""
     p = scene.press
+    scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
     pal = Palpation(mesh, scene.tissue, rings=rings, integrator=integrator, dt=dt, device="cpu",
-                    fixed_below=scene.fixed_below, probe_radius=scene.probe_radius)
+                    fixed_below=scene.fixed_below, probe_radius=scene.probe_radius, edge_scale=scales[0], anchor_scale=scales[1])
     if scene.probe_radius > 0:
         pal.touch(vertex, p.depth)
     else:
