@@ -26,7 +26,8 @@ its mesh, tissue, probe, supports, rings and press, its dt the scene's model's c
 median and largest region (vertices, springs) and the fast kernel's plan, so that the new tissue
 model's figure stands beside the paper probe's in one run. `--scene-rings` overrides the scene's
 ring count (to compare two counts); `--threads` sets the fast kernel's threads a block for the
-sphere and scene runs (default: the batch's plan); `--ab-all` runs the sphere and scene cases on
+sphere and scene runs (default: the batch's plan), `--max-registers` its register cap a thread
+(default: the kernel's MAX_REGISTERS); `--ab-all` runs the sphere and scene cases on
 the old checkout too, alternated with this one's (an A/B of the sphere's kernel).
 """
 
@@ -88,6 +89,10 @@ def worker(args) -> None:
         surface = mesh.surface_vertices
     if args.threads and (args.worker_scene or args.probe_radius_mm):
         options["threads"] = args.threads
+    if args.max_registers and (args.worker_scene or args.probe_radius_mm):
+        import almsdm_warp.kernels.batch_press_fast as bkf
+
+        bkf.MAX_REGISTERS = args.max_registers  # read when the kernel is made, below: this process's kernels only
     surface = np.random.default_rng(0).permutation(surface)
     vertices = np.resize(surface, args.batch).astype(np.int64)
     bp = BatchPalpation(mesh, dt=args.dt, device=args.device, **options).touch(vertices)
@@ -160,6 +165,8 @@ def run_side(checkout: Path, args, dt: float, sphere: bool = False, scene: str |
             cmd += ["--scene-rings", str(args.scene_rings)]
     if args.threads:
         cmd += ["--threads", str(args.threads)]
+    if args.max_registers:
+        cmd += ["--max-registers", str(args.max_registers)]
     out = subprocess.run(cmd, cwd=checkout, env=env, capture_output=True, text=True)
     rows = [json.loads(line[len("AB_ROW "):]) for line in out.stdout.splitlines() if line.startswith("AB_ROW ")]
     if out.returncode != 0 or not rows:
@@ -235,6 +242,7 @@ def main(argv=None):
     ap.add_argument("--scene", default="stomach", help="a shipped scene's name or a scene file, measured as it is on this checkout (none: skip)")
     ap.add_argument("--scene-rings", type=int, default=None, help="rings for the scene run (default: the scene's [region] rings)")
     ap.add_argument("--threads", type=int, default=None, help="the fast kernel's threads a block in the sphere and scene runs (default: the batch's plan)")
+    ap.add_argument("--max-registers", type=int, default=None, help="the fast kernel's register cap a thread in the sphere and scene runs (default: MAX_REGISTERS)")
     ap.add_argument("--ab-all", action="store_true", help="run the sphere and scene cases on the old checkout too, alternated (it must hold them)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--worker-scene", default=None, help=argparse.SUPPRESS)
