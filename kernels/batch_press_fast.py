@@ -29,7 +29,7 @@ import functools
 
 import warp as wp
 
-from .block_memory import add_entry16, block_sync, cpu_blocks, load2, load4, load_xyz, rsqrt_approx, shared_array, store_xyz, work_array
+from .block_memory import add_entry16, block_sync, cpu_blocks, load2, load4, load_xyz, named, rsqrt_approx, shared_array, store_xyz, work_array
 from .forces import EPS_LENGTH, anchor_force, spring_force_along
 from .probe_contact import sphere_project
 
@@ -47,9 +47,102 @@ MAX_REGISTERS = 80
 def shared_bytes_fast(vertex_capacity: int, free_capacity: int, spring_capacity: int, max_degree: int = 16, sphere_threads: int = 0) -> int:
     """Shared memory a block of the fast kernel takes [bytes]: packed state per vertex, constants
     and transposed int16 codes per free vertex, a force per spring, the probe's records; with a
-    sphere, each of `sphere_threads` threads' sum of contact reactions and the sphere's centre."""
-    sphere = 16 * sphere_threads + 16 if sphere_threads else 0
+    sphere of `sphere_threads` threads a block, each warp's sum of contact reactions, the sphere's
+    centre and an int16 surface flag per free vertex."""
+    sphere = 16 * part_slots(sphere_threads) + 16 + 2 * free_capacity if sphere_threads else 0
     return 32 * vertex_capacity + 24 * free_capacity + 2 * (free_capacity + 1 + max_degree * free_capacity) + 16 * spring_capacity + 116 + sphere
+
+
+def part_slots(threads: int) -> int:
+    """Partial sums of the contact reactions a block keeps in shared memory on CUDA: one a warp (of
+    32 threads) where the block is whole warps, else one a thread."""
+    return threads // 32 if threads % 32 == 0 else threads
+
+
+def contact_parts(threads: int):
+    """The block's partial sums of the contact reactions: `part_slots` float4s on CUDA, one a thread on
+    the CPU (where a block's fibers have no shuffles and lane 0 replays the warps' tree)."""
+    T = int(threads)
+    snippet = f"""
+#if defined(__CUDA_ARCH__)
+    __shared__ __align__(16) wp::vec_t<4, wp::float32> buf[{part_slots(T)}];
+    return wp::array_t<wp::vec_t<4, wp::float32>>(buf, {part_slots(T)});
+#else
+    alignas(16) static unsigned char raw[sizeof(wp::vec_t<4, wp::float32>) * {T}];
+    return wp::array_t<wp::vec_t<4, wp::float32>>(reinterpret_cast<wp::vec_t<4, wp::float32>*>(raw), {T});
+#endif
+"""
+
+    @named.func_native(snippet, f"contact_parts_{T}")
+    def parts() -> wp.array(dtype=wp.vec4): ...
+
+    return parts
+
+
+def store_contact_part(threads: int):
+    """`store(parts, lane, c)`: thread `lane`'s contact reaction c into the block's partial sums. On CUDA,
+    with whole warps, a warp's 32 values are added by shuffles (lane l takes l + 16, then l + 8, ...,
+    a tree) and the warp's first lane stores the sum; every thread of the block must call it. Else
+    (the CPU, or a block of part warps) each thread stores its own value."""
+    T = int(threads)
+    snippet = f"""
+#if defined(__CUDA_ARCH__) && {int(T % 32 == 0)}
+    float x = c[0], y = c[1], z = c[2];
+    #pragma unroll
+    for (int o = 16; o > 0; o >>= 1) {{
+        x += __shfl_down_sync(0xffffffffu, x, o);
+        y += __shfl_down_sync(0xffffffffu, y, o);
+        z += __shfl_down_sync(0xffffffffu, z, o);
+    }}
+    if ((lane & 31) == 0)
+        reinterpret_cast<float4*>(parts.data)[lane >> 5] = make_float4(x, y, z, 0.0f);
+#else
+    parts.data[lane] = wp::vec_t<4, wp::float32>(c[0], c[1], c[2], 0.0f);
+#endif
+"""
+
+    @named.func_native(snippet, f"store_contact_part_{T}")
+    def store(parts: wp.array(dtype=wp.vec4), lane: int, c: wp.vec3): ...
+
+    return store
+
+
+def sum_contact_parts(threads: int):
+    """`total(parts)`: the block's sum of contact reactions (lane 0, after a barrier): the warps' sums
+    in warp order; on the CPU the same tree replayed over each warp's 32 values, so that both devices
+    add in one order (a block of part warps: every thread's value in thread order)."""
+    T = int(threads)
+    snippet = f"""
+    wp::vec_t<3, wp::float32> f(0.0f, 0.0f, 0.0f);
+#if {int(T % 32 == 0)} && defined(__CUDA_ARCH__)
+    for (int w = 0; w < {T // 32}; ++w) {{
+        const float4 v = reinterpret_cast<const float4*>(parts.data)[w];
+        f = wp::vec_t<3, wp::float32>(f[0] + v.x, f[1] + v.y, f[2] + v.z);
+    }}
+#elif {int(T % 32 == 0)}
+    for (int w = 0; w < {T // 32}; ++w) {{
+        float x[32], y[32], z[32];
+        for (int l = 0; l < 32; ++l) {{
+            const wp::vec_t<4, wp::float32>& v = parts.data[w * 32 + l];
+            x[l] = v[0]; y[l] = v[1]; z[l] = v[2];
+        }}
+        for (int o = 16; o > 0; o >>= 1)
+            for (int l = 0; l < o; ++l) {{ x[l] += x[l + o]; y[l] += y[l + o]; z[l] += z[l + o]; }}
+        f = wp::vec_t<3, wp::float32>(f[0] + x[0], f[1] + y[0], f[2] + z[0]);
+    }}
+#else
+    for (int l = 0; l < {T}; ++l) {{
+        const wp::vec_t<4, wp::float32>& v = parts.data[l];
+        f = wp::vec_t<3, wp::float32>(f[0] + v[0], f[1] + v[1], f[2] + v[2]);
+    }}
+#endif
+    return f;
+"""
+
+    @named.func_native(snippet, f"sum_contact_parts_{T}")
+    def total(parts: wp.array(dtype=wp.vec4)) -> wp.vec3: ...
+
+    return total
 
 
 @wp.func
@@ -88,7 +181,10 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
     w_f = work_array("of4", wp.vec4, cs, True)
     w_p64 = work_array("op64", wp.float64, 8, True)
     w_pv = work_array("opv4", wp.vec4, 4 if SPHERE else 3, True)  # peak, full-depth target and 1/dt, hold; the centre
-    w_part = work_array("opart4", wp.vec4, T, True)  # (sphere) each thread's sum of contact reactions
+    w_part = contact_parts(T)  # (sphere) each warp's sum of contact reactions
+    store_part = store_contact_part(T)
+    sum_parts = sum_contact_parts(T)
+    w_surf = shared_array("osurf16", wp.int16, cf)  # (sphere) whether each free vertex may touch it
     vec_i = wp.types.vector(length=P, dtype=wp.int32)
     vec_f = wp.types.vector(length=P, dtype=wp.float32)
 
@@ -157,6 +253,8 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
             rest4[i] = wp.vec4(x0[0], x0[1], x0[2], -anchor_scale * anchor_ke[v])
             kda[i] = -anchor_scale * anchor_kd[v]
             dtm[i] = dt / particle_mass[v]
+            if wp.static(SPHERE):
+                w_surf()[i] = wp.int16(probe_surface[v])
             k0 = local_offsets[b, i]
             for k in range(k0, local_offsets[b, i + 1]):
                 code[(k - k0) * cf + i] = wp.int16(local_spring[b, k])
@@ -288,22 +386,19 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                 u1 = u + f * dtm[i]
                 x1 = x + dt * u1
                 if wp.static(SPHERE):
-                    if s < press_steps and probe_surface[region_vertex[b, i]] != 0:
+                    if s < press_steps and w_surf()[i] != wp.int16(0):
                         x1, u1, c, touched = sphere_project(x, x1, u1, f, centre, radius, dt)
                         part += c
                 qa[i] = wp.vec4(x1[0], x1[1], x1[2], u1[0])
                 qb[i] = wp.vec2(u1[1], u1[2])
             if wp.static(SPHERE):
-                store_xyz(w_part(scratch, 0), lane, part)
+                if s < press_steps:  # the same for every thread of the block: all of them reach the shuffles
+                    store_part(w_part(), lane, part)
             block_sync()
             if wp.static(SPHERE):
                 if lane == 0 and s < press_steps:
-                    # the feedback force: the sum of the contact reactions (each thread's, in thread order)
-                    parts = w_part(scratch, 0)
-                    f = wp.vec3(0.0)
-                    for l in range(wp.min(T, nf)):
-                        f += load_xyz(parts, l)
-                    record_force_fast(f, s == press_steps - 1, p64, pv)
+                    # the feedback force: the sum of the contact reactions (a tree in each warp, then the warps in order)
+                    record_force_fast(sum_parts(w_part()), s == press_steps - 1, p64, pv)
         for i in range(lane, n, T):
             av = load4(qa, i)
             bv = load2(qb, i)

@@ -230,6 +230,19 @@ def test_batch_sphere_supports_material_equal_palpation(device, stomach, support
     assert np.all(res.peak_force > 0.05)
 
 
+def test_batch_fast_sphere_contact_sum_in_part_warps(stomach, supported):
+    # 40 threads a block: not whole warps, so each thread's contact reactions are summed in thread
+    # order (whole warps add theirs by a tree); an 8 mm sphere touches vertices beyond the block's
+    # threads, which take the shared-memory path with its surface flags: the exact kernel's forces
+    exact = _sphere_batch(stomach, supported, "cpu", radius=0.008, kernel="exact").press(**SPHERE_PRESS)
+    bp = _sphere_batch(stomach, supported, "cpu", radius=0.008, kernel="fast", threads=40)
+    assert bp.threads == 40 and bp.free_vertex_counts.min() > 40
+    res = bp.press(**SPHERE_PRESS)
+    np.testing.assert_allclose(res.peak_force, exact.peak_force, rtol=5e-6)
+    np.testing.assert_allclose(res.hold_force, exact.hold_force, rtol=5e-6)
+    assert np.all(exact.peak_force > 0.3)
+
+
 def test_batch_supports_never_move(device, stomach, supported):
     material, z, contacts = supported
     bp = _sphere_batch(stomach, supported, device)
