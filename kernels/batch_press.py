@@ -89,7 +89,8 @@ def contact_sphere(
     total = wp.vec3(0.0)
     for i in range(nf):
         if probe_surface[region_vertex[b, i]] != 0:
-            x1, u1, c, touched = sphere_project(q_in[i], q_out[i], qd_out[i], dt / particle_mass[i], centre, radius, dt)
+            f = particle_mass[i] * (qd_out[i] - qd_in[i]) / dt  # the internal force of the step
+            x1, u1, c, touched = sphere_project(q_in[i], q_out[i], qd_out[i], f, centre, radius, dt)
             if touched:
                 q_out[i] = x1
                 qd_out[i] = u1

@@ -355,7 +355,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                     uo = uo + f * dto
                     xo = xo + dt * uo
                     if s < press_steps and so != 0:
-                        xo, uo, c, touched = sphere_project(x0, xo, uo, dto, centre, radius, dt)
+                        xo, uo, c, touched = sphere_project(x0, xo, uo, f, centre, radius, dt)
                         part += c
                 elif i == 0 and s < press_steps:
                     # the feedback force, then displacement control (lane 0; its state in shared memory)
@@ -387,7 +387,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                 x1 = x + dt * u1
                 if wp.static(SPHERE):
                     if s < press_steps and w_surf()[i] != wp.int16(0):
-                        x1, u1, c, touched = sphere_project(x, x1, u1, dtm[i], centre, radius, dt)
+                        x1, u1, c, touched = sphere_project(x, x1, u1, f, centre, radius, dt)
                         part += c
                 qa[i] = wp.vec4(x1[0], x1[1], x1[2], u1[0])
                 qb[i] = wp.vec2(u1[1], u1[2])

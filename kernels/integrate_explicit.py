@@ -103,7 +103,8 @@ def constrain_sphere_explicit(
         v = free_vertex[i]
         contact = wp.vec3(0.0)
         if sphere.probe_surface[v] != 0:
-            x1, u1, c, touched = sphere_project(q_in[v], q_out[v], qd_out[v], dt / particle_mass[v], centre, radius, dt)
+            f = particle_mass[v] * (qd_out[v] - qd_in[v]) / dt  # the internal force of the step
+            x1, u1, c, touched = sphere_project(q_in[v], q_out[v], qd_out[v], f, centre, radius, dt)
             if touched:
                 q_out[v] = x1
                 qd_out[v] = u1

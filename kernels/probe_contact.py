@@ -2,10 +2,9 @@
 
 Functions of values, inlined by Warp, called by the explicit and the implicit step. A vertex
 inside the sphere is put on its surface along the sphere's normal (frictionless: the tangential
-motion is kept); the tissue's force on the probe at that vertex is the normal force that holds it
-there: in the implicit step the normal part of the vertex's internal force, as the driven vertex's
-reaction is its internal force (radius -> 0 leaves one contact vertex and the paper's probe), in
-the explicit step the force the projection applied over the step.
+motion is kept); the tissue's force on the probe at that vertex is the normal part of the
+vertex's internal force, as the driven vertex's reaction is its internal force (radius -> 0
+leaves one contact vertex and the paper's probe).
 """
 
 import warp as wp
@@ -46,26 +45,22 @@ def onto_sphere(x_in: wp.vec3, x_out: wp.vec3, centre: wp.vec3, radius: float, d
 
 
 @wp.func
-def sphere_project(x_in: wp.vec3, x_out: wp.vec3, u_out: wp.vec3, dt_m: float, centre: wp.vec3, radius: float, dt: float):
+def sphere_project(x_in: wp.vec3, x_out: wp.vec3, u_out: wp.vec3, f: wp.vec3, centre: wp.vec3, radius: float, dt: float):
     # the explicit step's contact: a vertex the step left inside the sphere goes onto its surface;
-    # returns (position, velocity, the contact reaction, whether it touched). dt_m = dt / mass.
+    # returns (position, velocity, the contact reaction from its internal force f, whether it touched).
     # The point: x_out pushed along the normal at x_in to the plane tangent there, then onto the
     # sphere along its normal. Straight along the normal at x_out, a step that ends deep inside
-    # would scale the step's tangential move by radius / (radius - depth) (a vertex sliding over
-    # the sphere gains energy each step); through the tangent plane the move only shrinks.
-    # The velocity: the one that took x_in to x1 in dt, consistent with the position (a velocity that
-    # kept u_out's tangential part while the point moved less would put energy in).
-    # The reaction: the force the projection applied, m (x1 - x_out) / dt^2 along the normal,
-    # reversed (the momentum the tissue gave the probe over the step; pushing only).
+    # would scale the step's tangential move by radius / (radius - depth): a vertex sliding over the
+    # sphere would gain speed each step. Through the tangent plane the move only shrinks.
+    # The velocity: the one that takes x_in to that point in dt, consistent with the position (one
+    # that kept the step's tangential velocity while the point moved less would put energy in too).
     n, l = sphere_normal(x_out, centre)
     if l < radius:
         n0, l0 = sphere_normal(x_in, centre)
         x_t = x_out + wp.max(radius - wp.dot(x_out - centre, n0), 0.0) * n0
         n1, l1 = sphere_normal(x_t, centre)
         x1 = centre + radius * n1
-        u1 = (x1 - x_in) / dt
-        push = wp.dot(x1 - x_out, n1)
-        return x1, u1, -(push / (dt * dt_m)) * n1, True
+        return x1, (x1 - x_in) / dt, sphere_contact_reaction(f, n1), True
     return x_out, u_out, wp.vec3(0.0), False
 
 
