@@ -45,22 +45,30 @@ def onto_sphere(x_in: wp.vec3, x_out: wp.vec3, centre: wp.vec3, radius: float, d
 
 
 @wp.func
-def sphere_project(x_in: wp.vec3, x_out: wp.vec3, u_out: wp.vec3, f: wp.vec3, centre: wp.vec3, radius: float, dt: float):
-    # the explicit step's contact: a vertex the step left inside the sphere goes onto its surface;
-    # returns (position, velocity, the contact reaction from its internal force f, whether it touched).
-    # The point: x_out pushed along the normal at x_in to the plane tangent there, then onto the
-    # sphere along its normal. Straight along the normal at x_out, a step that ends deep inside
-    # would scale the step's tangential move by radius / (radius - depth): a vertex sliding over the
-    # sphere would gain speed each step. Through the tangent plane the move only shrinks.
-    # The velocity: the one that takes x_in to that point in dt, consistent with the position (one
+def onto_sphere_from(x_in: wp.vec3, x_out: wp.vec3, centre: wp.vec3, radius: float, dt: float):
+    # the end x_out of a step from x_in put on the sphere's surface: pushed along the normal at x_in
+    # to the plane tangent there, then onto the sphere along its normal; returns (the point, the
+    # velocity that takes x_in there in dt, the sphere's normal there). Straight along the normal at
+    # x_out, a step that ends deep inside would scale the step's tangential move by
+    # radius / (radius - depth): a vertex sliding over the sphere would gain speed each step. Through
+    # the tangent plane the move only shrinks. The velocity is consistent with the position (one
     # that kept the step's tangential velocity while the point moved less would put energy in too).
+    n0, l0 = sphere_normal(x_in, centre)
+    x_t = x_out + wp.max(radius - wp.dot(x_out - centre, n0), 0.0) * n0
+    n1, l1 = sphere_normal(x_t, centre)
+    x1 = centre + radius * n1
+    return x1, (x1 - x_in) / dt, n1
+
+
+@wp.func
+def sphere_project(x_in: wp.vec3, x_out: wp.vec3, u_out: wp.vec3, f: wp.vec3, centre: wp.vec3, radius: float, dt: float):
+    # the explicit step's contact: a vertex the step left inside the sphere goes onto its surface
+    # (onto_sphere_from); returns (position, velocity, the contact reaction from its internal force
+    # f, whether it touched)
     n, l = sphere_normal(x_out, centre)
     if l < radius:
-        n0, l0 = sphere_normal(x_in, centre)
-        x_t = x_out + wp.max(radius - wp.dot(x_out - centre, n0), 0.0) * n0
-        n1, l1 = sphere_normal(x_t, centre)
-        x1 = centre + radius * n1
-        return x1, (x1 - x_in) / dt, sphere_contact_reaction(f, n1), True
+        x1, u1, n1 = onto_sphere_from(x_in, x_out, centre, radius, dt)
+        return x1, u1, sphere_contact_reaction(f, n1), True
     return x_out, u_out, wp.vec3(0.0), False
 
 

@@ -21,7 +21,7 @@ import warp as wp
 from .arrays import struct_of
 from .integrate_implicit import CONTACT_SLACK
 from .forces import add_spring_force, anchor_force
-from .probe_contact import sphere_contact_reaction, sphere_normal
+from .probe_contact import onto_sphere_from, sphere_contact_reaction, sphere_normal
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -103,12 +103,12 @@ def constrain_stroke_spheres(
             if outer and l < radius + guard:
                 spheres.near_edge[p] = 1
             if free and l < radius * (1.0 + float(held) * HELD_SLACK):
-                x1 = c + radius * n
+                x1, u1, n1 = onto_sphere_from(q_in[v], q_out[v], c, radius, dt)
                 q_out[v] = x1
-                qd_out[v] = (x1 - q_in[v]) / dt
+                qd_out[v] = u1
                 spheres.touching[p] = spheres.touching[p] + 1
                 if held == 0:
-                    spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n)
+                    spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n1)
     if alpha >= 1.0:
         for p in range(probe_count):
             spheres.previous[p] = spheres.centre[p]  # the frame is done: the next one starts here
