@@ -272,7 +272,8 @@ def gather_contact_q(q_state: wp.array2d(dtype=wp.vec3), contact_local: wp.array
 
 
 def contact_positions(batch):
-    """Each palpation's contact vertex position [m], a [B] vec3 device array (on the current stream)."""
-    out = wp.empty(batch.batch_size, dtype=wp.vec3, device=batch.device)
+    """Each palpation's contact vertex position [m], a [B] vec3 device array (on the current stream;
+    the batch's own from one press to the next: batch.buffers)."""
+    out = batch.buffers.array("contact_positions", batch.batch_size, wp.vec3, zero=False)
     wp.launch(gather_contact_q, dim=batch.batch_size, inputs=[batch.q_state, batch.contact_local], outputs=[out], device=batch.device)
     return out

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import warp as wp
 from scipy.sparse.csgraph import shortest_path
 
 from almsdm_warp import Region
@@ -103,6 +104,42 @@ def test_batch_repeated_vertices(device, stomach):
     res = BatchPalpation(stomach, rings=2, device=device).touch([693, 5, 693]).press(**SHORT)
     assert res.peak_force[0] == res.peak_force[2]
     assert res.recovery_error[0] == res.recovery_error[2]
+
+
+@pytest.mark.parametrize("radius", [0.0, 0.004])
+def test_a_batch_pressed_again_reuses_its_buffers(device, stomach, radius):
+    # one batch gathering chunk after chunk from a region table (its device arrays kept, uploads staged
+    # through pinned memory on CUDA) gives what a new batch gives for each chunk, bit for bit
+    chunks = [[693, 5, 693, 311], [5, 1001, 311, 693], [1001, 1001, 5, 5], [311, 5]]
+    reused = BatchPalpation(stomach, rings=2, device=device, probe_radius=radius)
+    reused.cache_regions(sum(chunks, []), depth=SHORT["depth"])
+    arrays = None
+    for chunk in chunks:
+        got = reused.touch(chunk, SHORT["depth"]).press(**SHORT)
+        fresh = BatchPalpation(model=reused.model, rings=2, probe_radius=radius).touch(chunk, SHORT["depth"]).press(**SHORT)
+        for name in ("vertex", "peak_force", "hold_force", "recovery_error", "region_vertices", "free_vertices"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(fresh, name), err_msg=name)
+        if arrays is not None and len(chunk) == 4:
+            assert reused.q_state is arrays[0] and reused.regions.region_vertex is arrays[1]  # kept, not made again
+        arrays = (reused.q_state, reused.regions.region_vertex)
+    assert reused.q_state.shape[0] == 2  # the smaller chunk has arrays of its size
+
+
+def test_device_buffers_upload_and_reuse(device):
+    from almsdm_warp.batch.batch_palpation import DeviceBuffers
+
+    buffers = DeviceBuffers(wp.get_device(device))
+    a = buffers.upload("a", np.arange(5, dtype=np.int32), wp.int32)
+    b = buffers.upload("b", np.arange(6, dtype=np.float64).reshape(2, 3), wp.vec3d)
+    np.testing.assert_array_equal(a.numpy(), np.arange(5))
+    np.testing.assert_array_equal(b.numpy(), np.arange(6).reshape(2, 3))
+    a2 = buffers.upload("a", np.arange(5, 10, dtype=np.int32), wp.int32)  # the same array, new values
+    assert a2.ptr == a.ptr or device == "cpu"
+    np.testing.assert_array_equal(a2.numpy(), np.arange(5, 10))
+    z = buffers.array("z", (2, 3), wp.float32)
+    z.fill_(7.0)
+    assert buffers.array("z", (2, 3), wp.float32) is z and not z.numpy().any()  # the same, zeroed again
+    assert buffers.array("z", (3, 3), wp.float32) is not z
 
 
 @pytest.mark.parametrize("radius", [0.0, 0.004])

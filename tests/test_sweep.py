@@ -200,6 +200,7 @@ def test_stream_lanes_read_back_the_finished_press(stomach, monkeypatch):
     monkeypatch.setattr(wp, "get_stream", lambda device: None)
     monkeypatch.setattr(wp, "set_stream", lambda stream, device, sync=False: None)
     monkeypatch.setattr(wp, "synchronize_stream", lambda stream: None)
+    monkeypatch.setattr(wp, "synchronize_event", lambda event: None)
     monkeypatch.setattr(wp, "get_event_elapsed_time", lambda a, b: (b.t - a.t) * 1e3)
     monkeypatch.setattr(wp, "empty", lambda *a, pinned=False, **kw: empty(*a, **kw))
     monkeypatch.setattr(wp, "copy", lambda dst, src, stream=None: (copies.append(stream), copy(dst, src)))
@@ -218,7 +219,22 @@ def test_stream_lanes_read_back_the_finished_press(stomach, monkeypatch):
         for c in sw.COLUMNS:
             np.testing.assert_array_equal(got[c], expected[c])
     assert sum(s is lanes[0].stream for s in copies) == 3 * 2 * 2  # 3 results x 2 ring counts x chunks 0, 2
-    assert all(b <= e for b, e in lanes[1].busy)
+    assert all(origin[1] <= b <= e <= time.perf_counter() for b, e in lanes[1].busy)  # on the host's clock
+
+
+def test_the_timeline_of_presses():
+    # two devices' presses on the host's clock: the first start, the idle time between the first and the
+    # last press (no device pressing) and the tail, against the intervals worked out by hand
+    times = sw.SweepTimes()
+    t0 = times.t0
+    times.add_press([(t0 + 0.5, t0 + 1.0), (t0 + 1.2, t0 + 2.0)])  # one device: idle 1.0..1.2
+    times.add_press([(t0 + 0.9, t0 + 1.1), (t0 + 2.5, t0 + 3.0)])  # another: covers 1.0..1.1, adds 2.0..2.5 idle
+    assert times.press_s == pytest.approx(0.5 + 0.8 + 0.2 + 0.5)
+    got = times.timeline(4.0)
+    assert got["before_first_press_s"] == pytest.approx(0.5)
+    assert got["idle_between_presses_s"] == pytest.approx(0.1 + 0.5)
+    assert got["after_last_press_s"] == pytest.approx(1.0)
+    assert sw.SweepTimes().timeline(1.0) == {}
 
 
 def test_one_substep_from_the_whole_mesh_bound(stomach):

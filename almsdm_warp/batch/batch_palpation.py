@@ -48,6 +48,52 @@ def host_copy(a: wp.array) -> np.ndarray:
     return host.numpy()
 
 
+class DeviceBuffers:
+    """A batch's per-build device arrays, kept from one build to the next of the same size, and its
+    uploads, copied on the device's current stream from pinned host buffers kept likewise.
+
+    A sweep builds and launches one chunk on a stream while another chunk presses on a second
+    stream. A new device array per build frees the last one on the CUDA null stream (Warp's
+    stream-ordered free), and an upload from pageable memory makes the host wait for its stream;
+    together they make the host wait for the other chunk's press. Arrays of the same shape are
+    therefore reused (their earlier contents are only read by work queued before, on the same
+    stream), and uploads go through pinned memory without a host wait: a pinned buffer is written
+    again only after the copy that read it last has run (its event)."""
+
+    def __init__(self, device):
+        self.device = device
+        self._arrays: dict = {}
+        self._staging: dict = {}
+
+    def array(self, name: str, shape, dtype, zero: bool = True) -> wp.array:
+        """A device array of `shape` and `dtype` under `name` (the one of the last call with the same
+        shape, else a new one), zeroed on the current stream when `zero`."""
+        shape = tuple(int(n) for n in np.atleast_1d(shape))
+        held = self._arrays.get(name)
+        if held is None or held.shape != shape or held.dtype != dtype:
+            held = self._arrays[name] = (wp.zeros if zero else wp.empty)(shape, dtype=dtype, device=self.device)
+        elif zero:
+            held.zero_()
+        return held
+
+    def upload(self, name: str, values: np.ndarray, dtype) -> wp.array:
+        """`values` as a device array under `name` (as array()), copied on the current stream (no wait on CUDA)."""
+        values = np.ascontiguousarray(values)
+        if self.device.is_cpu:
+            return wp.array(values, dtype=dtype, device=self.device)
+        out = self.array(name, len(values), dtype, zero=False)
+        pinned, event = self._staging.get(name, (None, None))
+        if pinned is None or len(pinned) < len(values) or pinned.dtype != dtype:
+            pinned, event = wp.empty(max(len(values), 1), dtype=dtype, device="cpu", pinned=True), None
+        if event is not None:
+            wp.synchronize_event(event)  # the last copy from this buffer has run
+        view = pinned[: len(values)]
+        view.numpy()[...] = values.reshape(view.numpy().shape)
+        wp.copy(out, view)
+        self._staging[name] = (pinned, self.device.stream.record_event())
+        return out
+
+
 def _pow2(n: int, minimum: int = 1) -> int:
     return max(minimum, 1 << max(int(n) - 1, 0).bit_length())
 
@@ -101,11 +147,16 @@ class BatchResult:
 class BatchRegions:
     """Compacted per-palpation regions of fixed capacity, on the device (see kernels/batch_rings.py)."""
 
-    def __init__(self, batch_size: int, vertex_capacity: int, entry_capacity: int, rings: int, device, zeros=True):
-        # zeros=False: left uninitialised, for a gather that writes every element (RegionTable.gather)
+    def __init__(self, batch_size: int, vertex_capacity: int, entry_capacity: int, rings: int, device, zeros=True, buffers=None):
+        # zeros=False: left uninitialised, for a gather that writes every element (RegionTable.gather);
+        # buffers (DeviceBuffers): the arrays of its last build of this size, reused
         B, cv, ce, d = batch_size, vertex_capacity, entry_capacity, device
         self.rings = rings
-        alloc = wp.zeros if zeros else wp.empty
+        if buffers is None:
+            alloc = wp.zeros if zeros else wp.empty
+        else:
+            names = iter(range(1 << 8))
+            alloc = lambda shape, dtype, device: buffers.array(f"regions.{next(names)}", shape, dtype, zero=zeros)
         self.vertex_capacity = cv
         self.entry_capacity = ce
         self.region_vertex = alloc((B, cv), dtype=wp.int32, device=d)
@@ -161,11 +212,15 @@ class RegionTable:
         rows = np.minimum(np.searchsorted(self.vertices, vertices), len(self.vertices) - 1)
         return rows if np.array_equal(self.vertices[rows], vertices) else None
 
-    def gather(self, rows: np.ndarray) -> BatchRegions:
-        """The regions of the contacts at `rows`, as a build of them gives them (the same bits)."""
+    def gather(self, rows: np.ndarray, buffers: "DeviceBuffers | None" = None) -> BatchRegions:
+        """The regions of the contacts at `rows`, as a build of them gives them (the same bits); into
+        `buffers`' arrays (DeviceBuffers) when given."""
         t = self.regions
-        out = BatchRegions(len(rows), t.vertex_capacity, t.entry_capacity, t.rings, t.region_vertex.device, zeros=False)
-        br.gather_regions(t, wp.array(rows.astype(np.int32), dtype=wp.int32, device=out.region_vertex.device), out)
+        d = t.region_vertex.device
+        out = BatchRegions(len(rows), t.vertex_capacity, t.entry_capacity, t.rings, d, zeros=False, buffers=buffers)
+        rows = rows.astype(np.int32)
+        rows = wp.array(rows, dtype=wp.int32, device=d) if buffers is None else buffers.upload("rows", rows, wp.int32)
+        br.gather_regions(t, rows, out)
         return out
 
 
@@ -250,6 +305,8 @@ class BatchPalpation:
         self.region_table = None
         """A RegionTable (cache_regions) that build() gathers from where it holds every contact, or None."""
         self._region_host = None  # host copies of the regions' counts where build() has them without a read-back
+        self.buffers = DeviceBuffers(self.device)
+        """The per-build device arrays and uploads, reused from one build to the next (DeviceBuffers)."""
         self.vertices = np.zeros(0, dtype=np.int64)
         offsets = self.mesh.adjacency[0]
         self._max_degree = int(np.diff(offsets).max(initial=1))
@@ -270,7 +327,7 @@ class BatchPalpation:
         table = self.region_table
         rows = None if table is None else table.rows(self.vertices, self.patch_depth)
         if rows is not None:
-            self.regions = table.gather(rows)
+            self.regions = table.gather(rows, self.buffers)
             self._region_host = tuple(c[rows] for c in table.counts)
             self._find_contacts(table.contact_local[rows])
             return self
@@ -362,7 +419,7 @@ class BatchPalpation:
         if local is None:
             rv = self.regions.region_vertex.numpy()
             local = np.argmax(rv == self.vertices[:, None], axis=1).astype(np.int32)
-        self.contact_local = wp.array(local, dtype=wp.int32, device=self.device)
+        self.contact_local = self.buffers.upload("contact_local", np.asarray(local, dtype=np.int32), wp.int32)
         """Local index of each palpation's contact vertex in its region, int32 [B]."""
         self._contact_local = local
         self.sphere_arrays = BatchSphere()
@@ -425,23 +482,23 @@ class BatchPalpation:
             self.threads = min(max(_pow2(int(free.max()), 32), 32), 256)
 
     def _allocate_states(self) -> None:
-        B, d = self.batch_size, self.device
+        B, cv, a = self.batch_size, self.regions.vertex_capacity, self.buffers.array
         # global working arrays of the exact kernel where its regions do not fit in shared memory
         nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared or self.kernel != "exact")
-        self.scratch_vec3 = wp.zeros(nv, dtype=wp.vec3, device=d)
-        self.scratch_float = wp.zeros(nf, dtype=wp.float32, device=d)
-        self.scratch_int = wp.zeros(ni, dtype=wp.int32, device=d)
-        self.scratch_wide = wp.zeros(1, dtype=wp.vec4, device=d)  # a typed placeholder (shared memory is used)
-        self.q_state = wp.zeros((B, self.regions.vertex_capacity), dtype=wp.vec3, device=d)
+        self.scratch_vec3 = a("scratch_vec3", nv, wp.vec3)
+        self.scratch_float = a("scratch_float", nf, wp.float32)
+        self.scratch_int = a("scratch_int", ni, wp.int32)
+        self.scratch_wide = a("scratch_wide", 1, wp.vec4)  # a typed placeholder (shared memory is used)
+        self.q_state = a("q_state", (B, cv), wp.vec3)
         """Positions of each palpation's region vertices [m], local order, shape [B, capacity]."""
-        self.qd_state = wp.zeros((B, self.regions.vertex_capacity), dtype=wp.vec3, device=d)
+        self.qd_state = a("qd_state", (B, cv), wp.vec3)
         """Velocities [m/s], same layout."""
-        self.peak_force = wp.zeros(B, dtype=wp.float64, device=d)
+        self.peak_force = a("peak_force", B, wp.float64)
         """Running largest |feedback force| [N] (its square with the "fast" kernel), [B]."""
-        self.peak_reaction = wp.zeros(B, dtype=wp.vec3, device=d)
-        self.hold_reaction = wp.zeros(B, dtype=wp.vec3, device=d)
+        self.peak_reaction = a("peak_reaction", B, wp.vec3)
+        self.hold_reaction = a("hold_reaction", B, wp.vec3)
         normals = -self.model.vertex_normal_rest[self.vertices]
-        self.press_direction = wp.array(normals, dtype=wp.vec3d, device=d)
+        self.press_direction = self.buffers.upload("press_direction", normals, wp.vec3d)
         """Inward unit normal at each contact vertex (float64, as the host computes the target)."""
         self.press_arrays = struct_from(BatchPress, self, depth=0.0, ramp_steps=0, press_steps=0)
         """The press's schedule, directions and force records as one kernel argument (set again by start_press)."""

@@ -73,12 +73,34 @@ def area_uniform_points(vertices: np.ndarray, triangles: np.ndarray, n: int, see
     c = np.cross(e1, p[t[:, 2]] - p[t[:, 1]])
     cum = np.cumsum(np.sqrt((c**2).sum(axis=1)) / 2.0)
     rng = np.random.default_rng(seed)
-    face = np.searchsorted(cum, rng.random(n) * cum[-1])
-    uv = rng.random((n, 2))
-    fold = uv.sum(axis=1) > 1.0
-    uv[fold] -= 1.0
-    np.abs(uv, out=uv)
-    return e1[face] * uv[:, :1] + e2[face] * uv[:, 1:] + o[face]
+    pick, uv = rng.random(n), rng.random((n, 2))  # the draws in trimesh's order; the rest point by point
+    out = np.empty((n, 3))
+
+    def block(b: int, e: int) -> None:
+        face = np.searchsorted(cum, pick[b:e] * cum[-1])
+        w = uv[b:e]
+        w[w.sum(axis=1) > 1.0] -= 1.0
+        np.abs(w, out=w)
+        out[b:e] = e1[face] * w[:, :1] + e2[face] * w[:, 1:] + o[face]
+
+    in_blocks(block, n)
+    return out
+
+
+def in_blocks(work, n: int, size: int = 1 << 16) -> None:
+    """work(begin, end) over blocks of `size` of range(n), on a thread per core (NumPy and SciPy
+    release the GIL in them): each point's result is its own, so any split gives the same bits."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    blocks = [(b, min(b + size, n)) for b in range(0, n, size)]
+    if len(blocks) <= 1:
+        for b, e in blocks:
+            work(b, e)
+        return
+    with ThreadPoolExecutor(min(len(blocks), os.cpu_count() or 1)) as pool:
+        for f in [pool.submit(work, b, e) for b, e in blocks]:
+            f.result()
 
 
 def sample_points(mesh, n: int, seed: int = 0):
@@ -105,7 +127,12 @@ def sample_points(mesh, n: int, seed: int = 0):
         pts = dense[farthest_points(dense, n, int(np.argmax(dense[:, 2])))]
     else:  # farthest-point sampling costs n x 3n: beyond FPS_MAX, area-uniform random points
         pts = area_uniform_points(v, mesh.triangles, n, seed)
-    _, near = cKDTree(v[surface]).query(pts, workers=-1)  # every core: the same nearest vertices
+    tree, near = cKDTree(v[surface]), np.empty(len(pts), dtype=np.int64)
+
+    def snap(b: int, e: int) -> None:
+        near[b:e] = tree.query(pts[b:e])[1]
+
+    in_blocks(snap, len(pts))  # the same nearest vertices as one query
     return pts, surface[near].astype(np.int64)
 
 
@@ -396,9 +423,13 @@ class SweepTimes:
     """
 
     def __init__(self):
+        self.t0 = time.perf_counter()
         self.seconds = dict.fromkeys(PHASES, 0.0)
         self.press_s = 0.0
         """Press kernels [s]: per device, the time it was pressing, summed over devices."""
+        self.pressing: list[tuple[float, float]] = []
+        """(begin, end) of each chunk's press [s since t0], on the host's clock (on CUDA the device's
+        events moved by the host time of a synchronised origin event: within a few microseconds)."""
         self.host_per_chunk: list[float] = []
         """Host time [s] of each chunk on its device's thread (build, plan, launch, read-back, checks)."""
         self._lock = threading.Lock()
@@ -415,9 +446,21 @@ class SweepTimes:
         with self._lock:
             self.seconds[name] += seconds
 
-    def add_press(self, seconds: float) -> None:
+    def add_press(self, intervals) -> None:
+        """One device's presses, (begin, end) [s] on the host's clock (time.perf_counter)."""
+        intervals = [(b - self.t0, e - self.t0) for b, e in intervals]
         with self._lock:
-            self.press_s += seconds
+            self.press_s += union_length(intervals)
+            self.pressing += intervals
+
+    def timeline(self, wall_s: float) -> dict:
+        """When the devices pressed [s]: the first press's start, the idle time between the first and the
+        last press (no device pressing), and the time after the last press to `wall_s`."""
+        if not self.pressing:
+            return {}
+        first, last = min(b for b, _ in self.pressing), max(e for _, e in self.pressing)
+        return {"before_first_press_s": first, "idle_between_presses_s": last - first - union_length(self.pressing),
+                "after_last_press_s": wall_s - last}
 
     def table(self, wall_s: float) -> str:
         """The breakdown as lines of text: each phase, the press kernels and the rest of `wall_s` [s]."""
@@ -425,6 +468,8 @@ class SweepTimes:
         rows.append(("press kernels (device)", self.press_s))
         lines = [f"{name:<26}{s:10.3f} s{100 * s / wall_s:7.1f} %" for name, s in rows]
         lines.append(f"{'wall':<26}{wall_s:10.3f} s  (host phases of several threads may overlap the press)")
+        for name, s in self.timeline(wall_s).items():
+            lines.append(f"{name[:-2].replace('_', ' '):<26}{s:10.3f} s{100 * s / wall_s:7.1f} %")
         if self.host_per_chunk:
             h = np.array(self.host_per_chunk)
             lines.append(f"host time per chunk: median {np.median(h) * 1e3:.1f} ms, max {h.max() * 1e3:.1f} ms ({len(h)} chunks)")
@@ -433,7 +478,7 @@ class SweepTimes:
     def as_dict(self, wall_s: float) -> dict:
         """The breakdown in seconds, JSON keys with their unit."""
         out = {f"{name.replace(' ', '_').replace('-', '_')}_s": s for name, s in self.seconds.items()}
-        return {**out, "press_kernels_s": self.press_s, "wall_s": wall_s}
+        return {**out, "press_kernels_s": self.press_s, "wall_s": wall_s, **self.timeline(wall_s)}
 
 
 class RingBatches:
@@ -550,12 +595,18 @@ class Lane:
         pressed = 0.0
         if self.stream is None:  # the CPU, synchronous: the launch was the press
             pressed = sum(e[1] - e[0] for *_, e in self.started)
-            self.times.add_press(pressed)
         self.host_s = time.perf_counter() - t0 - pressed
 
     def clock_origin(self):
-        """An event on this stream, the zero of the press intervals on the device's clock (None on the CPU)."""
-        return self._record()[0] if self.stream is not None else None
+        """(an event on this stream, the host's time.perf_counter when it ran): the zero of the press
+        intervals on the device's clock, and where it falls on the host's (None on the CPU)."""
+        import warp as wp
+
+        if self.stream is None:
+            return None
+        event = self._record()[0]
+        wp.synchronize_event(event)
+        return event, time.perf_counter()
 
     def _record(self):
         import warp as wp
@@ -591,7 +642,10 @@ class Lane:
         if self.stream is not None:
             with self.times.phase("waiting for the device"):
                 wp.synchronize_stream(self.stream)
-            self.busy = [(wp.get_event_elapsed_time(origin, e[0]), wp.get_event_elapsed_time(origin, e[1])) for *_, e in self.started]
+            at = lambda event: origin[1] + 1e-3 * wp.get_event_elapsed_time(origin[0], event)
+            self.busy = [(at(e[0]), at(e[1])) for *_, e in self.started]
+        else:
+            self.busy = [(e[0], e[1]) for *_, e in self.started]
         results = []
         with self.times.phase("read-back"):
             for idx, batch, pinned, _ in self.started:
@@ -659,7 +713,7 @@ def run_device(plan: SweepPlan, batches: list, take, put, times: SweepTimes, on_
     def finish(chunk):
         j, lane = chunk
         put(j, lane.finish(plan, origin))
-        busy.extend(getattr(lane, "busy", []))
+        busy.extend(lane.busy)
 
     while True:
         i = take()
@@ -675,7 +729,7 @@ def run_device(plan: SweepPlan, batches: list, take, put, times: SweepTimes, on_
         if i is None:
             break
         flying = (i, lane)
-    times.add_press(union_length(busy) * 1e-3)
+    times.add_press(busy)
 
 
 def union_length(intervals) -> float:
