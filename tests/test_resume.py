@@ -54,6 +54,19 @@ def test_a_chunk_without_its_checksum_is_pressed_again(tmp_path, capsys):
     assert out.read_text() == whole.read_text()
 
 
+def test_a_run_stopped_before_its_first_chunk_leaves_a_folder_taken_as_new(tmp_path, capsys):
+    whole = tmp_path / "whole.csv"
+    assert main([*ARGS, "--out", str(whole)]) == 0
+    out = tmp_path / "s.csv"
+    interrupt_after(0, out)
+    parts = tmp_path / "s.csv.parts"
+    assert parts.is_dir() and not any(parts.iterdir())  # no plan.json yet: nothing was written
+    capsys.readouterr()
+    assert main([*ARGS, "--out", str(out)]) == 0
+    assert "resuming" not in capsys.readouterr().out
+    assert out.read_text() == whole.read_text()
+
+
 def interrupt_after(chunks: int, out) -> None:
     """Run the sweep of ARGS into `out`, interrupted (Ctrl-C) when `chunks` chunks are written."""
     from unittest import mock
@@ -70,6 +83,7 @@ def interrupt_after(chunks: int, out) -> None:
 
 
 def _key_of_the_sweep(tmp_path):
-    """The plan key of ARGS, from the plan.json of a run stopped before its first chunk."""
-    interrupt_after(0, tmp_path / "k.csv")
+    """The plan key of ARGS, from the plan.json of a run stopped after its first chunk (a new folder's
+    plan.json is written with its first chunk)."""
+    interrupt_after(1, tmp_path / "k.csv")
     return json.loads((tmp_path / "k.csv.parts" / "plan.json").read_text())["key"]

@@ -48,6 +48,45 @@ def test_more_points_than_vertices_snap_to_the_nearest(stomach):
     np.testing.assert_allclose(np.linalg.norm(points - stomach.vertices[vertices], axis=1), d.min(axis=1))
 
 
+def test_sampling_behind_the_caller_gives_trimeshs_points_snapped(stomach, monkeypatch):
+    # the area-uniform path sampled block by block on threads: trimesh's points for the seed, each
+    # snapped to its nearest surface vertex (brute force), the first blocks usable before the last
+    import trimesh
+
+    monkeypatch.setattr(sw.Sampling, "BLOCK", 1000)
+    n = 25000
+    sampling = sw.Sampling(stomach, n)
+    sampling.wait(3000)
+    tm = trimesh.Trimesh(vertices=stomach.vertices, faces=stomach.triangles, process=False)
+    expected = trimesh.sample.sample_surface(tm, n, seed=0)[0]
+    np.testing.assert_array_equal(sampling.points[:3000], expected[:3000])
+    sampling.wait()
+    assert sampling.seconds > 0
+    np.testing.assert_array_equal(sampling.points, expected)
+    surface = stomach.vertices[stomach.surface_vertices]
+    for b in range(0, n, 5000):
+        d = np.linalg.norm(expected[b : b + 5000, None, :] - surface[None], axis=2)
+        np.testing.assert_array_equal(sampling.vertices[b : b + 5000], stomach.surface_vertices[d.argmin(axis=1)])
+
+
+def test_a_sweep_pressing_while_its_points_are_sampled_writes_the_same_table(tmp_path, monkeypatch):
+    # more points than the surface's vertices on the area-uniform path: chunks start while later blocks
+    # are sampled, regions come from a table of every surface vertex, the key is hashed on the writer's
+    # thread; the table equals that of a plan whose points were all sampled first
+    fast = ["sweep", "--points", "1100", "--chunk", "256", "--rings", "1", "--ramp-s", "0.004", "--hold-s", "0",
+            "--settle-s", "0.004", "--dt-ms", "1", "--no-progress"]
+    monkeypatch.setattr(sw, "FPS_MAX", 100)
+    monkeypatch.setattr(sw.Sampling, "BLOCK", 128)
+    behind = tmp_path / "behind.npz"
+    assert main([*fast, "--out", str(behind)]) == 0
+    monkeypatch.setattr(sw, "start_sampling", lambda mesh, n, fixed_below=None: (*sw.pressable_points(mesh, n, fixed_below), None))
+    first = tmp_path / "first.npz"
+    assert main([*fast, "--out", str(first)]) == 0
+    a, b = sw.read_table(behind), sw.read_table(first)
+    for c in sw.COLUMNS:
+        np.testing.assert_array_equal(a[c], b[c], err_msg=c)
+
+
 def test_area_uniform_points_are_trimeshs_and_uniform(stomach):
     # the same points as trimesh's sampler for the same seed (so a sweep's plan, and its resume, are
     # unchanged), and uniform by area: each triangle's share of points against its share of the area

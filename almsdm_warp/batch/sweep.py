@@ -65,26 +65,79 @@ def area_uniform_points(vertices: np.ndarray, triangles: np.ndarray, n: int, see
     u + v > 1 they are folded back as 1 - u, 1 - v). The draws and the arithmetic are trimesh's
     ``sample.sample_surface``, so the points are its bits for the same seed, without building a mesh
     object or its (n, 2, 3) temporaries."""
-    p = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles)
-    o = p[t[:, 0]]
-    e1, e2 = p[t[:, 1]] - o, p[t[:, 2]] - o
-    # the area as trimesh computes it: |(v1 - v0) x (v2 - v1)| / 2
-    c = np.cross(e1, p[t[:, 2]] - p[t[:, 1]])
-    cum = np.cumsum(np.sqrt((c**2).sum(axis=1)) / 2.0)
-    rng = np.random.default_rng(seed)
-    pick, uv = rng.random(n), rng.random((n, 2))  # the draws in trimesh's order; the rest point by point
-    out = np.empty((n, 3))
+    surface = AreaSampler(vertices, triangles, n, seed)
+    in_blocks(surface.points, n)
+    return surface.out
 
-    def block(b: int, e: int) -> None:
-        face = np.searchsorted(cum, pick[b:e] * cum[-1])
-        w = uv[b:e]
-        w[w.sum(axis=1) > 1.0] -= 1.0
+
+class AreaSampler:
+    """area_uniform_points in parts: the draws at once, in trimesh's order (a triangle by a uniform
+    number searched in the areas' cumulative sum, then u, v for each point); then points(b, e) puts
+    points b..e into `out`, each from its own draws, so any split gives the same bits."""
+
+    def __init__(self, vertices, triangles, n: int, seed: int = 0):
+        p = np.asarray(vertices, dtype=np.float64)
+        t = np.asarray(triangles)
+        self.o = p[t[:, 0]]
+        self.e1, self.e2 = p[t[:, 1]] - self.o, p[t[:, 2]] - self.o
+        # the area as trimesh computes it: |(v1 - v0) x (v2 - v1)| / 2
+        c = np.cross(self.e1, p[t[:, 2]] - p[t[:, 1]])
+        self.cum = np.cumsum(np.sqrt((c**2).sum(axis=1)) / 2.0)
+        rng = np.random.default_rng(seed)
+        self.pick, self.uv = rng.random(n), rng.random((n, 2))
+        self.out = np.empty((n, 3))
+
+    def points(self, b: int, e: int) -> None:
+        face = np.searchsorted(self.cum, self.pick[b:e] * self.cum[-1])
+        w = self.uv[b:e]
+        w[w.sum(axis=1) > 1.0] -= 1.0  # folded back into the triangle: 1 - u, 1 - v
         np.abs(w, out=w)
-        out[b:e] = e1[face] * w[:, :1] + e2[face] * w[:, 1:] + o[face]
+        self.out[b:e] = self.e1[face] * w[:, :1] + self.e2[face] * w[:, 1:] + self.o[face]
 
-    in_blocks(block, n)
-    return out
+
+class Sampling:
+    """sample_points' area-uniform path (beyond FPS_MAX points and the surface's vertices) on a
+    thread a core, a block of points at a time in order, each block drawn and snapped to its nearest
+    surface vertex: `points` and `vertices` fill in behind the caller, who presses the first chunks
+    while later blocks are sampled (wait(end): until points[:end] are there). The same bits as
+    sample_points."""
+
+    BLOCK = 1 << 16
+
+    def __init__(self, mesh, n: int, seed: int = 0):
+        import os
+        from concurrent.futures import ThreadPoolExecutor
+
+        from scipy.spatial import cKDTree
+
+        t0 = time.perf_counter()
+        self.surface = mesh.surface_vertices
+        self.tree = cKDTree(mesh.vertices[self.surface])
+        self.area = AreaSampler(mesh.vertices, mesh.triangles, n, seed)
+        self.points, self.vertices = self.area.out, np.empty(n, dtype=np.int64)
+        self.blocks = [(b, min(b + self.BLOCK, n)) for b in range(0, n, self.BLOCK)]
+        self.seconds = None
+        """Wall time [s] from the start to the last block, once wait() has seen it."""
+        self._pool = ThreadPoolExecutor(min(len(self.blocks), os.cpu_count() or 1), thread_name_prefix="sweep-sampling")
+        self._futures = [self._pool.submit(self._block, b, e) for b, e in self.blocks]  # run in this order
+        self._pool.shutdown(wait=False)
+        self._t0 = t0
+
+    def _block(self, b: int, e: int) -> float:
+        self.area.points(b, e)
+        self.vertices[b:e] = self.surface[self.tree.query(self.points[b:e])[1]]
+        return time.perf_counter()
+
+    def wait(self, end: int | None = None) -> None:
+        """Return once points[:end] (all: None) are sampled; an error in a block is raised here."""
+        end = len(self.vertices) if end is None else end
+        last = 0.0
+        for (b, _), f in zip(self.blocks, self._futures):
+            if b >= end:
+                break
+            last = max(last, f.result())
+        if end >= len(self.vertices) and self.seconds is None:
+            self.seconds = last - self._t0
 
 
 def in_blocks(work, n: int, size: int = 1 << 16) -> None:
@@ -122,11 +175,12 @@ def sample_points(mesh, n: int, seed: int = 0):
         return v[idx].copy(), idx.astype(np.int64)
     from scipy.spatial import cKDTree
 
-    if n <= FPS_MAX:
-        dense = area_uniform_points(v, mesh.triangles, 3 * n, seed)
-        pts = dense[farthest_points(dense, n, int(np.argmax(dense[:, 2])))]
-    else:  # farthest-point sampling costs n x 3n: beyond FPS_MAX, area-uniform random points
-        pts = area_uniform_points(v, mesh.triangles, n, seed)
+    if n > FPS_MAX:  # farthest-point sampling costs n x 3n: beyond FPS_MAX, area-uniform random points
+        sampling = Sampling(mesh, n, seed)
+        sampling.wait()
+        return sampling.points, sampling.vertices
+    dense = area_uniform_points(v, mesh.triangles, 3 * n, seed)
+    pts = dense[farthest_points(dense, n, int(np.argmax(dense[:, 2])))]
     tree, near = cKDTree(v[surface]), np.empty(len(pts), dtype=np.int64)
 
     def snap(b: int, e: int) -> None:
@@ -173,6 +227,28 @@ class SweepPlan:
     """The spherical probe's radius [m] (BatchPalpation's probe_radius); 0: the paper's probe."""
     fixed_below: float | None = None
     """Support plane [m] (Model's fixed_below), or None."""
+    sampling: "Sampling | None" = None
+    """Where `points` and `vertices` are still being sampled (Sampling, filled block by block), or None;
+    not part of the plan's numbers (the points are)."""
+
+    def wait(self, end: int | None = None) -> None:
+        """Return once the points up to `end` (all: None) are there (see `sampling`)."""
+        if self.sampling is not None:
+            self.sampling.wait(end)
+
+    def __getstate__(self) -> dict:
+        # pickled (Ray) with every point sampled and without the sampling's threads
+        self.wait()
+        return {**self.__dict__, "sampling": None}
+
+    def contacts(self, rings: int) -> np.ndarray | None:
+        """The contacts whose regions of `rings` rings a sweep builds once and gathers (a RegionTable's,
+        sorted), or None where no contact is pressed twice. While the points are still being sampled:
+        every surface vertex (there are more points than those, each snapped to one)."""
+        if self.sampling is not None and self.sampling.seconds is None:
+            return np.sort(self.mesh.surface_vertices).astype(np.int64)
+        times = np.bincount(self.vertices[self.point_rings == rings], minlength=self.mesh.vertex_count)
+        return np.flatnonzero(times) if times.max(initial=0) > 1 else None
 
     @property
     def point_rings(self) -> np.ndarray:
@@ -181,7 +257,15 @@ class SweepPlan:
             return np.full(len(self.vertices), int(self.rings), dtype=np.int64)
         return np.asarray(self.rings, dtype=np.int64)
 
+    @property
+    def ring_counts(self) -> list[int]:
+        """The distinct ring counts of the plan's regions, ascending."""
+        if isinstance(self.rings, (int, np.integer)):
+            return [int(self.rings)]
+        return [int(k) for k in np.unique(self.rings)]
+
     def key(self) -> str:
+        self.wait()
         h = hashlib.sha256()
         scalars = ["table v2 (rings column)", self.mesh.path, self.mesh.vertex_count, self.dt, self.depth]
         scalars += [self.ramp, self.hold, self.settle, self.chunk, self.integrator, self.tol]
@@ -195,8 +279,13 @@ class SweepPlan:
 
     @property
     def chunks(self) -> list[tuple[int, int]]:
-        n = len(self.vertices)
-        return [(i, min(i + self.chunk, n)) for i in range(0, n, self.chunk)]
+        """(begin, end) of each chunk of points (made once for the plan's point count and chunk size:
+        a CPU sweep of 1e6 points has 15,625 chunks, each looked up here)."""
+        n, key = len(self.vertices), ("_chunks", len(self.vertices), self.chunk)
+        if self.__dict__.get("_chunks_key") != key:
+            self.__dict__["_chunks"] = [(i, min(i + self.chunk, n)) for i in range(0, n, self.chunk)]
+            self.__dict__["_chunks_key"] = key
+        return self.__dict__["_chunks"]
 
     def batch(self, device, model=None) -> "RingBatches":
         """The batches of this plan on `device`, one per ring count (with `model`, made on that device, when given)."""
@@ -309,7 +398,8 @@ class Parts:
     def __init__(self, out: Path, plan: SweepPlan):
         self.dir = Path(str(out) + ".parts")
         self.plan = plan
-        self.key = plan.key()
+        self._key = None
+        self._manifest_due = False  # a new folder's plan.json: written with its first chunk
         self.sums: dict[int, str] = {}
         """Chunk index -> SHA-256 of its file, as written."""
         self.damaged: list[int] = []
@@ -322,6 +412,13 @@ class Parts:
         self._lock = threading.Lock()  # chunks finish on several threads (several GPUs)
 
     @property
+    def key(self) -> str:
+        """The plan's key (SweepPlan.key: it hashes every point, so it waits for their sampling)."""
+        if self._key is None:
+            self._key = self.plan.key()
+        return self._key
+
+    @property
     def manifest(self) -> Path:
         return self.dir / "plan.json"
 
@@ -329,8 +426,12 @@ class Parts:
         return self.dir / f"chunk_{i:06d}.npz"
 
     def open(self) -> list[int]:
-        """Create or reuse the parts folder; returns the chunk indices already done (checksums verified)."""
-        if self.dir.exists():
+        """Create or reuse the parts folder; returns the chunk indices already done (checksums verified).
+
+        A new folder's plan.json is written with its first chunk (on the writer's thread: the key waits
+        for the points), so a folder with neither plan.json nor a chunk is one a run left before its
+        first chunk: taken as new."""
+        if self.dir.exists() and (self.manifest.exists() or any(self.dir.glob("chunk_*.npz"))):
             try:
                 data = json.loads(self.manifest.read_text())
                 found = data["key"]
@@ -343,12 +444,14 @@ class Parts:
                     f"delete it, or give another --out"
                 )
         else:
-            self.dir.mkdir()
-            self._write_manifest()
+            self.dir.mkdir(exist_ok=True)
+            self._manifest_due = True
+            return []
         done, self.damaged = [], []
+        present = {p.name for p in self.dir.iterdir()}  # one listing, not a look-up a chunk
         for i in range(len(self.plan.chunks)):
             path = self.chunk_path(i)
-            if not path.exists():
+            if path.name not in present:
                 continue
             if self.sums.get(i) == file_sha256(path):
                 done.append(i)
@@ -371,6 +474,10 @@ class Parts:
                 np.savez(f, **columns)
             digest.append(file_sha256(tmp))
 
+        with self._lock:
+            if self._manifest_due:  # before any chunk: a folder with a chunk always has its plan.json
+                self._write_manifest()
+                self._manifest_due = False
         atomic_write(self.chunk_path(i), write)
         with self._lock:
             self.sums[i] = digest[0]
@@ -408,7 +515,7 @@ class Parts:
 
 
 # -- running -----------------------------------------------------------------------------------
-PHASES = ("sampling", "set-up", "region build", "planning", "launch", "waiting for the device", "read-back", "checks",
+PHASES = ("sampling", "set-up", "waiting for the points", "region build", "planning", "launch", "waiting for the device", "read-back", "checks",
           "writing", "waiting for the writer", "gather", "output")
 """The host phases of a sweep's wall time (SweepTimes); the device's press time is counted apart."""
 
@@ -505,10 +612,8 @@ class RingBatches:
                                    probe_radius=p.probe_radius)
             if rings in self.tables:
                 batch.region_table = self.tables[rings]
-            else:
-                contacts = p.vertices[p.point_rings == rings]
-                if len(np.unique(contacts)) < len(contacts):  # a contact pressed again: its region built once
-                    self.tables[rings] = batch.cache_regions(contacts, p.depth)
+            elif (contacts := p.contacts(rings)) is not None:  # contacts pressed again: each region built once
+                self.tables[rings] = batch.cache_regions(contacts, p.depth)
             if isinstance(self.critical_dt_bound, Future):
                 self.critical_dt_bound = self.critical_dt_bound.result()
             batch.critical_dt_bound = self.critical_dt_bound
@@ -518,6 +623,7 @@ class RingBatches:
 
 def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_launch=None):
     """Start the presses of points begin..end (a batch per ring count among them); returns a finisher."""
+    plan.wait(end)
     rings = plan.point_rings[begin:end]
     per_launch = 200 if batches.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
     started = []
@@ -550,8 +656,8 @@ class Lane:
         self.batches, self.times, self.device = batches, times, batches.device
         self.stream = wp.Stream(self.device) if self.device.is_cuda else None
         with times.phase("region build"):  # made now: their set-up (and region tables) read on the null stream
-            for k in np.unique(batches.plan.point_rings):
-                batches.get(int(k))
+            for k in batches.plan.ring_counts:
+                batches.get(k)
         self.started = []
         """(indices in the chunk, batch, pinned (peak, hold, q0), events) of the chunk in flight."""
         self._pinned = {}
@@ -575,6 +681,8 @@ class Lane:
     def start(self, plan: SweepPlan, i: int, on_launch=None, origin=None) -> None:
         """Build, plan and launch chunk `i`, and queue its read-back (asynchronous on CUDA)."""
         begin, end = self.chunk = plan.chunks[i]
+        with self.times.phase("waiting for the points"):
+            plan.wait(end)
         rings = plan.point_rings[begin:end]
         per_launch = 200 if self.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
         t0, self.started = time.perf_counter(), []
@@ -743,7 +851,7 @@ def union_length(intervals) -> float:
 
 
 def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str], progress=None, *, pipeline: bool = True,
-              times: SweepTimes | None = None) -> None:
+              times: SweepTimes | None = None, models=None) -> None:
     """Press the chunks `todo` over `devices` (each chunk written when it is done).
 
     pipeline: a host thread per device (a device named twice gets two), each with its own model and
@@ -751,12 +859,13 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
     into pinned memory, part files written on a thread of their own; chunks are handed out in
     order to whichever device is free. Without: one thread, chunks interleaved over the devices,
     each built, pressed, read and written in turn. Both give the same bits for the same plan.
-    times: where the wall time goes (SweepTimes), filled in.
+    times: where the wall time goes (SweepTimes), filled in. models: the plan's model on each device,
+    or a Future of them (models_behind), or None: made here.
     """
     times = times if times is not None else SweepTimes()
     advance = None if progress is None else progress.advance
     with times.phase("set-up"):
-        models = [plan.model(d) for d in devices]
+        models = models.result() if isinstance(models, Future) else models or [plan.model(d) for d in devices]
     todo = list(todo)
     if not pipeline:
         batches = [RingBatches(plan, m) for m in models]
@@ -900,6 +1009,31 @@ def auto_dt(model, limit: float = 1e-3, safety: float = 0.9) -> float:
         return limit
     step = math.floor(safety * crit / 5e-5) * 5e-5
     return step if step > 0 else safety * crit
+
+
+def start_sampling(mesh, n: int, fixed_below=None):
+    """pressable_points(mesh, n, fixed_below) as (points, vertices, None); or, on its area-uniform
+    path and where no support can drop points (so their number is n before they are drawn), a
+    Sampling that fills them in behind the caller: (its points, its vertices, it). The same points."""
+    if n > FPS_MAX and n > len(mesh.surface_vertices) and fixed_below is None:
+        sampling = Sampling(mesh, n)
+        return sampling.points, sampling.vertices, sampling
+    return (*pressable_points(mesh, n, fixed_below), None)
+
+
+def models_behind(plan: SweepPlan, devices: list[str]) -> Future:
+    """The plan's model on each of `devices` (a list), made on a thread of its own while the caller
+    goes on (a CUDA device's first arrays also start its memory pool: ~0.1 s on an H200)."""
+    made = Future()
+
+    def make():
+        try:
+            made.set_result([plan.model(d) for d in devices])
+        except BaseException as exc:
+            made.set_exception(exc)
+
+    threading.Thread(target=make, name="sweep-models", daemon=True).start()
+    return made
 
 
 def pressable_points(mesh, n: int, fixed_below=None):

@@ -81,7 +81,7 @@ def cmd_sweep(args) -> int:
     quiet_warp()
     devices = _devices(args.device)
     times, t_start = SweepTimes(), time.perf_counter()
-    plan, scene, rings_text = _plan(args, devices, times)
+    plan, scene, rings_text, models = _plan(args, devices, times)
     parts, todo, left = _resume(out, plan)
     from ..batch.sweep import press_steps
 
@@ -92,7 +92,7 @@ def cmd_sweep(args) -> int:
             if args.ray:
                 run_ray(plan, parts, todo, devices[0] != "cpu", None if args.ray == "local" else args.ray, bar)
             else:
-                run_local(plan, parts, todo, devices, bar, pipeline=args.pipeline, times=times)
+                run_local(plan, parts, todo, devices, bar, pipeline=args.pipeline, times=times, models=models)
     except KeyboardInterrupt:
         print(f"almsdm: interrupted; the chunks done are in {parts.dir}: run the same command again to resume", file=sys.stderr)
         return 130
@@ -100,6 +100,9 @@ def cmd_sweep(args) -> int:
         parts.remove()
         raise InputError(str(exc)) from exc
     elapsed = time.perf_counter() - t0
+    if plan.sampling is not None:  # behind the first chunks: its wall time, overlapped
+        plan.wait()
+        times.add("sampling", plan.sampling.seconds)
     with times.phase("gather"):
         columns = parts.gather()
     with times.phase("output"):
@@ -119,8 +122,9 @@ def cmd_sweep(args) -> int:
 
 def _plan(args, devices, times):
     """The scene, its mesh and the sweep's plan (points, chunks, rings, step); says what will be pressed.
-    Returns (plan, scene, the rings in words)."""
-    from ..batch.sweep import SweepPlan, check_sphere_travel, default_chunk, pressable_points
+    Returns (plan, scene, the rings in words, the models on the devices: a Future, or None). The points
+    may still be being sampled (plan.sampling), and the models made, while the caller goes on."""
+    from ..batch.sweep import SweepPlan, check_sphere_travel, default_chunk, models_behind, pressable_points, start_sampling
     from ..batch.sweep_auto import rings_summary
     from ..scene.loader import resolve_scene_or_mesh
 
@@ -144,12 +148,18 @@ def _plan(args, devices, times):
     check_limit(args.points, "points", "--points")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
-    with times.phase("sampling"):
+    t0, sampling = time.perf_counter(), None
+    if tol is None:  # (--rings auto sizes each point's region first: every point is needed at once)
+        points, vertices, sampling = start_sampling(mesh, args.points, scene.fixed_below)
+    else:
         points, vertices = pressable_points(mesh, args.points, scene.fixed_below)
+    if sampling is None:  # else counted when it is done (its wall time, behind the first chunks)
+        times.add("sampling", time.perf_counter() - t0)
     cuda = devices[0] != "cpu"
     chunk = args.chunk or default_chunk(len(vertices), devices)
     plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, dt, depth, ramp, hold, settle, points,
-                     vertices, chunk, args.integrator, tol, radius, scene.fixed_below)
+                     vertices, chunk, args.integrator, tol, radius, scene.fixed_below, sampling=sampling)
+    models = None if args.ray or not args.pipeline else models_behind(plan, devices)
     print(mesh.summary())
     with times.phase("set-up"):
         substeps = _substeps(plan)
@@ -160,14 +170,15 @@ def _plan(args, devices, times):
     else:
         rings_text = f"{rings} rings"
     lesion = f"; lesion {scene.lesion.as_dict()}" if scene.lesion is not None else ""
+    distinct = "sampled while the first chunks press" if sampling is not None else f"{len(np.unique(vertices))} distinct vertices"
     where = f"Ray ({'GPU' if cuda else 'CPU'} tasks)" if args.ray else ", ".join(devices)
     print(
-        f"sweep: {len(vertices)} points ({len(np.unique(vertices))} distinct vertices), {rings_text}, press {depth * 1e3:g} mm "
+        f"sweep: {len(vertices)} points ({distinct}), {rings_text}, press {depth * 1e3:g} mm "
         f"(ramp {ramp:g} s, hold {hold:g} s, settle {settle:g} s), {plan.integrator}, dt {plan.dt * 1e3:g} ms, chunks of {chunk} on {where}{lesion}"
     )
     print(f"cost: {cost:.3g} region-steps ({len(vertices)} points x {frames} frames x at most {substeps} substep(s); "
           f"limit {args.max_region_steps:.3g}, --max-region-steps)")
-    return plan, scene, rings_text
+    return plan, scene, rings_text, models
 
 
 def _substeps(plan) -> int:
@@ -193,10 +204,11 @@ def _resume(out: Path, plan):
     done = parts.open()
     if parts.damaged:
         print(f"note: {len(parts.damaged)} chunk(s) in {parts.dir} did not match their checksum (damaged): pressed again", file=sys.stderr)
-    todo = [i for i in range(len(plan.chunks)) if i not in set(done)]
+    done = set(done)
+    todo = [i for i in range(len(plan.chunks)) if i not in done]
     if done:
         print(f"resuming: {len(done)} of {len(plan.chunks)} chunks already in {parts.dir}")
-    left = sum(e - b for i, (b, e) in enumerate(plan.chunks) if i in set(todo))
+    left = sum(e - b for i, (b, e) in enumerate(plan.chunks) if i not in done)
     return parts, todo, left
 
 
