@@ -4,6 +4,7 @@ end is one line with exit code 2; nothing half-written, no temporary file left b
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 from fuzzing import check_outcome, run_main
 
@@ -274,3 +275,39 @@ def test_ctrl_c_in_the_first_second(tmp_path, after_s):
         assert list(folder.iterdir()) == []
 
     _attempts(check)
+
+def test_npz_written_by_rows_reads_back_as_savez(tmp_path):
+    # rows in any order, some left to finish(): np.load and zipfile's CRC check read what np.savez writes
+    import zipfile
+
+    from almsdm_warp.export.npz_rows import NpzRows
+
+    rng = np.random.default_rng(1)
+    n = 10007
+    columns = {"x_mm": rng.random(n), "vertex": rng.integers(0, 1 << 40, n), "f": rng.random(n).astype(np.float32)}
+    path = tmp_path / "t.npz"
+    table = NpzRows(path, n, {c: v.dtype for c, v in columns.items()})
+    blocks = list(range(0, n, 1000))
+    for b in rng.permutation(blocks)[:-3]:
+        table.rows(int(b), {c: v[b : b + 1000] for c, v in columns.items()})
+    assert not path.exists()  # nothing at the target before finish()
+    table.finish(columns)
+    table.discard()  # after finish(): nothing to remove, the table stays
+    with zipfile.ZipFile(path) as z:
+        assert z.testzip() is None
+    np.savez(tmp_path / "s.npz", **columns)
+    with np.load(path) as got, np.load(tmp_path / "s.npz") as expected:
+        assert got.files == expected.files
+        for c in columns:
+            assert got[c].dtype == expected[c].dtype
+            np.testing.assert_array_equal(got[c], expected[c])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.npz", "t.npz"]
+
+
+def test_npz_rows_discarded_leaves_nothing(tmp_path):
+    from almsdm_warp.export.npz_rows import NpzRows
+
+    table = NpzRows(tmp_path / "t.npz", 10, {"a": np.float64})
+    table.rows(0, {"a": np.arange(5.0)})
+    table.discard()
+    assert list(tmp_path.iterdir()) == []

@@ -36,6 +36,8 @@ FPS_MAX = 20000
 COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "stiffness_N_per_mm", "recovery_error_mm", "rings")
 """The table's columns; `rings`: the ring count of each point's region (the same for all but at --rings auto)."""
 _INT_COLUMNS = ("vertex", "rings")
+COLUMN_DTYPES = {c: np.int64 if c in _INT_COLUMNS else np.float64 for c in COLUMNS}
+"""Each column's dtype in a table."""
 FORMATS = (".csv", ".npz")
 
 
@@ -409,6 +411,9 @@ class Parts:
         self.table: dict | None = None
         """The output's columns, every point, filled in as write() writes each chunk (on the writer's
         thread, while the next chunks press): gather() returns it when this process wrote every chunk."""
+        self.rows_file = None
+        """An NpzRows of the output (export/npz_rows.py) that write() also writes each chunk's rows to,
+        or None."""
         self._lock = threading.Lock()  # chunks finish on several threads (several GPUs)
 
     @property
@@ -489,6 +494,8 @@ class Parts:
             begin, end = self.plan.chunks[i]
             for c in COLUMNS:
                 self.table[c][begin:end] = columns[c]
+        if self.rows_file is not None:  # the output's rows too, in place (one writer thread: no lock)
+            self.rows_file.rows(begin, columns)
 
     def gather(self) -> dict:
         """Every chunk's columns, in point order: those this process wrote from memory, the others read

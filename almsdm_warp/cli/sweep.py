@@ -67,10 +67,8 @@ def _devices(text: str) -> list[str]:
 
 
 def cmd_sweep(args) -> int:
-    from ..batch.sweep import SweepTimes, run_local, run_ray
-    from ..protocol.palpation import SimulationDiverged
-    from ..export.writers import check_output, write_output
-    from ..progress import Progress
+    from ..batch.sweep import SweepTimes
+    from ..export.writers import check_output
 
     if args.dataset:  # several scenes and a lesion grid: cli/dataset.py
         return cmd_dataset(args, _devices(args.device))
@@ -83,10 +81,27 @@ def cmd_sweep(args) -> int:
     times, t_start = SweepTimes(), time.perf_counter()
     plan, scene, rings_text, models = _plan(args, devices, times)
     parts, todo, left = _resume(out, plan)
-    from ..batch.sweep import press_steps
+    from ..batch.sweep import COLUMN_DTYPES
 
-    steps = press_steps(plan)
-    t0 = time.perf_counter()
+    if out.suffix.lower() == ".npz":  # written as the chunks come: after the last press, only its directory
+        from ..export.npz_rows import NpzRows
+
+        parts.rows_file = NpzRows(out, len(plan.vertices), COLUMN_DTYPES)
+    try:
+        return _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo)
+    finally:
+        if parts.rows_file is not None:
+            parts.rows_file.discard()  # after finish(): nothing left to remove
+
+
+def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo) -> int:
+    """cmd_sweep's second half: the chunks, the table, the report."""
+    from ..batch.sweep import press_steps, run_local, run_ray
+    from ..export.writers import write_output
+    from ..progress import Progress
+    from ..protocol.palpation import SimulationDiverged
+
+    out, steps, t0 = Path(args.out), press_steps(plan), time.perf_counter()
     try:
         with Progress(left * steps, enabled=args.progress, label="sweep") as bar:
             if args.ray:
@@ -106,7 +121,10 @@ def cmd_sweep(args) -> int:
     with times.phase("gather"):
         columns = parts.gather()
     with times.phase("output"):
-        write_output(out, columns, "table", "--out")
+        if parts.rows_file is not None:
+            parts.rows_file.finish(columns)
+        else:
+            write_output(out, columns, "table", "--out")
         parts.remove()
     _report(columns, left, steps, elapsed)
     if args.profile:
