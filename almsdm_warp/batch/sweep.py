@@ -544,6 +544,8 @@ class SweepTimes:
         self.pressing: list[tuple[float, float]] = []
         """(begin, end) of each chunk's press [s since t0], on the host's clock (on CUDA the device's
         events moved by the host time of a synchronised origin event: within a few microseconds)."""
+        self.marks: dict[str, float] = {}
+        """When [s since t0] each milestone of the way to the first press was first reached (mark())."""
         self.host_per_chunk: list[float] = []
         """Host time [s] of each chunk on its device's thread (build, plan, launch, read-back, checks)."""
         self._lock = threading.Lock()
@@ -559,6 +561,11 @@ class SweepTimes:
     def add(self, name: str, seconds: float) -> None:
         with self._lock:
             self.seconds[name] += seconds
+
+    def mark(self, name: str) -> None:
+        """Note the first time `name` is reached (the way to the first press: what it waits for)."""
+        with self._lock:
+            self.marks.setdefault(name, time.perf_counter() - self.t0)
 
     def add_press(self, intervals) -> None:
         """One device's presses, (begin, end) [s] on the host's clock (time.perf_counter)."""
@@ -584,6 +591,8 @@ class SweepTimes:
         lines.append(f"{'wall':<26}{wall_s:10.3f} s  (host phases of several threads may overlap the press)")
         for name, s in self.timeline(wall_s).items():
             lines.append(f"{name[:-2].replace('_', ' '):<26}{s:10.3f} s{100 * s / wall_s:7.1f} %")
+        if self.marks:
+            lines.append("on the way to the first press: " + ", ".join(f"{name} {s:.3f} s" for name, s in sorted(self.marks.items(), key=lambda m: m[1])))
         if self.host_per_chunk:
             h = np.array(self.host_per_chunk)
             lines.append(f"host time per chunk: median {np.median(h) * 1e3:.1f} ms, max {h.max() * 1e3:.1f} ms ({len(h)} chunks)")
@@ -665,6 +674,7 @@ class Lane:
         with times.phase("region build"):  # made now: their set-up (and region tables) read on the null stream
             for k in batches.plan.ring_counts:
                 batches.get(k)
+        times.mark("region tables")
         self.started = []
         """(indices in the chunk, batch, pinned (peak, hold, q0), events) of the chunk in flight."""
         self._pinned = {}
@@ -690,6 +700,7 @@ class Lane:
         begin, end = self.chunk = plan.chunks[i]
         with self.times.phase("waiting for the points"):
             plan.wait(end)
+        self.times.mark("first chunk's points")
         rings = plan.point_rings[begin:end]
         per_launch = 200 if self.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
         t0, self.started = time.perf_counter(), []
@@ -699,13 +710,16 @@ class Lane:
                 batch = self.batches.get(int(k))
                 with self.times.phase("region build"):
                     batch.build(plan.vertices[begin:end][idx], plan.depth)
+                self.times.mark("first chunk built")
                 with self.times.phase("planning"):
                     batch.plan()
+                self.times.mark("first chunk planned")
                 with self.times.phase("launch"):
                     events = self._record()
                     batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch,
                                       on_launch=frames(on_launch, batch, len(idx)))
                     events += self._record()
+                    self.times.mark("first press launched")
                     self.started.append((idx, batch, self._read_back(batch, int(k)), events))
         pressed = 0.0
         if self.stream is None:  # the CPU, synchronous: the launch was the press
@@ -871,8 +885,10 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
     """
     times = times if times is not None else SweepTimes()
     advance = None if progress is None else progress.advance
+    times.mark("run")
     with times.phase("set-up"):
         models = models.result() if isinstance(models, Future) else models or [plan.model(d) for d in devices]
+    times.mark("models")
     todo = list(todo)
     if not pipeline:
         batches = [RingBatches(plan, m) for m in models]
@@ -1035,12 +1051,33 @@ def models_behind(plan: SweepPlan, devices: list[str]) -> Future:
 
     def make():
         try:
-            made.set_result([plan.model(d) for d in devices])
+            models = [plan.model(d) for d in devices]
+            made.set_result(models)
         except BaseException as exc:
             made.set_exception(exc)
+            return
+        preload_modules(devices)
 
     threading.Thread(target=make, name="sweep-models", daemon=True).start()
     return made
+
+
+def preload_modules(devices: list[str]) -> None:
+    """Load the modules of the kernels a sweep's first chunk launches (region builds and gathers, rest
+    states, the contacts' read-back) on each CUDA device of `devices`, as their first launch would
+    (wp.load_module; cached code is only loaded): done on the models' thread, while the points are
+    sampled, rather than on the way to the first press. Errors are left to that launch."""
+    import warp as wp
+
+    from ..kernels import batch_press, batch_rings
+
+    for d in devices:
+        if wp.get_device(d).is_cuda:
+            for module in (batch_rings, batch_press):
+                try:
+                    wp.load_module(module, device=d)
+                except Exception:  # the launch that needs it loads it again and says what is wrong
+                    pass
 
 
 def pressable_points(mesh, n: int, fixed_below=None):

@@ -177,6 +177,7 @@ def _plan(args, devices, times):
     chunk = args.chunk or default_chunk(len(vertices), devices)
     plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, dt, depth, ramp, hold, settle, points,
                      vertices, chunk, args.integrator, tol, radius, scene.fixed_below, sampling=sampling)
+    times.mark("plan")
     models = None if args.ray or not args.pipeline else models_behind(plan, devices)
     print(mesh.summary())
     with times.phase("set-up"):

@@ -69,6 +69,9 @@ class NpzRows:
         self.central = offset
         os.ftruncate(self.fd, offset)
         self.written = np.zeros(self.n, dtype=bool)
+        # each entry's CRC-32 over its bytes so far: rows that come in order are added as they come
+        self.crc = [zlib.crc32(head) for _, _, head, _, _ in self.entries]
+        self.crc_rows = 0
 
     def rows(self, begin: int, columns: dict) -> None:
         """Rows begin.. of every column (columns: name -> 1-D array), written in place and flushed to disk."""
@@ -78,10 +81,16 @@ class NpzRows:
             raise InputError(f"{self.path}: cannot write: {exc.strerror or exc}") from exc
 
     def _rows(self, begin: int, columns: dict) -> None:
-        for (fname, _, _, data, _), (name, dtype) in zip(self.entries, self.dtypes.items()):
-            values = np.ascontiguousarray(columns[name], dtype=dtype)
-            os.pwrite(self.fd, memoryview(values).cast("B"), data + begin * dtype.itemsize)
-        self.written[begin : begin + len(values)] = True
+        in_order = begin == self.crc_rows
+        for k, ((fname, _, _, data, _), (name, dtype)) in enumerate(zip(self.entries, self.dtypes.items())):
+            values = memoryview(np.ascontiguousarray(columns[name], dtype=dtype)).cast("B")
+            os.pwrite(self.fd, values, data + begin * dtype.itemsize)
+            if in_order:
+                self.crc[k] = zlib.crc32(values, self.crc[k])
+        end = begin + len(values) // dtype.itemsize
+        self.written[begin:end] = True
+        if in_order:
+            self.crc_rows = end
         os.fdatasync(self.fd)
 
     def finish(self, columns: dict) -> Path:
@@ -98,9 +107,7 @@ class NpzRows:
             for run in np.split(missing, cuts):
                 self._rows(int(run[0]), {name: np.asarray(columns[name])[run[0] : run[-1] + 1] for name in self.dtypes})
         central = []
-        for (fname, at, head, data, size), (name, dtype) in zip(self.entries, self.dtypes.items()):
-            values = np.ascontiguousarray(columns[name], dtype=dtype)
-            crc = zlib.crc32(memoryview(values).cast("B"), zlib.crc32(head))  # the file's bytes: the same values
+        for (fname, at, head, data, size), crc in zip(self.entries, self._crcs(columns)):
             extra = struct.pack("<HHQQ", 1, 16, size, size)
             local = _LOCAL.pack(0x04034B50, _VERSION, 0, 0, _DOS_TIME, _DOS_DATE, crc, _FULL32, _FULL32, len(fname), len(extra))
             os.pwrite(self.fd, local + fname + extra + head, at)
@@ -117,6 +124,20 @@ class NpzRows:
         os.close(self.fd)
         self.fd = None
         return publish(self.tmp, self.path)
+
+    def _crcs(self, columns: dict) -> list[int]:
+        # each entry's CRC-32: the rows added in order so far, then the rest from `columns` (the values the
+        # file holds), a thread a column (zlib leaves the GIL for large buffers)
+        from concurrent.futures import ThreadPoolExecutor
+
+        def rest(k: int, name: str, dtype) -> int:
+            values = np.ascontiguousarray(np.asarray(columns[name])[self.crc_rows :], dtype=dtype)
+            return zlib.crc32(memoryview(values).cast("B"), self.crc[k])
+
+        if self.crc_rows >= self.n:
+            return list(self.crc)
+        with ThreadPoolExecutor(len(self.dtypes)) as pool:
+            return list(pool.map(rest, range(len(self.dtypes)), self.dtypes, self.dtypes.values()))
 
     def discard(self) -> None:
         """Remove the unfinished file."""
