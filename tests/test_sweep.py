@@ -307,8 +307,9 @@ def test_union_length_against_a_fine_grid():
 def test_default_chunk_fills_the_devices():
     assert sw.default_chunk(10_000, ["cpu"]) == 64
     assert sw.default_chunk(200, ["cuda:0"]) == 200  # all in one launch
-    assert sw.default_chunk(1_000_000, ["cuda:0"]) == 131072  # 8 chunks: the next is built while one presses
-    assert sw.default_chunk(1_000_000, ["cuda:0", "cuda:1"]) == 125000  # 4 chunks a device
+    assert sw.default_chunk(1_000_000, ["cuda:0"]) == 65536  # 16 chunks: the next is built while one presses
+    assert sw.default_chunk(1_000_000, ["cuda:0", "cuda:1"]) == 65536  # 8 chunks a device
+    assert sw.default_chunk(200_000, ["cuda:0", "cuda:1"]) == 25000  # 4 chunks a device
     assert sw.default_chunk(100_000, ["cuda:0"]) == 25000
 
 

@@ -77,7 +77,7 @@ class AreaSampler:
     number searched in the areas' cumulative sum, then u, v for each point); then points(b, e) puts
     points b..e into `out`, each from its own draws, so any split gives the same bits."""
 
-    def __init__(self, vertices, triangles, n: int, seed: int = 0):
+    def __init__(self, vertices, triangles, n: int, seed: int = 0, out: np.ndarray | None = None):
         p = np.asarray(vertices, dtype=np.float64)
         t = np.asarray(triangles)
         self.o = p[t[:, 0]]
@@ -87,7 +87,7 @@ class AreaSampler:
         self.cum = np.cumsum(np.sqrt((c**2).sum(axis=1)) / 2.0)
         rng = np.random.default_rng(seed)
         self.pick, self.uv = rng.random(n), rng.random((n, 2))
-        self.out = np.empty((n, 3))
+        self.out = np.empty((n, 3)) if out is None else out
 
     def points(self, b: int, e: int) -> None:
         face = np.searchsorted(self.cum, self.pick[b:e] * self.cum[-1])
@@ -112,20 +112,24 @@ class Sampling:
 
         from scipy.spatial import cKDTree
 
-        t0 = time.perf_counter()
-        self.surface = mesh.surface_vertices
-        self.tree = cKDTree(mesh.vertices[self.surface])
-        self.area = AreaSampler(mesh.vertices, mesh.triangles, n, seed)
-        self.points, self.vertices = self.area.out, np.empty(n, dtype=np.int64)
+        self._t0 = time.perf_counter()
+        self.points, self.vertices = np.empty((n, 3)), np.empty(n, dtype=np.int64)
         self.blocks = [(b, min(b + self.BLOCK, n)) for b in range(0, n, self.BLOCK)]
         self.seconds = None
         """Wall time [s] from the start to the last block, once wait() has seen it."""
         self._pool = ThreadPoolExecutor(min(len(self.blocks), os.cpu_count() or 1), thread_name_prefix="sweep-sampling")
+
+        def prepare():  # the draws and the tree, on the pool too: the caller goes on at once
+            self.surface = mesh.surface_vertices
+            self.tree = cKDTree(mesh.vertices[self.surface])
+            self.area = AreaSampler(mesh.vertices, mesh.triangles, n, seed, out=self.points)
+
+        self._prepared = self._pool.submit(prepare)
         self._futures = [self._pool.submit(self._block, b, e) for b, e in self.blocks]  # run in this order
         self._pool.shutdown(wait=False)
-        self._t0 = t0
 
     def _block(self, b: int, e: int) -> float:
+        self._prepared.result()
         self.area.points(b, e)
         self.vertices[b:e] = self.surface[self.tree.query(self.points[b:e])[1]]
         return time.perf_counter()
@@ -195,12 +199,14 @@ def sample_points(mesh, n: int, seed: int = 0):
 def default_chunk(points: int, devices: list[str]) -> int:
     """Points a chunk when the command line gives none: 64 on the CPU (the progress moves, a resume
     loses little); on GPUs at least four chunks a device where the points allow (so the next chunk is
-    built while one presses, and the devices share the work), 16384..131072 points each (a launch
-    that fills an H200: a block a palpation)."""
+    built while one presses, and the devices share the work), 16384..65536 points each (a launch
+    that fills an H200, a block a palpation, 40 times over; smaller chunks shorten what is not
+    overlapped: the first chunk's build before the first press, the last one's read-back and
+    writing after the last)."""
     if all(d == "cpu" for d in devices):
         return 64
     per_device = -(-points // len(devices))
-    return max(1, min(per_device, max(16384, min(-(-per_device // 4), 131072))))
+    return max(1, min(per_device, max(16384, min(-(-per_device // 4), 65536))))
 
 
 # -- the plan ----------------------------------------------------------------------------------

@@ -39,7 +39,7 @@ def add_parser(sub) -> None:
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=None, metavar="MS", help="frame [ms] (default 1); the explicit integrator takes it in substeps under 0.9 x the critical step")
     p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
-    p.add_argument("--chunk", type=count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU; on GPUs, four chunks a device or more, 16384..131072 points each)")
+    p.add_argument("--chunk", type=count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU; on GPUs, four chunks a device or more, 16384..65536 points each)")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks on Ray actors (one GPU each with a CUDA --device, else one CPU; one a GPU of the cluster); ADDRESS of a cluster, or a local one")
     p.add_argument("--pipeline", action=argparse.BooleanOptionalAction, default=True, help="build and launch the next chunk while one presses, read back and write on the side (default); --no-pipeline: one chunk after another (the same numbers)")
     p.add_argument("--profile", action="store_true", help="print where the wall time went: sampling, region builds, planning, press kernels, read-back, checks, writing, gather")
