@@ -36,12 +36,22 @@ from .probe_contact import sphere_project
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
-__all__ = ["MAX_REGISTERS", "press_batch_fast", "press_kernel_fast", "shared_bytes_fast"]
+__all__ = ["MAX_REGISTERS", "SPHERE_MAX_REGISTERS", "SPHERE_THREADS", "press_batch_fast", "press_kernel_fast", "shared_bytes_fast"]
 
 EPS_LENGTH2 = EPS_LENGTH * EPS_LENGTH
 
 MAX_REGISTERS = 80
 """Registers a thread (12 blocks of 64 threads an SM): 9.55e8 region-steps/s against 9.23e8 at 64 on an H200."""
+
+SPHERE_THREADS = 128
+SPHERE_MAX_REGISTERS = 64
+"""The sphere variant's threads a block and registers a thread: on the shipped stomach scene (1 ring,
+113 / 184 region vertices median / max, 268 / 464 springs) on an H200, 4.90e8 region-steps/s at 128
+threads and 64 registers (every free vertex of up to 128 in registers, 4 springs a thread, 8 blocks
+an SM) against 4.21e8 at the paper probe's 64 and 80; 128 threads with 56 / 72 / 80 / 96 / 128
+registers 3.95e8 / 4.86e8 / 4.58e8 / 4.49e8 / 4.06e8, 64 threads with 64 / 96 / 128 3.74e8 / 4.55e8 /
+4.46e8, 256 threads with 56-96 2.6e8-3.5e8 (scripts/ab_batch_cuda.py --threads --max-registers;
+docs/performance.md)."""
 
 
 def shared_bytes_fast(vertex_capacity: int, free_capacity: int, spring_capacity: int, max_degree: int = 16, sphere_threads: int = 0) -> int:
@@ -188,7 +198,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
     vec_i = wp.types.vector(length=P, dtype=wp.int32)
     vec_f = wp.types.vector(length=P, dtype=wp.float32)
 
-    @wp.kernel(module="unique", enable_backward=False, cuda_max_registers=MAX_REGISTERS)
+    @wp.kernel(module="unique", enable_backward=False, cuda_max_registers=SPHERE_MAX_REGISTERS if SPHERE else MAX_REGISTERS)
     def press_batch_explicit_fast(
         region_vertex: wp.array2d(dtype=wp.int32),
         region_count: wp.array(dtype=wp.int32),

@@ -27,7 +27,7 @@ median and largest region (vertices, springs) and the fast kernel's plan, so tha
 model's figure stands beside the paper probe's in one run. `--scene-rings` overrides the scene's
 ring count (to compare two counts); `--threads` sets the fast kernel's threads a block for the
 sphere and scene runs (default: the batch's plan), `--max-registers` its register cap a thread
-(default: the kernel's MAX_REGISTERS); `--ab-all` runs the sphere and scene cases on
+(default: the kernel's MAX_REGISTERS, SPHERE_MAX_REGISTERS with a sphere); `--ab-all` runs the sphere and scene cases on
 the old checkout too, alternated with this one's (an A/B of the sphere's kernel).
 """
 
@@ -92,7 +92,7 @@ def worker(args) -> None:
     if args.max_registers and (args.worker_scene or args.probe_radius_mm):
         import almsdm_warp.kernels.batch_press_fast as bkf
 
-        bkf.MAX_REGISTERS = args.max_registers  # read when the kernel is made, below: this process's kernels only
+        bkf.MAX_REGISTERS = bkf.SPHERE_MAX_REGISTERS = args.max_registers  # read when the kernel is made: this process's only
     surface = np.random.default_rng(0).permutation(surface)
     vertices = np.resize(surface, args.batch).astype(np.int64)
     bp = BatchPalpation(mesh, dt=args.dt, device=args.device, **options).touch(vertices)

@@ -506,7 +506,7 @@ class BatchPalpation:
     def _fast_plan(self, max_vertices, max_free, max_entries, max_springs):
         """(threads, springs per thread, vertex, free-vertex and spring capacities, largest degree)
         of the "fast" kernel, or None where it cannot hold these regions."""
-        threads = 64 if self._threads is None else int(self._threads)
+        threads = (bkf.SPHERE_THREADS if self.probe_radius > 0 else 64) if self._threads is None else int(self._threads)
         per_thread = -(-max_springs // threads)
         while per_thread > 16 and threads < 1024:  # registers are unrolled up to 16 springs a thread
             threads *= 2
