@@ -441,3 +441,18 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
         pal.touch(int(auto["vertex"][k]))
         hold_press(pal, 0.01, 0.1, 0.2)
         assert pal.rings_chosen == auto["rings"][k]
+
+
+def test_devices_started_ahead():
+    # the contexts a --device names start on a thread; a name with no device behind it is left to the
+    # command (no error here); afterwards every CUDA device named has its context
+    import warp as wp
+
+    from almsdm_warp.warp_init import devices_started, start_devices
+
+    start_devices("cpu")
+    devices_started()
+    names = ",".join(["cpu", *(d.alias for d in wp.get_cuda_devices()), "cuda:99"])
+    start_devices(names)
+    devices_started()
+    assert all(d.has_context for d in wp.get_cuda_devices())

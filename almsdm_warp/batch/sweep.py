@@ -308,6 +308,10 @@ class SweepPlan:
 
     def model(self, device):
         from ..sim.model import Model
+        from ..warp_init import devices_started
+
+        if str(device) != "cpu":
+            devices_started()  # a context the command line started (warp_init.start_devices)
 
         return Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale,
                      fixed_below=self.fixed_below)

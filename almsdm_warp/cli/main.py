@@ -158,6 +158,10 @@ def _run(argv) -> int:
         if _default_command(argv):
             argv = ["palpate", *argv]  # `almsdm`, `almsdm --depth-mm 5`, `almsdm liver`, `almsdm my.obj`
         args = build_parser().parse_args(argv)
+        if getattr(args, "start_devices", False):  # their contexts start while the imports below run
+            from ..warp_init import start_devices
+
+            start_devices(getattr(args, "device", None))
         with signals_held():
             for name in SHIELDED_IMPORTS + (SHIELDED_USD_IMPORTS if getattr(args, "usd", None) else ()):
                 importlib.import_module(name)

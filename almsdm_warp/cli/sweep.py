@@ -49,7 +49,7 @@ def add_parser(sub) -> None:
     p.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
     add_tissue_args(p)
     add_dataset_arg(p)
-    p.set_defaults(func=cmd_sweep)
+    p.set_defaults(func=cmd_sweep, start_devices=True)
 
 
 def _devices(text: str) -> list[str]:
