@@ -2,6 +2,7 @@
 pressed again; the table equals an uninterrupted run's, byte for byte."""
 
 import json
+from pathlib import Path
 
 from almsdm_warp.batch import sweep as sw
 from almsdm_warp.cli.main import main
@@ -10,12 +11,18 @@ FAST = ["--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05", "--dt-ms",
 ARGS = ["sweep", "--points", "20", "--chunk", "6", *FAST]
 
 
-def test_damaged_chunks_are_pressed_again(tmp_path, capsys):
-    whole = tmp_path / "whole.csv"
+def whole_and_interrupted(tmp_path, name: str, chunks: int):
+    """An uninterrupted sweep of ARGS (whole.SUFFIX) and one into `name` stopped after `chunks` chunks:
+    (whole, out, out's parts folder)."""
+    whole = tmp_path / f"whole{Path(name).suffix}"
     assert main([*ARGS, "--out", str(whole)]) == 0
-    out = tmp_path / "resumed.csv"
-    interrupt_after(3, out)
-    parts = tmp_path / "resumed.csv.parts"
+    out = tmp_path / name
+    interrupt_after(chunks, out)
+    return whole, out, tmp_path / f"{name}.parts"
+
+
+def test_damaged_chunks_are_pressed_again(tmp_path, capsys):
+    whole, out, parts = whole_and_interrupted(tmp_path, "resumed.csv", 3)
     chunks = sorted(parts.glob("chunk_*.npz"))
     assert len(chunks) == 3
     sums = json.loads((parts / "plan.json").read_text())["chunks"]
@@ -55,11 +62,7 @@ def test_a_chunk_without_its_checksum_is_pressed_again(tmp_path, capsys):
 
 
 def test_a_run_stopped_before_its_first_chunk_leaves_a_folder_taken_as_new(tmp_path, capsys):
-    whole = tmp_path / "whole.csv"
-    assert main([*ARGS, "--out", str(whole)]) == 0
-    out = tmp_path / "s.csv"
-    interrupt_after(0, out)
-    parts = tmp_path / "s.csv.parts"
+    whole, out, parts = whole_and_interrupted(tmp_path, "s.csv", 0)
     assert parts.is_dir() and not any(parts.iterdir())  # no plan.json yet: nothing was written
     capsys.readouterr()
     assert main([*ARGS, "--out", str(out)]) == 0
@@ -94,10 +97,7 @@ def test_a_resumed_npz_table_equals_an_uninterrupted_one(tmp_path):
     # from their parts, are written into the resumed run's table at the end
     import numpy as np
 
-    whole = tmp_path / "whole.npz"
-    assert main([*ARGS, "--out", str(whole)]) == 0
-    out = tmp_path / "r.npz"
-    interrupt_after(2, out)
+    whole, out, _ = whole_and_interrupted(tmp_path, "r.npz", 2)
     assert not out.exists() and [p.name for p in tmp_path.iterdir() if p.name.startswith(".r.npz")] == []
     assert main([*ARGS, "--out", str(out)]) == 0
     a, b = sw.read_table(whole), sw.read_table(out)
