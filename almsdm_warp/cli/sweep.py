@@ -78,26 +78,19 @@ def cmd_sweep(args) -> int:
         check_output(args.png, "image", "--png")
     quiet_warp()
     devices = _devices(args.device)
-    # the sweep's threads (sampling, the devices' models, a device's lanes, the writer) each hold the
-    # GIL briefly between calls that release it; Python hands it on after 5 ms by default, which a
-    # thread waiting to launch or copy would wait out: 0.5 ms while the sweep runs
-    switch = sys.getswitchinterval()
-    sys.setswitchinterval(min(switch, 5e-4))
     times, t_start = SweepTimes(), time.perf_counter()
-    parts = None
+    plan, scene, rings_text, models = _plan(args, devices, times)
+    parts, todo, left = _resume(out, plan)
+    from ..batch.sweep import COLUMN_DTYPES
+
+    if out.suffix.lower() == ".npz":  # written as the chunks come: after the last press, only its directory
+        from ..export.npz_rows import NpzRows
+
+        parts.rows_file = NpzRows(out, len(plan.vertices), COLUMN_DTYPES)
     try:
-        plan, scene, rings_text, models = _plan(args, devices, times)
-        parts, todo, left = _resume(out, plan)
-        from ..batch.sweep import COLUMN_DTYPES
-
-        if out.suffix.lower() == ".npz":  # written as the chunks come: after the last press, only its directory
-            from ..export.npz_rows import NpzRows
-
-            parts.rows_file = NpzRows(out, len(plan.vertices), COLUMN_DTYPES)
         return _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo)
     finally:
-        sys.setswitchinterval(switch)
-        if parts is not None and parts.rows_file is not None:
+        if parts.rows_file is not None:
             parts.rows_file.discard()  # after finish(): nothing left to remove
 
 
