@@ -42,7 +42,7 @@ def add_parser(sub) -> None:
     p.add_argument("--chunk", type=count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU; on GPUs, four chunks a device or more, 16384..65536 points each)")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks on Ray actors (one GPU each with a CUDA --device, else one CPU; one a GPU of the cluster); ADDRESS of a cluster, or a local one")
     p.add_argument("--pipeline", action=argparse.BooleanOptionalAction, default=True, help="build and launch the next chunk while one presses, read back and write on the side (default); --no-pipeline: one chunk after another (the same numbers)")
-    p.add_argument("--profile", action="store_true", help="print where the wall time went: sampling, region builds, planning, press kernels, read-back, checks, writing, gather")
+    p.add_argument("--profile", action="store_true", help="print where the wall time went: sampling, region builds, planning, press kernels, read-back, checks, writing, gather; when the presses ran (before the first, idle between, after the last) and what the first waited for")
     p.add_argument("--png", default=None, metavar="PATH", help="also draw the organ coloured by stiffness (matplotlib)")
     p.add_argument("--max-region-steps", type=number_arg("> 0"), default=LIMITS["region_steps"], metavar="N", help=f"refuse a sweep that would take more region-steps (points x frames x substeps) than N (default {LIMITS['region_steps']:g})")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
