@@ -8,8 +8,9 @@ from what it wrote. Chunks go, in order, to whichever device given is free (a ho
 where the next chunk is built and launched while one presses and the results are read back and
 written on the side (run_local), each distinct contact's region built once a sweep and each
 chunk's regions gathered from that table on the device (RingBatches); or to Ray actors of one GPU
-each (``ray`` extra). When all are done they are gathered, in point order, into the output (.csv
-or .npz) and the parts removed.
+each (``ray`` extra). Many points are sampled behind the first chunks (Sampling), and an .npz
+output takes each chunk's rows as it is written (export/npz_rows.py). When all are done they are
+gathered, in point order, into the output (.csv or .npz) and the parts removed.
 """
 
 from __future__ import annotations
@@ -251,9 +252,10 @@ class SweepPlan:
 
     def contacts(self, rings: int) -> np.ndarray | None:
         """The contacts whose regions of `rings` rings a sweep builds once and gathers (a RegionTable's,
-        sorted), or None where no contact is pressed twice. While the points are still being sampled:
-        every surface vertex (there are more points than those, each snapped to one)."""
-        if self.sampling is not None and self.sampling.seconds is None:
+        sorted), or None where no contact is pressed twice. Where the points are sampled behind the
+        sweep (`sampling`): every surface vertex (there are more points than those, each snapped to
+        one), whether or not the sampling is done, so that every device builds the same table."""
+        if self.sampling is not None:
             return np.sort(self.mesh.surface_vertices).astype(np.int64)
         times = np.bincount(self.vertices[self.point_rings == rings], minlength=self.mesh.vertex_count)
         return np.flatnonzero(times) if times.max(initial=0) > 1 else None
@@ -1056,7 +1058,7 @@ def start_sampling(mesh, n: int, fixed_below=None):
 
 def models_behind(plan: SweepPlan, devices: list[str]) -> Future:
     """The plan's model on each of `devices` (a list), made on a thread of its own while the caller
-    goes on (a CUDA device's first arrays also start its memory pool: ~0.1 s on an H200)."""
+    goes on, then the first chunk's kernel modules loaded there (preload_modules)."""
     made = Future()
 
     def make():
