@@ -456,3 +456,22 @@ def test_devices_started_ahead():
     start_devices(names)
     devices_started()
     assert all(d.has_context for d in wp.get_cuda_devices())
+
+
+def test_profile_says_where_the_wall_time_went(tmp_path, capsys):
+    # --profile: each phase, the press kernels, the presses' timeline and the way to the first press;
+    # the timeline's three parts and the presses' union fit in the wall time
+    import re
+
+    out = tmp_path / "p.npz"
+    args = ["sweep", "--points", "40", "--chunk", "16", "--rings", "1", "--ramp-s", "0.004", "--hold-s", "0",
+            "--settle-s", "0.004", "--dt-ms", "1", "--no-progress", "--profile", "--out", str(out)]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    seconds = {name: float(s) for name, s in re.findall(r"^(wall|press kernels \(device\)|before first press|idle between presses"
+                                                       r"|after last press)\s+([0-9.]+) s", text, flags=re.M)}
+    assert len(seconds) == 5
+    parts = seconds["before first press"] + seconds["idle between presses"] + seconds["after last press"]
+    assert parts + seconds["press kernels (device)"] == pytest.approx(seconds["wall"], abs=0.004)
+    assert "on the way to the first press: plan" in text and "first press launched" in text
+    assert sorted(sw.read_table(out)["vertex"]) == sorted(sw.sample_points(load_cached(SCENES / "stomach.obj"), 40)[1])
