@@ -212,15 +212,12 @@ class RegionTable:
         rows = np.minimum(np.searchsorted(self.vertices, vertices), len(self.vertices) - 1)
         return rows if np.array_equal(self.vertices[rows], vertices) else None
 
-    def gather(self, rows: np.ndarray, buffers: "DeviceBuffers | None" = None) -> BatchRegions:
-        """The regions of the contacts at `rows`, as a build of them gives them (the same bits); into
-        `buffers`' arrays (DeviceBuffers) when given."""
+    def gather(self, rows: np.ndarray, buffers: DeviceBuffers) -> BatchRegions:
+        """The regions of the contacts at `rows`, as a build of them gives them (the same bits), in
+        `buffers`' arrays (the gathering batch's DeviceBuffers)."""
         t = self.regions
-        d = t.region_vertex.device
-        out = BatchRegions(len(rows), t.vertex_capacity, t.entry_capacity, t.rings, d, zeros=False, buffers=buffers)
-        rows = rows.astype(np.int32)
-        rows = wp.array(rows, dtype=wp.int32, device=d) if buffers is None else buffers.upload("rows", rows, wp.int32)
-        br.gather_regions(t, rows, out)
+        out = BatchRegions(len(rows), t.vertex_capacity, t.entry_capacity, t.rings, t.region_vertex.device, zeros=False, buffers=buffers)
+        br.gather_regions(t, buffers.upload("rows", rows.astype(np.int32), wp.int32), out)
         return out
 
 

@@ -291,7 +291,8 @@ class SweepPlan:
     def chunks(self) -> list[tuple[int, int]]:
         """(begin, end) of each chunk of points (made once for the plan's point count and chunk size:
         a CPU sweep of 1e6 points has 15,625 chunks, each looked up here)."""
-        n, key = len(self.vertices), ("_chunks", len(self.vertices), self.chunk)
+        n = len(self.vertices)
+        key = (n, self.chunk)
         if self.__dict__.get("_chunks_key") != key:
             self.__dict__["_chunks"] = [(i, min(i + self.chunk, n)) for i in range(0, n, self.chunk)]
             self.__dict__["_chunks_key"] = key
