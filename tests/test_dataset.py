@@ -49,7 +49,7 @@ def whole(tmp_path_factory):
     """The dataset of SPEC in one run: (its folder, its table)."""
     folder = tmp_path_factory.mktemp("whole")
     assert run(spec_file(folder), folder / "out") == 0
-    return folder / "out", ds.read_dataset_table(folder / "out" / "table.npz")
+    return folder / "out", ds.DATASET_TABLE.read(folder / "out" / "table.npz")
 
 
 def test_one_table_of_every_item_and_point(whole):
@@ -67,7 +67,7 @@ def test_one_table_of_every_item_and_point(whole):
         xyz = np.column_stack([table[c][table["scene"] == scene] for c in ("x_mm", "y_mm", "z_mm")]).reshape(3, POINTS, 3)
         np.testing.assert_array_equal(xyz[0], xyz[1])
         np.testing.assert_array_equal(xyz[0], xyz[2])
-    text = ds.read_dataset_table(out / "table.csv")
+    text = ds.DATASET_TABLE.read(out / "table.csv")
     for c in ds.DATASET_COLUMNS:
         np.testing.assert_array_equal(text[c], table[c])
     with np.load(out / "table.npz", allow_pickle=False) as z:  # numpy alone reads it, schema included

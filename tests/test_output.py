@@ -77,15 +77,15 @@ def test_atomic_write_that_fails_leaves_nothing(tmp_path):
 def test_sweep_table_goes_through_the_one_writer(tmp_path, monkeypatch):
     """The sweep's table is published by export.output.publish, with a new file's mode."""
     import almsdm_warp.export.output as output
-    from almsdm_warp.batch.sweep import COLUMNS, read_table, write_table
+    from almsdm_warp.batch.sweep import COLUMNS, SWEEP_TABLE
 
     published = []
     real = output.publish
     monkeypatch.setattr(output, "publish", lambda tmp, path: published.append(Path(path).name) or real(tmp, path))
     columns = {c: [1.0, 2.0] for c in COLUMNS}
-    out = write_table(tmp_path / "s.csv", columns)
+    out = SWEEP_TABLE.write(tmp_path / "s.csv", columns)
     assert published == ["s.csv"] and (out.stat().st_mode & 0o777) == _new_file_mode()
-    assert read_table(out)["peak_force_N"].tolist() == [1.0, 2.0]
+    assert SWEEP_TABLE.read(out)["peak_force_N"].tolist() == [1.0, 2.0]
 
 
 # -- outputs only to regular files, each its own, never an input -----------------------------

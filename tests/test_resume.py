@@ -100,6 +100,6 @@ def test_a_resumed_npz_table_equals_an_uninterrupted_one(tmp_path):
     whole, out, _ = whole_and_interrupted(tmp_path, "r.npz", 2)
     assert not out.exists() and [p.name for p in tmp_path.iterdir() if p.name.startswith(".r.npz")] == []
     assert main([*ARGS, "--out", str(out)]) == 0
-    a, b = sw.read_table(whole), sw.read_table(out)
+    a, b = sw.SWEEP_TABLE.read(whole), sw.SWEEP_TABLE.read(out)
     for c in sw.COLUMNS:
         np.testing.assert_array_equal(a[c], b[c])

@@ -82,7 +82,7 @@ def test_a_sweep_pressing_while_its_points_are_sampled_writes_the_same_table(tmp
     monkeypatch.setattr(sw, "start_sampling", lambda mesh, n, fixed_below=None: (*sw.pressable_points(mesh, n, fixed_below), None))
     first = tmp_path / "first.npz"
     assert main([*fast, "--out", str(first)]) == 0
-    a, b = sw.read_table(behind), sw.read_table(first)
+    a, b = sw.SWEEP_TABLE.read(behind), sw.SWEEP_TABLE.read(first)
     for c in sw.COLUMNS:
         np.testing.assert_array_equal(a[c], b[c], err_msg=c)
 
@@ -115,7 +115,7 @@ def test_tables_round_trip(tmp_path):
     cols["rings"] = rng.integers(1, 9, size=9)
     cols["recovery_error_mm"][3] = np.nan
     for suffix in (".csv", ".npz"):
-        back = sw.read_table(sw.write_table(tmp_path / f"t{suffix}", cols))
+        back = sw.SWEEP_TABLE.read(sw.SWEEP_TABLE.write(tmp_path / f"t{suffix}", cols))
         for c in sw.COLUMNS:
             np.testing.assert_array_equal(back[c], cols[c])  # exact: CSV floats are written with repr
         assert back["vertex"].dtype == np.int64 and back["rings"].dtype == np.int64
@@ -124,7 +124,7 @@ def test_tables_round_trip(tmp_path):
     old = tmp_path / "old.csv"
     text = (tmp_path / "t.csv").read_text().splitlines()
     old.write_text("\n".join(line.rsplit(",", 1)[0] for line in text) + "\n")
-    back = sw.read_table(old)
+    back = sw.SWEEP_TABLE.read(old)
     assert "rings" not in back
     np.testing.assert_array_equal(back["peak_force_N"], cols["peak_force_N"])
 
@@ -135,7 +135,7 @@ def test_sweep_finds_the_lesion(tmp_path, capsys):
     lesion_out, plain_out = tmp_path / "lesion.csv", tmp_path / "plain.npz"
     assert main(["sweep", "stomach_lesion", "--points", "48", "--out", str(lesion_out), *FAST]) == 0
     assert main(["sweep", "stomach", "--points", "48", "--out", str(plain_out), *FAST]) == 0
-    a, b = sw.read_table(lesion_out), sw.read_table(plain_out)
+    a, b = sw.SWEEP_TABLE.read(lesion_out), sw.SWEEP_TABLE.read(plain_out)
     np.testing.assert_array_equal(a["vertex"], b["vertex"])
     lesion = resolve_scene_or_mesh("stomach_lesion").lesion
     xyz = np.column_stack([a["x_mm"], a["y_mm"], a["z_mm"]]) * 1e-3
@@ -330,7 +330,7 @@ def test_sweep_implicit_matches_the_batch(tmp_path, stomach):
     # the command's implicit sweep is BatchPalpation's implicit press at the same points
     out = tmp_path / "imp.npz"
     assert main(["sweep", "paper_stomach", "--points", "6", "--rings", "2", "--integrator", "implicit", "--out", str(out), *FAST]) == 0
-    table = sw.read_table(out)
+    table = sw.SWEEP_TABLE.read(out)
     from almsdm_warp.batch.batch_palpation import BatchPalpation
 
     res = BatchPalpation(stomach, rings=2, dt=5e-4, device="cpu", integrator="implicit").touch(table["vertex"]).press(0.01, 0.05, 0.05, 0.05)
@@ -412,7 +412,7 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     # the paper's preset: the reference below is its constants (TissueParams)
     assert main(["sweep", "paper_stomach", *press, "--rings", "auto", "--tol-mm", "0.1", "--out", str(tmp_path / "auto.npz")]) == 0
     assert main(["sweep", "paper_stomach", *press, "--rings", "8", "--out", str(tmp_path / "eight.csv")]) == 0
-    auto, eight = sw.read_table(tmp_path / "auto.npz"), sw.read_table(tmp_path / "eight.csv")
+    auto, eight = sw.SWEEP_TABLE.read(tmp_path / "auto.npz"), sw.SWEEP_TABLE.read(tmp_path / "eight.csv")
     for c in ("x_mm", "y_mm", "z_mm", "vertex"):
         np.testing.assert_array_equal(auto[c], eight[c])
     assert set(auto["rings"]) == {2, 3} and set(eight["rings"]) == {8}  # docs/adaptive.md: 3 or 2 at 0.1 mm
@@ -432,7 +432,7 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     text = (SCENES / "paper_stomach.toml").read_text().replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
     (tmp_path / "auto.toml").write_text(text.replace("\nrings = 4 ", '\nrings = "auto"\ntol_mm = 0.1\n# '))
     assert main(["sweep", str(tmp_path / "auto.toml"), *press, "--out", str(tmp_path / "scene.npz")]) == 0
-    by_scene = sw.read_table(tmp_path / "scene.npz")
+    by_scene = sw.SWEEP_TABLE.read(tmp_path / "scene.npz")
     for c in sw.COLUMNS:
         np.testing.assert_array_equal(by_scene[c], auto[c])
     # each point's rings are a fresh adaptive palpation's there (sized from rest, whatever the order)
@@ -474,4 +474,4 @@ def test_profile_says_where_the_wall_time_went(tmp_path, capsys):
     parts = seconds["before first press"] + seconds["idle between presses"] + seconds["after last press"]
     assert parts + seconds["press kernels (device)"] == pytest.approx(seconds["wall"], abs=0.004)
     assert "on the way to the first press: plan" in text and "first press launched" in text
-    assert sorted(sw.read_table(out)["vertex"]) == sorted(sw.sample_points(load_cached(SCENES / "stomach.obj"), 40)[1])
+    assert sorted(sw.SWEEP_TABLE.read(out)["vertex"]) == sorted(sw.sample_points(load_cached(SCENES / "stomach.obj"), 40)[1])

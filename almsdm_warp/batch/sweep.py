@@ -31,15 +31,15 @@ import numpy as np
 
 from ..errors import InputError
 from ..export.output import atomic_write
+from ..export.tables import TableLayout
 
 FPS_MAX = 20000
 """Beyond this many points (and the mesh's vertices), points are area-uniform random, not farthest-point."""
 COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "stiffness_N_per_mm", "recovery_error_mm", "rings")
 """The table's columns; `rings`: the ring count of each point's region (the same for all but at --rings auto)."""
-_INT_COLUMNS = ("vertex", "rings")
-COLUMN_DTYPES = {c: np.int64 if c in _INT_COLUMNS else np.float64 for c in COLUMNS}
-"""Each column's dtype in a table."""
-FORMATS = (".csv", ".npz")
+SWEEP_TABLE = TableLayout("sweep table", {c: "int64" if c in ("vertex", "rings") else "float64" for c in COLUMNS},
+                          optional=("rings",))
+"""The sweep's table and its parts' (export/tables.py: .csv or .npz); a table written before the rings column has none."""
 
 
 # -- points ------------------------------------------------------------------------------------
@@ -348,50 +348,6 @@ def checked_columns(columns: dict) -> dict:
 
 
 # -- files -------------------------------------------------------------------------------------
-def write_table(path, columns: dict) -> Path:
-    """Write the sweep's columns to `path` (.csv with a header, or .npz), atomically."""
-    path = Path(path)
-    if path.suffix.lower() == ".npz":
-
-        def write(tmp):
-            with open(tmp, "wb") as f:
-                np.savez(f, **{c: np.asarray(columns[c]) for c in COLUMNS})
-
-    else:
-
-        def write(tmp):
-            cols = [np.asarray(columns[c]) for c in COLUMNS]
-            with open(tmp, "w", encoding="utf-8") as f:
-                f.write(",".join(COLUMNS) + "\n")
-                for b in range(0, len(cols[0]), 1 << 16):  # blocks of rows, each column formatted at once
-                    # repr: the shortest text that reads back to the same float
-                    text = [map(str, col[b : b + (1 << 16)].astype(np.int64).tolist()) if c in _INT_COLUMNS else
-                            map(repr, col[b : b + (1 << 16)].astype(np.float64).tolist()) for c, col in zip(COLUMNS, cols)]
-                    f.write("".join(line + "\n" for line in map(",".join, zip(*text))))
-
-    atomic_write(path, write)
-    return path
-
-
-def read_table(path) -> dict:
-    """The columns of a sweep file (.csv or .npz), as NumPy arrays (vertex and rings as int64; a
-    table written before the rings column has none)."""
-    path = Path(path)
-    if path.suffix.lower() == ".npz":
-        with np.load(path) as z:
-            return {c: z[c] for c in COLUMNS if c in z.files}
-    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-    with open(path, encoding="utf-8") as f:
-        header = tuple(f.readline().strip().split(","))
-    if header not in (COLUMNS, COLUMNS[:-1]):
-        raise InputError(f"{path}: not a sweep table (header {list(header)})")
-    out = {c: data[:, i] for i, c in enumerate(header)}
-    for c in _INT_COLUMNS:
-        if c in out:
-            out[c] = out[c].astype(np.int64)
-    return out
-
-
 def file_sha256(path) -> str:
     """The SHA-256 of a file's bytes, in hex."""
     h = hashlib.sha256()
@@ -485,20 +441,13 @@ class Parts:
 
     def write(self, i: int, columns: dict) -> None:
         """Write chunk `i` atomically, then its checksum into plan.json."""
-        digest = []
-
-        def write(tmp):
-            with open(tmp, "wb") as f:
-                np.savez(f, **columns)
-            digest.append(file_sha256(tmp))
-
         with self._lock:
             if self._manifest_due:  # before any chunk: a folder with a chunk always has its plan.json
                 self._write_manifest()
                 self._manifest_due = False
-        atomic_write(self.chunk_path(i), write)
+        digest = file_sha256(SWEEP_TABLE.write(self.chunk_path(i), columns))
         with self._lock:
-            self.sums[i] = digest[0]
+            self.sums[i] = digest
             self._write_manifest()
             self.written[i] = columns
             if self.table is None:
@@ -524,9 +473,8 @@ class Parts:
             try:
                 if self.sums.get(i) != file_sha256(path):
                     raise ValueError("its checksum does not match plan.json")
-                with np.load(path) as z:
-                    parts.append({c: z[c] for c in COLUMNS})
-            except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+                parts.append(SWEEP_TABLE.read(path))
+            except (OSError, ValueError, KeyError, zipfile.BadZipFile, InputError) as exc:
                 raise InputError(f"{path}: damaged ({exc}); run the same command again to press that chunk again") from exc
         return {c: np.concatenate([p[c] for p in parts]) for c in COLUMNS}
 

@@ -81,12 +81,10 @@ def cmd_sweep(args) -> int:
     times, t_start = SweepTimes(), time.perf_counter()
     plan, scene, rings_text, models = _plan(args, devices, times)
     parts, todo, left = _resume(out, plan)
-    from ..batch.sweep import COLUMN_DTYPES
+    from ..batch.sweep import SWEEP_TABLE
 
-    if out.suffix.lower() == ".npz":  # written as the chunks come: after the last press, only its directory
-        from ..export.npz_rows import NpzRows
-
-        parts.rows_file = NpzRows(out, len(plan.vertices), COLUMN_DTYPES)
+    # where the format can, the table is written as the chunks come: after the last press, only what needs the whole
+    parts.rows_file = SWEEP_TABLE.rows(out, len(plan.vertices))
     try:
         return _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo)
     finally:
@@ -96,8 +94,7 @@ def cmd_sweep(args) -> int:
 
 def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo) -> int:
     """cmd_sweep's second half: the chunks, the table, the report."""
-    from ..batch.sweep import press_steps, run_local, run_ray
-    from ..export.writers import write_output
+    from ..batch.sweep import SWEEP_TABLE, press_steps, run_local, run_ray
     from ..progress import Progress
     from ..protocol.palpation import SimulationDiverged
 
@@ -124,7 +121,7 @@ def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_s
         if parts.rows_file is not None:
             parts.rows_file.finish(columns)
         else:
-            write_output(out, columns, "table", "--out")
+            SWEEP_TABLE.write(out, columns)
         parts.remove()
     _report(columns, left, steps, elapsed)
     if args.profile:
