@@ -334,7 +334,7 @@ def test_batch_sphere_and_support_errors(stomach, supported):
 def test_sweep_with_sphere_supports_and_material(tmp_path, stomach, supported, capsys):
     # the command line's sweep presses what a batch presses (the same bits on the CPU); no supported point.
     # paper_stomach: a scene whose other tissue keys (density 1000) are the fixture's
-    from almsdm_warp.batch.sweep import SWEEP_TABLE
+    from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
     from almsdm_warp.cli.main import main
 
     material, z, _ = supported

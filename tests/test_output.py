@@ -77,7 +77,7 @@ def test_atomic_write_that_fails_leaves_nothing(tmp_path):
 def test_sweep_table_goes_through_the_one_writer(tmp_path, monkeypatch):
     """The sweep's table is published by export.output.publish, with a new file's mode."""
     import almsdm_warp.export.output as output
-    from almsdm_warp.batch.sweep import COLUMNS, SWEEP_TABLE
+    from almsdm_warp.batch.sweep_plan import COLUMNS, SWEEP_TABLE
 
     published = []
     real = output.publish

@@ -184,7 +184,7 @@ def test_cli_surface_material_needs_a_thickness(tmp_path):
 def test_sweep_of_a_supported_scene_never_presses_or_moves_the_support(tmp_path):
     """A supported scene sweeps: points below the plane are left out (a press there reads no force),
     and every point pressed reads a force above zero."""
-    from almsdm_warp.batch.sweep import SWEEP_TABLE
+    from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
 
     out = tmp_path / "map.csv"
     code, _stdout, err = run_main(["sweep", str(liver_scene(tmp_path, "[support]\nfixed_below_mm = -5.0\n")), "--points", "6",

@@ -178,7 +178,7 @@ def test_a_mesh_that_diverged_with_the_defaults_now_presses(tmp_path):
 def test_sweep_past_the_critical_step_writes_a_finite_table(tmp_path, capsys):
     """`sweep --dt-ms 2` wrote inf into its table; it now substeps, says its cost first, and every
     number it writes is finite."""
-    from almsdm_warp.batch.sweep import SWEEP_TABLE
+    from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
 
     out = tmp_path / "t.csv"
     assert main(["sweep", "paper_stomach", "--out", str(out), "--points", "4", "--dt-ms", "2", "--settle-s", "0.1"]) == 0

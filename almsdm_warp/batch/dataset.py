@@ -8,7 +8,7 @@ the same points of its scene (a SweepPlan pressed by run_local, resumable from i
 sweep is), written as its own table. The output folder holds::
 
     dataset.json              the spec's key and each finished item's key and checksum
-    items/<scene>_L<id>.npz   each item's sweep table (batch.sweep.COLUMNS)
+    items/<scene>_L<id>.npz   each item's sweep table (batch.sweep_plan.SWEEP_TABLE)
     maps/<scene>.png          force maps (each scene's baseline, or every item)
     table.npz                 the dataset: one array per column and a "schema" entry (JSON)
     table.csv                 the same table as text (when the spec asks for it)
@@ -32,7 +32,10 @@ from ..errors import InputError
 from ..export.output import atomic_write, check_regular
 from ..export.tables import TableLayout
 from ..solvers import INTEGRATORS
-from .sweep import SWEEP_TABLE, COLUMNS, Parts, SweepPlan, check_sphere_travel, file_sha256, pressable_points, run_local, sample_points
+from .sampling import pressable_points, sample_points
+from .sweep import run_local
+from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, check_sphere_travel
+from .sweep_store import Parts, file_sha256
 
 try:
     import tomllib
