@@ -49,9 +49,8 @@ class TableLayout:
 
     def write(self, path, columns: dict) -> Path:
         """Write `columns` to `path` in its suffix's format, atomically."""
-        fmt = table_format(path)
-        cast = self.cast(columns)
-        atomic_write(path, lambda tmp: fmt.write(tmp, cast, self))
+        fmt, columns = table_format(path), self.cast(columns)
+        atomic_write(path, lambda tmp: fmt.write(tmp, columns, self))
         return Path(path)
 
     def read(self, path) -> dict:
@@ -87,8 +86,8 @@ def read_csv(path: Path, layout: TableLayout) -> dict:
         header = f.readline().strip().split(",")
     if header != layout.columns(header):
         raise InputError(f"{path}: not a {layout.name} (header {header})")
-    text = {"str": object, "int64": np.int64, "float64": np.float64}
-    dtype = np.dtype([(c, text[layout.dtypes[c]]) for c in header])
+    parsed = {"str": object, "int64": np.int64, "float64": np.float64}  # str: read as Python strings, then sized
+    dtype = np.dtype([(c, parsed[layout.dtypes[c]]) for c in header])
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", "loadtxt: input contained no data")  # a header alone: no rows
         data = np.loadtxt(path, delimiter=",", skiprows=1, dtype=dtype, comments=None, ndmin=1, encoding="utf-8")
