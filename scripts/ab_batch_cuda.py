@@ -203,7 +203,7 @@ def summary(name: str, rows: dict, med: dict) -> None:
 def measure_sphere(args, old: Path, med: dict) -> dict:
     """The sphere case (`--probe-radius-mm` on a membrane of `--youngs-modulus-kpa`) on the stomach mesh."""
     from almsdm_warp import load_mesh
-    from almsdm_warp.batch.sweep import auto_dt
+    from almsdm_warp.batch.sweep_plan import auto_dt
     from almsdm_warp.sim.model import Model
 
     dt = args.dt if args.dt is not None else auto_dt(Model(load_mesh(args.mesh), tissue_of(args.youngs_modulus_kpa), "cpu"))
@@ -215,7 +215,7 @@ def measure_sphere(args, old: Path, med: dict) -> dict:
 
 def measure_scene(args, old: Path, scene, med: dict) -> dict:
     """The shipped scene as it is: its mesh, tissue, probe, supports, rings and press."""
-    from almsdm_warp.batch.sweep import auto_dt
+    from almsdm_warp.batch.sweep_plan import auto_dt
     from almsdm_warp.sim.model import Model
 
     mesh = scene.load_mesh()
@@ -256,7 +256,7 @@ def main(argv=None):
         raise SystemExit(f"{old} is not a checkout of this project (no almsdm_warp/__init__.py)")
     sys.path.insert(0, str(ROOT))
     from almsdm_warp import load_mesh
-    from almsdm_warp.batch.sweep import auto_dt
+    from almsdm_warp.batch.sweep_plan import auto_dt
     from almsdm_warp.sim.model import Model
     from almsdm_warp.warp_init import init_warp
 

@@ -32,7 +32,7 @@ def sweep_time(mesh, points, device, rings=4, repeats=3, dt=1e-3):
     import warp as wp
 
     from almsdm_warp.batch.batch_palpation import BatchPalpation
-    from almsdm_warp.batch.sweep import sample_points
+    from almsdm_warp.batch.sampling import sample_points
 
     t0 = time.perf_counter()
     _, vertices = sample_points(mesh, points)
@@ -100,7 +100,7 @@ def main(argv=None):
     init_warp()
     mesh = load_mesh(args.mesh or default_mesh())
     from almsdm_warp.sim.model import Model
-    from almsdm_warp.batch.sweep import auto_dt
+    from almsdm_warp.batch.sweep_plan import auto_dt
 
     dt = args.dt_ms * 1e-3 if args.dt_ms else auto_dt(Model(mesh, None, "cpu"))
     print(f"{mesh.summary()}; device {args.device}; {args.rings} rings; dt {dt * 1e3:g} ms")

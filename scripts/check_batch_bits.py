@@ -17,7 +17,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     mesh = load_batch_mesh(args.mesh)
     from almsdm_warp.batch.batch_palpation import BatchPalpation
-    from almsdm_warp.batch.sweep import sample_points
+    from almsdm_warp.batch.sampling import sample_points
     from almsdm_warp.protocol.palpation import Palpation
 
     _, vertices = sample_points(mesh, args.points)

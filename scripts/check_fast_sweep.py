@@ -22,7 +22,8 @@ def main(argv=None):
     import warp as wp
 
     from almsdm_warp.batch.batch_palpation import BatchPalpation
-    from almsdm_warp.batch.sweep import auto_dt, sample_points
+    from almsdm_warp.batch.sampling import sample_points
+    from almsdm_warp.batch.sweep_plan import auto_dt
     from almsdm_warp.sim.model import Model
 
     mesh = load_batch_mesh(args.mesh)

@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from almsdm_warp.batch.sweep import farthest_points
+from almsdm_warp.batch.sampling import farthest_points
 from almsdm_warp.protocol.palpation import Palpation
 from almsdm_warp.region.contact import top_vertex
 from almsdm_warp.scene.loader import default_scene_path, load_scene

@@ -18,7 +18,9 @@ from almsdm_warp.evaluation.adaptive_accuracy import hold_press
 from almsdm_warp.protocol.palpation import Palpation
 from almsdm_warp.scene.loader import resolve_scene_or_mesh
 from almsdm_warp.sim.model import Model
-from almsdm_warp.batch.sweep import SweepPlan, auto_dt, press_chunk, sample_points
+from almsdm_warp.batch.sampling import sample_points
+from almsdm_warp.batch.sweep_lanes import RingBatches, press_chunk
+from almsdm_warp.batch.sweep_plan import SweepPlan, auto_dt
 from almsdm_warp.batch.sweep_auto import rings_summary, size_regions
 from almsdm_warp.warp_init import init_warp
 
@@ -28,7 +30,7 @@ DEPTH, RAMP, HOLD, SETTLE = 0.01, 0.1, 0.2, 0.01
 def sweep(mesh, tissue, rings, points, vertices, dt):
     plan = SweepPlan(mesh, tissue, None, None, rings, dt, DEPTH, RAMP, HOLD, SETTLE, points, vertices, len(vertices))
     t0 = time.perf_counter()
-    cols = press_chunk(plan.batch("cpu"), plan, 0, len(vertices))()
+    cols = press_chunk(RingBatches(plan, plan.model("cpu")), plan, 0, len(vertices))()
     return cols["peak_force_N"], time.perf_counter() - t0
 
 

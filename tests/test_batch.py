@@ -334,7 +334,7 @@ def test_batch_sphere_and_support_errors(stomach, supported):
 def test_sweep_with_sphere_supports_and_material(tmp_path, stomach, supported, capsys):
     # the command line's sweep presses what a batch presses (the same bits on the CPU); no supported point.
     # paper_stomach: a scene whose other tissue keys (density 1000) are the fixture's
-    from almsdm_warp.batch.sweep import read_table
+    from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
     from almsdm_warp.cli.main import main
 
     material, z, _ = supported
@@ -342,7 +342,7 @@ def test_sweep_with_sphere_supports_and_material(tmp_path, stomach, supported, c
     flags = ["--youngs-modulus-kpa", "5", "--thickness-mm", "3", "--foundation-kpa-per-mm", "1", "--damping-ratio", "0.5"]
     assert main(["sweep", "paper_stomach", "--out", str(out), "--points", "10", "--rings", "3", "--probe-radius-mm", "4", "--fixed-below-mm",
                  f"{z * 1e3!r}", "--depth-mm", "5", "--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.1", *flags]) == 0
-    table = read_table(out)
+    table = SWEEP_TABLE.read(out)
     assert 0 < len(table["vertex"]) < 10 and np.all(stomach.vertices[table["vertex"], 2] >= z)
     res = BatchPalpation(stomach, material, rings=3, device="cpu", probe_radius=0.004, fixed_below=z).touch(table["vertex"]).press(**SPHERE_PRESS)
     np.testing.assert_array_equal(table["peak_force_N"], res.peak_force)

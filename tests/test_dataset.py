@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from almsdm_warp.batch import dataset as ds
-from almsdm_warp.batch import sweep as sw
+from almsdm_warp.batch.sweep_store import Parts
 from almsdm_warp.cli.main import main
 from almsdm_warp.protocol.palpation import Palpation
 from almsdm_warp.scene.loader import resolve_scene_or_mesh
@@ -49,7 +49,7 @@ def whole(tmp_path_factory):
     """The dataset of SPEC in one run: (its folder, its table)."""
     folder = tmp_path_factory.mktemp("whole")
     assert run(spec_file(folder), folder / "out") == 0
-    return folder / "out", ds.read_dataset_table(folder / "out" / "table.npz")
+    return folder / "out", ds.DATASET_TABLE.read(folder / "out" / "table.npz")
 
 
 def test_one_table_of_every_item_and_point(whole):
@@ -67,7 +67,7 @@ def test_one_table_of_every_item_and_point(whole):
         xyz = np.column_stack([table[c][table["scene"] == scene] for c in ("x_mm", "y_mm", "z_mm")]).reshape(3, POINTS, 3)
         np.testing.assert_array_equal(xyz[0], xyz[1])
         np.testing.assert_array_equal(xyz[0], xyz[2])
-    text = ds.read_dataset_table(out / "table.csv")
+    text = ds.DATASET_TABLE.read(out / "table.csv")
     for c in ds.DATASET_COLUMNS:
         np.testing.assert_array_equal(text[c], table[c])
     with np.load(out / "table.npz", allow_pickle=False) as z:  # numpy alone reads it, schema included
@@ -108,7 +108,7 @@ def test_lesion_stiffens_the_points_over_it_as_one_palpation_finds(whole):
 
 def test_interrupted_dataset_resumes_to_the_same_table(whole, tmp_path, monkeypatch, capsys):
     out = tmp_path / "out"
-    real_write = sw.Parts.write
+    real_write = Parts.write
     calls = []
 
     def write_then_stop(self, i, columns):  # stop in the third item, after its first chunk
@@ -117,12 +117,12 @@ def test_interrupted_dataset_resumes_to_the_same_table(whole, tmp_path, monkeypa
         calls.append(i)
         real_write(self, i, columns)
 
-    monkeypatch.setattr(sw.Parts, "write", write_then_stop)
+    monkeypatch.setattr(Parts, "write", write_then_stop)
     assert run(spec_file(tmp_path), out) == 130
     assert not (out / "table.npz").exists()
     assert sorted(p.name for p in (out / "items").iterdir()) == ["stomach_L000.npz", "stomach_L001.npz", "stomach_L002.npz.parts"]
     assert not list(out.rglob(".*.tmp"))  # nothing half-written
-    monkeypatch.setattr(sw.Parts, "write", real_write)
+    monkeypatch.setattr(Parts, "write", real_write)
     capsys.readouterr()
     assert run(spec_file(tmp_path), out) == 0
     assert "2 item(s) already in" in capsys.readouterr().out

@@ -77,15 +77,46 @@ def test_atomic_write_that_fails_leaves_nothing(tmp_path):
 def test_sweep_table_goes_through_the_one_writer(tmp_path, monkeypatch):
     """The sweep's table is published by export.output.publish, with a new file's mode."""
     import almsdm_warp.export.output as output
-    from almsdm_warp.batch.sweep import COLUMNS, read_table, write_table
+    from almsdm_warp.batch.sweep_plan import COLUMNS, SWEEP_TABLE
 
     published = []
     real = output.publish
     monkeypatch.setattr(output, "publish", lambda tmp, path: published.append(Path(path).name) or real(tmp, path))
     columns = {c: [1.0, 2.0] for c in COLUMNS}
-    out = write_table(tmp_path / "s.csv", columns)
+    out = SWEEP_TABLE.write(tmp_path / "s.csv", columns)
     assert published == ["s.csv"] and (out.stat().st_mode & 0o777) == _new_file_mode()
-    assert read_table(out)["peak_force_N"].tolist() == [1.0, 2.0]
+    assert SWEEP_TABLE.read(out)["peak_force_N"].tolist() == [1.0, 2.0]
+
+
+def test_every_table_format_holds_every_table(tmp_path):
+    """Each table format (export/tables.py) writes and reads back the sweep's, the dataset's and the
+    trace's tables exactly, each through its layout; the command line takes exactly its suffixes."""
+    from almsdm_warp.batch.dataset import DATASET_TABLE
+    from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
+    from almsdm_warp.cli.trace import TRACE_TABLE
+    from almsdm_warp.errors import InputError
+    from almsdm_warp.export.tables import TABLE_FORMATS
+    from almsdm_warp.export.writers import suffixes
+
+    assert suffixes("table") == tuple(TABLE_FORMATS)
+    rng = np.random.default_rng(0)
+    for k, layout in enumerate((SWEEP_TABLE, DATASET_TABLE, TRACE_TABLE)):
+        kinds = {"int64": lambda: rng.integers(-99, 1 << 40, 5), "float64": lambda: rng.normal(size=5) * 1e-7,
+                 "str": lambda: np.array(["a", "bb", "", "d e", "f"])}
+        columns = {c: kinds[d]() for c, d in layout.dtypes.items()}
+        for suffix in TABLE_FORMATS:
+            back = layout.read(layout.write(tmp_path / f"t{k}{suffix}", columns))
+            assert list(back) == list(layout.dtypes)
+            for c, values in columns.items():
+                assert back[c].dtype.kind == values.dtype.kind
+                np.testing.assert_array_equal(back[c], values)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"t{k}{s}" for k in range(3) for s in TABLE_FORMATS)
+    with pytest.raises(InputError, match=r"t\.parquet: unknown table suffix '\.parquet' \(allowed: \.csv, \.npz\)"):
+        SWEEP_TABLE.write(tmp_path / "t.parquet", columns)
+    with pytest.raises(InputError, match=r"t1\.csv: not a sweep table \(header \['scene'"):
+        SWEEP_TABLE.read(tmp_path / "t1.csv")
+    with pytest.raises(InputError, match=r"t0\.npz: not a dataset table \(no column 'scene'\)"):
+        DATASET_TABLE.read(tmp_path / "t0.npz")
 
 
 # -- outputs only to regular files, each its own, never an input -----------------------------

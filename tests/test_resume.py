@@ -4,7 +4,8 @@ pressed again; the table equals an uninterrupted run's, byte for byte."""
 import json
 from pathlib import Path
 
-from almsdm_warp.batch import sweep as sw
+from almsdm_warp.batch.sweep_plan import COLUMNS, SWEEP_TABLE
+from almsdm_warp.batch.sweep_store import Parts
 from almsdm_warp.cli.main import main
 
 FAST = ["--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05", "--dt-ms", "0.5"]
@@ -74,14 +75,14 @@ def interrupt_after(chunks: int, out) -> None:
     """Run the sweep of ARGS into `out`, interrupted (Ctrl-C) when `chunks` chunks are written."""
     from unittest import mock
 
-    real = sw.Parts.write
+    real = Parts.write
 
     def write(self, i, columns):
         if len(self.sums) >= chunks:
             raise KeyboardInterrupt
         real(self, i, columns)
 
-    with mock.patch.object(sw.Parts, "write", write):
+    with mock.patch.object(Parts, "write", write):
         assert main([*ARGS, "--out", str(out)]) == 130
 
 
@@ -100,6 +101,6 @@ def test_a_resumed_npz_table_equals_an_uninterrupted_one(tmp_path):
     whole, out, _ = whole_and_interrupted(tmp_path, "r.npz", 2)
     assert not out.exists() and [p.name for p in tmp_path.iterdir() if p.name.startswith(".r.npz")] == []
     assert main([*ARGS, "--out", str(out)]) == 0
-    a, b = sw.read_table(whole), sw.read_table(out)
-    for c in sw.COLUMNS:
+    a, b = SWEEP_TABLE.read(whole), SWEEP_TABLE.read(out)
+    for c in COLUMNS:
         np.testing.assert_array_equal(a[c], b[c])

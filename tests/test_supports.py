@@ -184,13 +184,13 @@ def test_cli_surface_material_needs_a_thickness(tmp_path):
 def test_sweep_of_a_supported_scene_never_presses_or_moves_the_support(tmp_path):
     """A supported scene sweeps: points below the plane are left out (a press there reads no force),
     and every point pressed reads a force above zero."""
-    from almsdm_warp.batch.sweep import read_table
+    from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
 
     out = tmp_path / "map.csv"
     code, _stdout, err = run_main(["sweep", str(liver_scene(tmp_path, "[support]\nfixed_below_mm = -5.0\n")), "--points", "6",
                                    "--out", str(out)])
     assert code == 0, err
-    table = read_table(out)
+    table = SWEEP_TABLE.read(out)
     assert np.all(table["z_mm"] >= -5.0) and np.all(table["peak_force_N"] > 0)
 
 

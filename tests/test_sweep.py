@@ -4,7 +4,12 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from almsdm_warp.batch import sweep as sw
+from almsdm_warp.batch.sampling import Sampling, area_uniform_points, pressable_points, sample_points
+from almsdm_warp.batch.sweep import SweepDevice, run_local
+from almsdm_warp.batch.sweep_lanes import Lane, RingBatches, press_chunk
+from almsdm_warp.batch.sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, default_chunk, sweep_critical_dt
+from almsdm_warp.batch.sweep_store import Parts
+from almsdm_warp.batch.sweep_times import SweepTimes, union_length
 from almsdm_warp.cli.main import main
 from almsdm_warp.scene.loader import resolve_scene_or_mesh
 from conftest import SCENES, load_cached
@@ -18,7 +23,7 @@ def stomach():
 
 
 def test_points_spread_evenly_over_the_vertices(stomach):
-    points, vertices = sw.sample_points(stomach, 50)
+    points, vertices = sample_points(stomach, 50)
     assert len(np.unique(vertices)) == 50
     np.testing.assert_array_equal(points, stomach.vertices[vertices])
     # farthest-point sampling: every surface vertex is no farther from a chosen point than the
@@ -30,7 +35,7 @@ def test_points_spread_evenly_over_the_vertices(stomach):
 
 
 def test_more_points_than_vertices_snap_to_the_nearest(stomach):
-    points, vertices = sw.sample_points(stomach, 1500)
+    points, vertices = sample_points(stomach, 1500)
     assert len(points) == 1500
     # each point lies in some triangle: on its plane, with barycentric coordinates in [0, 1]
     t = stomach.vertices[stomach.triangles]
@@ -53,9 +58,9 @@ def test_sampling_behind_the_caller_gives_trimeshs_points_snapped(stomach, monke
     # snapped to its nearest surface vertex (brute force), the first blocks usable before the last
     import trimesh
 
-    monkeypatch.setattr(sw.Sampling, "BLOCK", 1000)
+    monkeypatch.setattr(Sampling, "BLOCK", 1000)
     n = 25000
-    sampling = sw.Sampling(stomach, n)
+    sampling = Sampling(stomach, n)
     sampling.wait(3000)
     tm = trimesh.Trimesh(vertices=stomach.vertices, faces=stomach.triangles, process=False)
     expected = trimesh.sample.sample_surface(tm, n, seed=0)[0]
@@ -75,15 +80,15 @@ def test_a_sweep_pressing_while_its_points_are_sampled_writes_the_same_table(tmp
     # thread; the table equals that of a plan whose points were all sampled first
     fast = ["sweep", "--points", "1100", "--chunk", "256", "--rings", "1", "--ramp-s", "0.004", "--hold-s", "0",
             "--settle-s", "0.004", "--dt-ms", "1", "--no-progress"]
-    monkeypatch.setattr(sw, "FPS_MAX", 100)
-    monkeypatch.setattr(sw.Sampling, "BLOCK", 128)
+    monkeypatch.setattr("almsdm_warp.batch.sampling.FPS_MAX", 100)
+    monkeypatch.setattr(Sampling, "BLOCK", 128)
     behind = tmp_path / "behind.npz"
     assert main([*fast, "--out", str(behind)]) == 0
-    monkeypatch.setattr(sw, "start_sampling", lambda mesh, n, fixed_below=None: (*sw.pressable_points(mesh, n, fixed_below), None))
+    monkeypatch.setattr("almsdm_warp.batch.sampling.start_sampling", lambda mesh, n, fixed_below=None: (*pressable_points(mesh, n, fixed_below), None))
     first = tmp_path / "first.npz"
     assert main([*fast, "--out", str(first)]) == 0
-    a, b = sw.read_table(behind), sw.read_table(first)
-    for c in sw.COLUMNS:
+    a, b = SWEEP_TABLE.read(behind), SWEEP_TABLE.read(first)
+    for c in COLUMNS:
         np.testing.assert_array_equal(a[c], b[c], err_msg=c)
 
 
@@ -94,10 +99,10 @@ def test_area_uniform_points_are_trimeshs_and_uniform(stomach):
 
     tm = trimesh.Trimesh(vertices=stomach.vertices, faces=stomach.triangles, process=False)
     for n, seed in ((1, 0), (4097, 3)):
-        np.testing.assert_array_equal(sw.area_uniform_points(stomach.vertices, stomach.triangles, n, seed),
+        np.testing.assert_array_equal(area_uniform_points(stomach.vertices, stomach.triangles, n, seed),
                                       trimesh.sample.sample_surface(tm, n, seed=seed)[0])
     n = 200000
-    points = sw.area_uniform_points(stomach.vertices, stomach.triangles, n, 1)
+    points = area_uniform_points(stomach.vertices, stomach.triangles, n, 1)
     # the z-band below the median height holds the share of area below it (areas of the triangles'
     # pieces are not needed: triangles wholly below or above the band's edge bound the share)
     t = stomach.vertices[stomach.triangles]
@@ -110,13 +115,13 @@ def test_area_uniform_points_are_trimeshs_and_uniform(stomach):
 
 def test_tables_round_trip(tmp_path):
     rng = np.random.default_rng(1)
-    cols = {c: rng.normal(size=9) for c in sw.COLUMNS}
+    cols = {c: rng.normal(size=9) for c in COLUMNS}
     cols["vertex"] = rng.integers(0, 1000, size=9)
     cols["rings"] = rng.integers(1, 9, size=9)
     cols["recovery_error_mm"][3] = np.nan
     for suffix in (".csv", ".npz"):
-        back = sw.read_table(sw.write_table(tmp_path / f"t{suffix}", cols))
-        for c in sw.COLUMNS:
+        back = SWEEP_TABLE.read(SWEEP_TABLE.write(tmp_path / f"t{suffix}", cols))
+        for c in COLUMNS:
             np.testing.assert_array_equal(back[c], cols[c])  # exact: CSV floats are written with repr
         assert back["vertex"].dtype == np.int64 and back["rings"].dtype == np.int64
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv", "t.npz"]  # no temporary left
@@ -124,7 +129,7 @@ def test_tables_round_trip(tmp_path):
     old = tmp_path / "old.csv"
     text = (tmp_path / "t.csv").read_text().splitlines()
     old.write_text("\n".join(line.rsplit(",", 1)[0] for line in text) + "\n")
-    back = sw.read_table(old)
+    back = SWEEP_TABLE.read(old)
     assert "rings" not in back
     np.testing.assert_array_equal(back["peak_force_N"], cols["peak_force_N"])
 
@@ -135,7 +140,7 @@ def test_sweep_finds_the_lesion(tmp_path, capsys):
     lesion_out, plain_out = tmp_path / "lesion.csv", tmp_path / "plain.npz"
     assert main(["sweep", "stomach_lesion", "--points", "48", "--out", str(lesion_out), *FAST]) == 0
     assert main(["sweep", "stomach", "--points", "48", "--out", str(plain_out), *FAST]) == 0
-    a, b = sw.read_table(lesion_out), sw.read_table(plain_out)
+    a, b = SWEEP_TABLE.read(lesion_out), SWEEP_TABLE.read(plain_out)
     np.testing.assert_array_equal(a["vertex"], b["vertex"])
     lesion = resolve_scene_or_mesh("stomach_lesion").lesion
     xyz = np.column_stack([a["x_mm"], a["y_mm"], a["z_mm"]]) * 1e-3
@@ -153,7 +158,7 @@ def test_interrupted_sweep_resumes_to_the_same_file(tmp_path, monkeypatch, capsy
     whole = tmp_path / "whole.csv"
     assert main(["sweep", "--points", "20", "--chunk", "6", "--out", str(whole), *FAST]) == 0
     out = tmp_path / "resumed.csv"
-    real_write = sw.Parts.write
+    real_write = Parts.write
     calls = []
 
     def write_then_stop(self, i, columns):
@@ -162,11 +167,11 @@ def test_interrupted_sweep_resumes_to_the_same_file(tmp_path, monkeypatch, capsy
         calls.append(i)
         real_write(self, i, columns)
 
-    monkeypatch.setattr(sw.Parts, "write", write_then_stop)
+    monkeypatch.setattr(Parts, "write", write_then_stop)
     assert main(["sweep", "--points", "20", "--chunk", "6", "--out", str(out), *FAST]) == 130
     assert not out.exists()
     assert len(list((tmp_path / "resumed.csv.parts").glob("chunk_*.npz"))) == 2
-    monkeypatch.setattr(sw.Parts, "write", real_write)
+    monkeypatch.setattr(Parts, "write", real_write)
     capsys.readouterr()
     assert main(["sweep", "--points", "20", "--chunk", "6", "--out", str(out), *FAST]) == 0
     assert "resuming: 2 of 4 chunks" in capsys.readouterr().out
@@ -183,37 +188,37 @@ def test_pipelined_sweep_gives_the_serial_bits(stomach, tmp_path):
     # the pipeline (two chunks in flight a device, read-back and writing on the side), on one device
     # or split over two, against the serial path: chunk after chunk, each read and written in turn;
     # per-point ring counts make chunks of several batches
-    points, vertices = sw.sample_points(stomach, 12)
+    points, vertices = sample_points(stomach, 12)
     from almsdm_warp.tissue.params import TissueParams
 
     rings = np.array([3, 2, 3, 3, 2, 2, 3, 3, 3, 2, 3, 3])
-    plan = sw.SweepPlan(stomach, TissueParams(), None, None, rings, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 5)
+    plan = SweepPlan(stomach, TissueParams(), None, None, rings, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 5)
     results = []
     for devices, pipeline in ((["cpu"], False), (["cpu"], True), (["cpu", "cpu"], True)):
-        parts = sw.Parts(tmp_path / f"x{len(devices)}{pipeline}.npz", plan)
+        parts = Parts(tmp_path / f"x{len(devices)}{pipeline}.npz", plan)
         parts.open()
-        times = sw.SweepTimes()
-        sw.run_local(plan, parts, [0, 1, 2], devices, pipeline=pipeline, times=times)
+        times = SweepTimes()
+        run_local(plan, parts, [0, 1, 2], devices, pipeline=pipeline, times=times)
         results.append(parts.gather())
         assert len(times.host_per_chunk) == (3 if pipeline else 0)
     for other in results[1:]:
-        for c in sw.COLUMNS:
+        for c in COLUMNS:
             np.testing.assert_array_equal(other[c], results[0][c])
     np.testing.assert_array_equal(results[0]["rings"], rings)
 
 
 def test_ray_actor_presses_the_serial_bits(stomach, tmp_path):
     # what a Ray actor of one device runs (here in process, on the CPU): the serial path's columns
-    points, vertices = sw.sample_points(stomach, 10)
+    points, vertices = sample_points(stomach, 10)
     from almsdm_warp.tissue.params import TissueParams
 
-    plan = sw.SweepPlan(stomach, TissueParams(), None, None, 2, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 4)
-    actor = sw.SweepDevice(plan, False, sw.sweep_critical_dt(plan))
-    serial = plan.batch("cpu")
+    plan = SweepPlan(stomach, TissueParams(), None, None, 2, 5e-4, 0.01, 0.05, 0.05, 0.05, points, vertices, 4)
+    actor = SweepDevice(plan, False, sweep_critical_dt(plan))
+    serial = RingBatches(plan, plan.model("cpu"))
     for i, (begin, end) in enumerate(plan.chunks):
-        expected = sw.press_chunk(serial, plan, begin, end)()
+        expected = press_chunk(serial, plan, begin, end)()
         got = actor.press(i)
-        for c in sw.COLUMNS:
+        for c in COLUMNS:
             np.testing.assert_array_equal(got[c], expected[c])
 
 
@@ -243,19 +248,19 @@ def test_stream_lanes_read_back_the_finished_press(stomach, monkeypatch):
     monkeypatch.setattr(wp, "get_event_elapsed_time", lambda a, b: (b.t - a.t) * 1e3)
     monkeypatch.setattr(wp, "empty", lambda *a, pinned=False, **kw: empty(*a, **kw))
     monkeypatch.setattr(wp, "copy", lambda dst, src, stream=None: (copies.append(stream), copy(dst, src)))
-    points, vertices = sw.sample_points(stomach, 14)
-    plan = sw.SweepPlan(stomach, TissueParams(), None, None, np.array([2, 3] * 7), 5e-4, 0.01, 0.02, 0.02, 0.02, points, vertices, 5)
+    points, vertices = sample_points(stomach, 14)
+    plan = SweepPlan(stomach, TissueParams(), None, None, np.array([2, 3] * 7), 5e-4, 0.01, 0.02, 0.02, 0.02, points, vertices, 5)
     model = plan.model("cpu")
-    lanes = [sw.Lane(sw.RingBatches(plan, model), sw.SweepTimes()) for _ in range(2)]
+    lanes = [Lane(RingBatches(plan, model), SweepTimes()) for _ in range(2)]
     for lane in lanes:
         lane.stream = Stream()
     origin = lanes[0].clock_origin()
-    serial = plan.batch("cpu")
+    serial = RingBatches(plan, plan.model("cpu"))
     for i, (begin, end) in enumerate(plan.chunks):
         lanes[i % 2].start(plan, i, None, origin)
         got = lanes[i % 2].finish(plan, origin)
-        expected = sw.press_chunk(serial, plan, begin, end)()
-        for c in sw.COLUMNS:
+        expected = press_chunk(serial, plan, begin, end)()
+        for c in COLUMNS:
             np.testing.assert_array_equal(got[c], expected[c])
     assert sum(s is lanes[0].stream for s in copies) == 3 * 2 * 2  # 3 results x 2 ring counts x chunks 0, 2
     assert all(origin[1] <= b <= e <= time.perf_counter() for b, e in lanes[1].busy)  # on the host's clock
@@ -264,7 +269,7 @@ def test_stream_lanes_read_back_the_finished_press(stomach, monkeypatch):
 def test_the_timeline_of_presses():
     # two devices' presses on the host's clock: the first start, the idle time between the first and the
     # last press (no device pressing) and the tail, against the intervals worked out by hand
-    times = sw.SweepTimes()
+    times = SweepTimes()
     t0 = times.t0
     times.add_press([(t0 + 0.5, t0 + 1.0), (t0 + 1.2, t0 + 2.0)])  # one device: idle 1.0..1.2
     times.add_press([(t0 + 0.9, t0 + 1.1), (t0 + 2.5, t0 + 3.0)])  # another: covers 1.0..1.1, adds 2.0..2.5 idle
@@ -273,7 +278,7 @@ def test_the_timeline_of_presses():
     assert got["before_first_press_s"] == pytest.approx(0.5)
     assert got["idle_between_presses_s"] == pytest.approx(0.1 + 0.5)
     assert got["after_last_press_s"] == pytest.approx(1.0)
-    assert sw.SweepTimes().timeline(1.0) == {}
+    assert SweepTimes().timeline(1.0) == {}
 
 
 def test_one_substep_from_the_whole_mesh_bound(stomach):
@@ -300,17 +305,17 @@ def test_union_length_against_a_fine_grid():
     covered = np.zeros(len(grid), dtype=bool)
     for b, e in intervals:
         covered |= (grid >= b) & (grid < e)
-    assert abs(sw.union_length(intervals) - covered.sum() * 1e-4) < 40 * 2e-4
-    assert sw.union_length([]) == 0.0
+    assert abs(union_length(intervals) - covered.sum() * 1e-4) < 40 * 2e-4
+    assert union_length([]) == 0.0
 
 
 def test_default_chunk_fills_the_devices():
-    assert sw.default_chunk(10_000, ["cpu"]) == 64
-    assert sw.default_chunk(200, ["cuda:0"]) == 200  # all in one launch
-    assert sw.default_chunk(1_000_000, ["cuda:0"]) == 65536  # 16 chunks: the next is built while one presses
-    assert sw.default_chunk(1_000_000, ["cuda:0", "cuda:1"]) == 65536  # 8 chunks a device
-    assert sw.default_chunk(200_000, ["cuda:0", "cuda:1"]) == 25000  # 4 chunks a device
-    assert sw.default_chunk(100_000, ["cuda:0"]) == 25000
+    assert default_chunk(10_000, ["cpu"]) == 64
+    assert default_chunk(200, ["cuda:0"]) == 200  # all in one launch
+    assert default_chunk(1_000_000, ["cuda:0"]) == 65536  # 16 chunks: the next is built while one presses
+    assert default_chunk(1_000_000, ["cuda:0", "cuda:1"]) == 65536  # 8 chunks a device
+    assert default_chunk(200_000, ["cuda:0", "cuda:1"]) == 25000  # 4 chunks a device
+    assert default_chunk(100_000, ["cuda:0"]) == 25000
 
 
 def test_sweep_on_ray_gives_the_same_file(tmp_path):
@@ -330,7 +335,7 @@ def test_sweep_implicit_matches_the_batch(tmp_path, stomach):
     # the command's implicit sweep is BatchPalpation's implicit press at the same points
     out = tmp_path / "imp.npz"
     assert main(["sweep", "paper_stomach", "--points", "6", "--rings", "2", "--integrator", "implicit", "--out", str(out), *FAST]) == 0
-    table = sw.read_table(out)
+    table = SWEEP_TABLE.read(out)
     from almsdm_warp.batch.batch_palpation import BatchPalpation
 
     res = BatchPalpation(stomach, rings=2, dt=5e-4, device="cpu", integrator="implicit").touch(table["vertex"]).press(0.01, 0.05, 0.05, 0.05)
@@ -412,7 +417,7 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     # the paper's preset: the reference below is its constants (TissueParams)
     assert main(["sweep", "paper_stomach", *press, "--rings", "auto", "--tol-mm", "0.1", "--out", str(tmp_path / "auto.npz")]) == 0
     assert main(["sweep", "paper_stomach", *press, "--rings", "8", "--out", str(tmp_path / "eight.csv")]) == 0
-    auto, eight = sw.read_table(tmp_path / "auto.npz"), sw.read_table(tmp_path / "eight.csv")
+    auto, eight = SWEEP_TABLE.read(tmp_path / "auto.npz"), SWEEP_TABLE.read(tmp_path / "eight.csv")
     for c in ("x_mm", "y_mm", "z_mm", "vertex"):
         np.testing.assert_array_equal(auto[c], eight[c])
     assert set(auto["rings"]) == {2, 3} and set(eight["rings"]) == {8}  # docs/adaptive.md: 3 or 2 at 0.1 mm
@@ -432,8 +437,8 @@ def test_auto_sweep_agrees_with_the_global_reference(tmp_path, stomach):
     text = (SCENES / "paper_stomach.toml").read_text().replace('path = "stomach.obj"', f"path = {str(SCENES / 'stomach.obj')!r}")
     (tmp_path / "auto.toml").write_text(text.replace("\nrings = 4 ", '\nrings = "auto"\ntol_mm = 0.1\n# '))
     assert main(["sweep", str(tmp_path / "auto.toml"), *press, "--out", str(tmp_path / "scene.npz")]) == 0
-    by_scene = sw.read_table(tmp_path / "scene.npz")
-    for c in sw.COLUMNS:
+    by_scene = SWEEP_TABLE.read(tmp_path / "scene.npz")
+    for c in COLUMNS:
         np.testing.assert_array_equal(by_scene[c], auto[c])
     # each point's rings are a fresh adaptive palpation's there (sized from rest, whatever the order)
     for k in (1, 4):
@@ -474,4 +479,4 @@ def test_profile_says_where_the_wall_time_went(tmp_path, capsys):
     parts = seconds["before first press"] + seconds["idle between presses"] + seconds["after last press"]
     assert parts + seconds["press kernels (device)"] == pytest.approx(seconds["wall"], abs=0.004)
     assert "on the way to the first press: plan" in text and "first press launched" in text
-    assert sorted(sw.read_table(out)["vertex"]) == sorted(sw.sample_points(load_cached(SCENES / "stomach.obj"), 40)[1])
+    assert sorted(SWEEP_TABLE.read(out)["vertex"]) == sorted(sample_points(load_cached(SCENES / "stomach.obj"), 40)[1])

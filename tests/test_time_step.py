@@ -178,13 +178,13 @@ def test_a_mesh_that_diverged_with_the_defaults_now_presses(tmp_path):
 def test_sweep_past_the_critical_step_writes_a_finite_table(tmp_path, capsys):
     """`sweep --dt-ms 2` wrote inf into its table; it now substeps, says its cost first, and every
     number it writes is finite."""
-    from almsdm_warp.batch.sweep import read_table
+    from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
 
     out = tmp_path / "t.csv"
     assert main(["sweep", "paper_stomach", "--out", str(out), "--points", "4", "--dt-ms", "2", "--settle-s", "0.1"]) == 0
     stdout = capsys.readouterr().out
     assert "cost: " in stdout and "x at most 2 substep(s)" in stdout, stdout
-    table = read_table(out)
+    table = SWEEP_TABLE.read(out)
     assert all(np.all(np.isfinite(table[c])) for c in table) and np.all(table["peak_force_N"] > 0.5)
 
 

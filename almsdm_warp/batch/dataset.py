@@ -8,7 +8,7 @@ the same points of its scene (a SweepPlan pressed by run_local, resumable from i
 sweep is), written as its own table. The output folder holds::
 
     dataset.json              the spec's key and each finished item's key and checksum
-    items/<scene>_L<id>.npz   each item's sweep table (batch.sweep.COLUMNS)
+    items/<scene>_L<id>.npz   each item's sweep table (batch.sweep_plan.SWEEP_TABLE)
     maps/<scene>.png          force maps (each scene's baseline, or every item)
     table.npz                 the dataset: one array per column and a "schema" entry (JSON)
     table.csv                 the same table as text (when the spec asks for it)
@@ -30,9 +30,12 @@ import numpy as np
 from ..checks import AUTO, check_limit, check_protocol, check_value, describe
 from ..errors import InputError
 from ..export.output import atomic_write, check_regular
+from ..export.tables import TableLayout
 from ..solvers import INTEGRATORS
-from .sweep import (COLUMNS, Parts, SweepPlan, check_sphere_travel, file_sha256, pressable_points, read_table, run_local,
-                    sample_points, write_table)
+from .sampling import pressable_points, sample_points
+from .sweep import run_local
+from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, check_sphere_travel
+from .sweep_store import Parts, file_sha256
 
 try:
     import tomllib
@@ -63,6 +66,10 @@ SCHEMA = {
     "rings": ("int64", "", "rings of the local region"),
 }
 """Column -> (dtype, unit, meaning): written into table.npz as its "schema" entry."""
+DATASET_TABLE = TableLayout("dataset table", {c: SCHEMA[c][0] for c in DATASET_COLUMNS}, meta={"schema": json.dumps(
+    {"format": FORMAT, "columns": {c: {"dtype": d, "unit": u, "meaning": m} for c, (d, u, m) in SCHEMA.items()}})})
+"""The dataset table (export/tables.py): .npz (one array per column, plus "schema": JSON text of column ->
+{dtype, unit, meaning}; np.load reads it without pickle) or .csv (a header row)."""
 MAPS = ("scene", "items", "none")
 SPEC_KEYS = {
     "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "chunk"),
@@ -389,7 +396,7 @@ class DatasetFolder:
         parts = Parts(path, item.plan)
         done = set(parts.open())
         run_local(item.plan, parts, [i for i in range(len(item.plan.chunks)) if i not in done], devices, progress)
-        write_table(path, parts.gather())
+        SWEEP_TABLE.write(path, parts.gather())
         parts.remove()
         self.done[item.name] = {"key": item.key(), "sha256": file_sha256(path), "scene": item.scene,
                                 "lesion": None if item.lesion is None else item.lesion.as_dict()}
@@ -402,7 +409,7 @@ class DatasetFolder:
             path = self.item_path(item)
             if not self._finished(item):
                 raise InputError(f"{path}: missing or damaged; run the same command again to press it again")
-            parts.append(item.columns(read_table(path)))
+            parts.append(item.columns(SWEEP_TABLE.read(path)))
         return {c: np.concatenate([p[c] for p in parts]) for c in DATASET_COLUMNS}
 
 
@@ -412,56 +419,6 @@ def press_dataset(folder: DatasetFolder, todo: list[DatasetItem], devices: list[
         folder.press(item, devices, progress)
         if on_item is not None:
             on_item(item)
-
-
-# -- the table ---------------------------------------------------------------------------------
-def write_dataset_table(path, columns: dict) -> Path:
-    """The dataset table, atomically: .npz (one array per column, plus "schema": JSON text of
-    column -> {dtype, unit, meaning}; np.load reads it without pickle) or .csv (a header row)."""
-    path = Path(path)
-    cols = {c: np.asarray(columns[c]).astype(SCHEMA[c][0] if SCHEMA[c][0] != "str" else str) for c in DATASET_COLUMNS}
-    if path.suffix.lower() == ".npz":
-        schema = {c: {"dtype": d, "unit": u, "meaning": m} for c, (d, u, m) in SCHEMA.items()}
-
-        def write(tmp):
-            with open(tmp, "wb") as f:
-                np.savez(f, schema=np.array(json.dumps({"format": FORMAT, "columns": schema})), **cols)
-
-    else:
-
-        def write(tmp):
-            with open(tmp, "w", encoding="utf-8") as f:
-                f.write(",".join(DATASET_COLUMNS) + "\n")
-                for row in zip(*(cols[c] for c in DATASET_COLUMNS)):
-                    f.write(",".join(_cell(c, x) for c, x in zip(DATASET_COLUMNS, row)) + "\n")
-
-    atomic_write(path, write)
-    return path
-
-
-def _cell(column: str, x) -> str:
-    kind = SCHEMA[column][0]
-    if kind == "str":
-        return str(x)  # scene names: file stems, commas replaced by plan_items
-    return str(int(x)) if kind == "int64" else repr(float(x))
-
-
-def read_dataset_table(path) -> dict:
-    """The columns of a dataset table (.npz or .csv) as NumPy arrays of the schema's dtypes."""
-    path = Path(path)
-    if path.suffix.lower() == ".npz":
-        with np.load(path, allow_pickle=False) as z:
-            missing = [c for c in DATASET_COLUMNS if c not in z.files]
-            if missing:
-                raise InputError(f"{path}: not a dataset table (no column {missing[0]!r})")
-            return {c: z[c] for c in DATASET_COLUMNS}
-    with open(path, encoding="utf-8") as f:
-        header = f.readline().strip().split(",")
-        rows = [line.rstrip("\n").split(",") for line in f if line.strip()]
-    if tuple(header) != DATASET_COLUMNS:
-        raise InputError(f"{path}: not a dataset table (header {header})")
-    raw = list(zip(*rows)) if rows else [()] * len(header)
-    return {c: np.array(v, dtype=SCHEMA[c][0] if SCHEMA[c][0] != "str" else str) for c, v in zip(header, raw)}
 
 
 def draw_maps(folder: DatasetFolder) -> list[Path]:
@@ -479,15 +436,15 @@ def draw_maps(folder: DatasetFolder) -> list[Path]:
         name = item.scene if folder.spec.maps == "scene" else item.name
         what = "no lesion" if item.lesion is None else f"lesion {item.lesion_id} ({item.lesion.radius * 1e3:g} mm, x{item.lesion.stiffness_factor:g})"
         title = f"{item.scene}, {what}: stiffness under a {item.plan.depth * 1e3:g} mm press"
-        written.append(plot_sweep(item.plan.mesh, read_table(folder.item_path(item)), folder.dir / "maps" / f"{name}.png", title=title))
+        written.append(plot_sweep(item.plan.mesh, SWEEP_TABLE.read(folder.item_path(item)), folder.dir / "maps" / f"{name}.png", title=title))
     return written
 
 
 def finish_dataset(folder: DatasetFolder) -> dict:
     """Gather the items into table.npz (and table.csv when the spec asks), draw the maps; returns the table."""
     columns = folder.gather()
-    write_dataset_table(folder.dir / "table.npz", columns)
+    DATASET_TABLE.write(folder.dir / "table.npz", columns)
     if folder.spec.csv:
-        write_dataset_table(folder.dir / "table.csv", columns)
+        DATASET_TABLE.write(folder.dir / "table.csv", columns)
     draw_maps(folder)
     return columns

@@ -54,7 +54,7 @@ def cmd_bench(args) -> int:
         glob.append({"integrator": integrator, "steps_per_s": row["steps_per_s"]})
         print(f"  global {integrator}: {row['step_us_median']:.1f} us/step, {row['steps_per_s']:,.0f} steps/s")
     from ..sim.model import Model
-    from ..batch.sweep import auto_dt
+    from ..batch.sweep_plan import auto_dt
 
     dt = auto_dt(Model(mesh, scene.tissue, "cpu"))  # 1 ms unless the mesh's critical step is shorter
     batch = []

@@ -43,7 +43,7 @@ def cmd_dataset(args, devices: list[str]) -> int:
     points = sum(len(i.plan.vertices) for i in items)
     print(f"dataset: {len(items)} items ({scenes} scene(s) x lesions, baseline {'on' if spec.baseline else 'off'}), "
           f"{points} presses; {len(items) - len(todo)} item(s) already in {folder.dir}")
-    from ..batch.sweep import press_steps
+    from ..batch.sweep_plan import press_steps
 
     total = sum(len(i.plan.vertices) * press_steps(i.plan) for i in todo)
     check_region_steps(total, 1, 1, args.max_region_steps)

@@ -67,7 +67,7 @@ def _devices(text: str) -> list[str]:
 
 
 def cmd_sweep(args) -> int:
-    from ..batch.sweep import SweepTimes
+    from ..batch.sweep_times import SweepTimes
     from ..export.writers import check_output
 
     if args.dataset:  # several scenes and a lesion grid: cli/dataset.py
@@ -81,12 +81,10 @@ def cmd_sweep(args) -> int:
     times, t_start = SweepTimes(), time.perf_counter()
     plan, scene, rings_text, models = _plan(args, devices, times)
     parts, todo, left = _resume(out, plan)
-    from ..batch.sweep import COLUMN_DTYPES
+    from ..batch.sweep_plan import SWEEP_TABLE
 
-    if out.suffix.lower() == ".npz":  # written as the chunks come: after the last press, only its directory
-        from ..export.npz_rows import NpzRows
-
-        parts.rows_file = NpzRows(out, len(plan.vertices), COLUMN_DTYPES)
+    # where the format can, the table is written as the chunks come: after the last press, only what needs the whole
+    parts.rows_file = SWEEP_TABLE.rows(out, len(plan.vertices))
     try:
         return _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo)
     finally:
@@ -96,8 +94,8 @@ def cmd_sweep(args) -> int:
 
 def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo) -> int:
     """cmd_sweep's second half: the chunks, the table, the report."""
-    from ..batch.sweep import press_steps, run_local, run_ray
-    from ..export.writers import write_output
+    from ..batch.sweep import run_local, run_ray
+    from ..batch.sweep_plan import SWEEP_TABLE, press_steps
     from ..progress import Progress
     from ..protocol.palpation import SimulationDiverged
 
@@ -124,7 +122,7 @@ def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_s
         if parts.rows_file is not None:
             parts.rows_file.finish(columns)
         else:
-            write_output(out, columns, "table", "--out")
+            SWEEP_TABLE.write(out, columns)
         parts.remove()
     _report(columns, left, steps, elapsed)
     if args.profile:
@@ -142,7 +140,9 @@ def _plan(args, devices, times):
     """The scene, its mesh and the sweep's plan (points, chunks, rings, step); says what will be pressed.
     Returns (plan, scene, the rings in words, the models on the devices: a Future, or None). The points
     may still be being sampled (plan.sampling), and the models made, while the caller goes on."""
-    from ..batch.sweep import SweepPlan, check_sphere_travel, default_chunk, models_behind, pressable_points, start_sampling
+    from ..batch.sampling import pressable_points, start_sampling
+    from ..batch.sweep import models_behind
+    from ..batch.sweep_plan import SweepPlan, check_sphere_travel, default_chunk
     from ..batch.sweep_auto import rings_summary
     from ..scene.loader import resolve_scene_or_mesh
 
@@ -217,7 +217,7 @@ def _substeps(plan) -> int:
 
 def _resume(out: Path, plan):
     """The chunks already written beside `out` (OUT.parts/): (parts, chunks to do, points left)."""
-    from ..batch.sweep import Parts
+    from ..batch.sweep_store import Parts
 
     parts = Parts(out, plan)
     done = parts.open()

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..checks import check_ring_count
 from ..errors import InputError
+from ..export.tables import TableLayout
 from ..mesh.validate import MAX_COORDINATE_M
 from .args import add_command, add_integrator_arg, add_probe_radius_arg, add_tissue_args, count_arg, get_device
 from .args import number_arg, path_arg, print_notes, quiet_warp, rings_arg, scene_with_tissue_args
@@ -34,6 +35,9 @@ COLUMNS = ("t_s", "probe_x_mm", "probe_y_mm", "probe_z_mm", "force_x_N", "force_
 DEVICE_COLUMNS = ("device_x_mm", "device_y_mm", "device_z_mm")
 """With a coupling: the device's position, after COLUMNS (the probe columns are then the tool's)."""
 INT_COLUMNS = ("region_vertices", "relocations")
+TRACE_TABLE = TableLayout("trace", {c: "int64" if c in INT_COLUMNS else "float64" for c in (*COLUMNS, *DEVICE_COLUMNS)},
+                          optional=DEVICE_COLUMNS)
+"""The trace (export/tables.py): .csv (a header, then rows, floats as repr reads them back) or .npz (one array a column)."""
 DEFAULT_PROBE_RADIUS_MM = 10.0
 """The sphere's radius [mm] where neither --probe-radius-mm nor the scene gives one (a fingertip; larger than the
 built-in stroke's 8 mm press: a sphere pressed deeper than its radius pokes between the vertices)."""
@@ -143,25 +147,6 @@ def check_steps(duration: float, dt: float, what: str) -> None:
         raise InputError(f"{what} lasts {duration:g} s: {n:.3g} steps of {dt * 1e3:g} ms, more than {MAX_PATH_STEPS:,}")
     if n < 1:
         raise InputError(f"{what} lasts {duration:g} s, less than one step of --dt-ms {dt * 1e3:g}")
-
-
-def write_trace(path, columns: dict) -> Path:
-    """The trace to `path` (.csv: a header, then rows, floats as repr reads them back; .npz: one
-    array a column), atomically."""
-    from ..export.output import atomic_write, atomic_write_text
-
-    names = [c for c in (*COLUMNS, *DEVICE_COLUMNS) if c in columns]
-    if Path(path).suffix.lower() == ".npz":
-        arrays = {c: np.asarray(columns[c]) for c in names}
-
-        def write(tmp):
-            with open(tmp, "wb") as f:
-                np.savez(f, **arrays)
-
-        return atomic_write(path, write)
-    text = [str(int(x)) if c in INT_COLUMNS else repr(float(x)) for c in names for x in columns[c]]
-    table = np.array(text, dtype=object).reshape(len(names), -1).T
-    return atomic_write_text(path, "\n".join([",".join(names), *(",".join(row) for row in table)]) + "\n")
 
 
 def cmd_trace(args) -> int:
@@ -322,7 +307,7 @@ def _finish(args, scene, mesh, stroke, columns, src) -> None:
     if args.usd:
         print(f"wrote {args.usd}")
     if args.out:
-        write_trace(args.out, columns)
+        TRACE_TABLE.write(args.out, columns)
         print(f"wrote {args.out} ({len(mag)} rows)")
     if args.png:
         from ..export.trace_png import plot_trace

@@ -1,9 +1,10 @@
 """Output files by suffix: one table from a suffix to what the file holds and the function that writes it.
 
 The command line checks every output path here before any work (``--json``, ``--out``, ``--usd``,
-``--png``) and writes its records and tables through :func:`write_output`. A new format is one
-function and one line of :data:`FORMATS`; a suffix a flag does not take is one InputError that
-lists the ones it does.
+``--png``) and writes its records through :func:`write_output`. A new record format is one
+function and one line of :data:`FORMATS`; the table formats are export/tables.py's TABLE_FORMATS
+(each table written by its layout, TableLayout.write). A suffix a flag does not take is one
+InputError that lists the ones it does.
 """
 
 from __future__ import annotations
@@ -15,16 +16,11 @@ from typing import Callable
 
 from ..errors import InputError
 from .output import check_writable, write_json
+from .tables import TABLE_FORMATS, suffix_error
 
 KINDS = {"record": "JSON", "table": "table", "stage": "USD", "image": "PNG"}
 """What an output holds -> the word its messages use: a JSON record (--json), a table of columns
 (sweep --out), a USD stage (--usd), a picture (--png)."""
-
-
-def _write_table(path, columns: dict) -> Path:
-    from ..batch.sweep import write_table
-
-    return write_table(path, columns)
 
 
 @dataclass(frozen=True)
@@ -38,16 +34,16 @@ class OutputFormat:
     what: str
     """The format in a few words."""
     write: Callable[[object, object], Path] | None
-    """write(path, data) -> path, atomic; None for a stage or a picture, which its producer writes
-    (export.usd.UsdRecorder frame by frame, export.preview.render_png, export.sweep_png.plot_sweep)."""
+    """write(path, data) -> path, atomic; None for a table, which its layout writes (export.tables.TableLayout.write),
+    and for a stage or a picture, which its producer writes (export.usd.UsdRecorder frame by frame,
+    export.preview.render_png, export.sweep_png.plot_sweep)."""
 
 
 FORMATS: dict[str, OutputFormat] = {
     f.suffix: f
     for f in (
         OutputFormat(".json", "record", "JSON, indented", write_json),
-        OutputFormat(".csv", "table", "comma-separated columns, a header line first", _write_table),
-        OutputFormat(".npz", "table", "a NumPy archive, one array a column", _write_table),
+        *(OutputFormat(t.suffix, "table", t.what, None) for t in TABLE_FORMATS.values()),
         OutputFormat(".usda", "stage", "a USD stage as text", None),
         OutputFormat(".usdc", "stage", "a USD stage as a binary crate", None),
         OutputFormat(".usd", "stage", "a USD stage (crate)", None),
@@ -67,13 +63,10 @@ def suffixes(kind: str) -> tuple[str, ...]:
 def output_format(path, kind: str, flag: str | None = None) -> OutputFormat:
     """The format of an output of `kind` at `path`, from its suffix; InputError for a suffix that
     kind does not take (the message starts with `flag` where one is given)."""
-    p = Path(path)
     allowed = suffixes(kind)
-    suffix = p.suffix.lower()
+    suffix = Path(path).suffix.lower()
     if suffix not in allowed:
-        where = f"{flag} {p}" if flag else str(p)
-        got = repr(p.suffix) if p.suffix else "(none)"
-        raise InputError(f"{where}: unknown {KINDS[kind]} suffix {got} (allowed: {', '.join(allowed)})")
+        raise suffix_error(path, KINDS[kind], allowed, flag)
     return FORMATS[suffix]
 
 
@@ -84,10 +77,10 @@ def check_output(path, kind: str, flag: str | None = None) -> Path:
 
 
 def write_output(path, data, kind: str, flag: str | None = None) -> Path:
-    """Write `data` (a record: a dict; a table: columns by name) to `path` in its suffix's format, atomically."""
+    """Write `data` (a record: a dict) to `path` in its suffix's format, atomically."""
     fmt = output_format(path, kind, flag)
     if fmt.write is None:
-        raise TypeError(f"{fmt.suffix} ({fmt.what}) is written by its producer, not by write_output")
+        raise TypeError(f"{fmt.suffix} ({fmt.what}) is written by its producer (a table: by its layout), not by write_output")
     return fmt.write(path, data)
 
 

@@ -1,0 +1,239 @@
+"""A sweep's chunks pressed on one device: its batches (RingBatches, one per ring count, each distinct
+contact's region built once a sweep and each chunk's gathered from that table on the device), the
+chunk in flight on a stream (Lane), and the loop that keeps two in flight (run_device)."""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import Future
+from contextlib import contextmanager
+
+import numpy as np
+
+from .sweep_plan import SweepPlan
+from .sweep_times import SweepTimes
+
+
+def checked_columns(columns: dict) -> dict:
+    """`columns`, or SimulationDiverged where a number is not finite: a sweep never writes one."""
+    from ..protocol.palpation import SimulationDiverged
+
+    for name, values in columns.items():
+        bad = np.flatnonzero(~np.isfinite(values))
+        if len(bad):
+            raise SimulationDiverged(f"the sweep's {name} is not finite at vertex {int(columns['vertex'][bad[0]])} "
+                                     f"({len(bad)} of {len(values)} points): nothing is written")
+    return columns
+
+
+class RingBatches:
+    """A plan's BatchPalpations on one device, one per ring count (made when first asked for).
+
+    critical_dt_bound: the whole mesh's critical step (BatchPalpation.critical_dt_bound), or None, or a
+    Future of it (concurrent.futures), waited for after the region tables are built.
+    Where the plan presses a vertex more than once with a ring count, that count's batch gathers each
+    chunk's regions from a table of its distinct contacts built once (BatchPalpation.cache_regions;
+    the same bits): `tables` (ring count -> RegionTable), shared by the RingBatches of one model."""
+
+    def __init__(self, plan: SweepPlan, model, critical_dt_bound=None, tables: dict | None = None):
+        self.plan, self.model, self.device = plan, model, model.device
+        self.critical_dt_bound = critical_dt_bound
+        self.tables = {} if tables is None else tables
+        self._batches = {}
+
+    def get(self, rings: int):
+        from .batch_palpation import BatchPalpation
+
+        if rings not in self._batches:
+            p = self.plan
+            batch = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator,
+                                   probe_radius=p.probe_radius)
+            if rings in self.tables:
+                batch.region_table = self.tables[rings]
+            elif (contacts := p.contacts(rings)) is not None:  # contacts pressed again: each region built once
+                self.tables[rings] = batch.cache_regions(contacts, p.depth)
+            if isinstance(self.critical_dt_bound, Future):
+                self.critical_dt_bound = self.critical_dt_bound.result()
+            batch.critical_dt_bound = self.critical_dt_bound
+            self._batches[rings] = batch
+        return self._batches[rings]
+
+
+def press_chunk(batches: RingBatches, plan: SweepPlan, begin: int, end: int, on_launch=None):
+    """Start the presses of points begin..end (a batch per ring count among them); returns a finisher."""
+    plan.wait(end)
+    rings = plan.point_rings[begin:end]
+    per_launch = 200 if batches.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
+    started = []
+    for k in np.unique(rings):
+        idx = np.flatnonzero(rings == k)
+        batch = batches.get(int(k))
+        batch.touch(plan.vertices[begin:end][idx], plan.depth)
+        batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch, on_launch=frames(on_launch, batch, len(idx)))
+        started.append((idx, batch))
+    return lambda: checked_columns(plan.columns(begin, end, [(idx, batch.finish_press()) for idx, batch in started]))
+
+
+def frames(on_launch, batch, n: int):
+    """The progress counts frames: a launch of `steps` substeps of `n` presses advances it by n x steps / substeps."""
+    return None if on_launch is None else (lambda steps: on_launch(steps * n // batch.substeps))
+
+
+class Lane:
+    """One chunk in flight on a device: its batches (one per ring count), its CUDA stream and its
+    read-back buffers in pinned host memory.
+
+    A device's thread keeps two lanes: it builds, plans and launches chunk i + 1 on one stream while
+    chunk i presses on the other, then reads chunk i back on its own stream (never the null stream,
+    which would wait for both). On the CPU, where launches are synchronous, the same steps in order.
+    """
+
+    def __init__(self, batches: RingBatches, times: SweepTimes):
+        import warp as wp
+
+        self.batches, self.times, self.device = batches, times, batches.device
+        self.stream = wp.Stream(self.device) if self.device.is_cuda else None
+        with times.phase("region build"):  # made now: their set-up (and region tables) read on the null stream
+            for k in batches.plan.ring_counts:
+                batches.get(k)
+        times.mark("region tables")
+        self.started = []
+        """(indices in the chunk, batch, pinned (peak, hold, q0), events) of the chunk in flight."""
+        self._pinned = {}
+
+    @contextmanager
+    def scope(self):
+        """This lane's stream as its device's current one (wp.ScopedStream would also set the process's
+        default device, which the threads of several GPUs would race for)."""
+        import warp as wp
+
+        if self.stream is None:
+            yield
+            return
+        saved = wp.get_stream(self.device)
+        wp.set_stream(self.stream, self.device, sync=True)  # after what the device's stream holds (the model)
+        try:
+            yield
+        finally:
+            wp.set_stream(saved, self.device)
+
+    def start(self, plan: SweepPlan, i: int, on_launch=None, origin=None) -> None:
+        """Build, plan and launch chunk `i`, and queue its read-back (asynchronous on CUDA)."""
+        begin, end = self.chunk = plan.chunks[i]
+        with self.times.phase("waiting for the points"):
+            plan.wait(end)
+        self.times.mark("first chunk's points")
+        rings = plan.point_rings[begin:end]
+        per_launch = 200 if self.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
+        t0, self.started = time.perf_counter(), []
+        with self.scope():
+            for k in np.unique(rings):
+                idx = np.flatnonzero(rings == k)
+                batch = self.batches.get(int(k))
+                with self.times.phase("region build"):
+                    batch.build(plan.vertices[begin:end][idx], plan.depth)
+                self.times.mark("first chunk built")
+                with self.times.phase("planning"):
+                    batch.plan()
+                self.times.mark("first chunk planned")
+                with self.times.phase("launch"):
+                    events = self._record()
+                    batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch,
+                                      on_launch=frames(on_launch, batch, len(idx)))
+                    events += self._record()
+                    self.times.mark("first press launched")
+                    self.started.append((idx, batch, self._read_back(batch, int(k)), events))
+        pressed = 0.0
+        if self.stream is None:  # the CPU, synchronous: the launch was the press
+            pressed = sum(e[1] - e[0] for *_, e in self.started)
+        self.host_s = time.perf_counter() - t0 - pressed
+
+    def clock_origin(self):
+        """(an event on this stream, the host's time.perf_counter when it ran): the zero of the press
+        intervals on the device's clock, and where it falls on the host's (None on the CPU)."""
+        import warp as wp
+
+        if self.stream is None:
+            return None
+        event = self._record()[0]
+        wp.synchronize_event(event)
+        return event, time.perf_counter()
+
+    def _record(self):
+        import warp as wp
+
+        if self.stream is None:
+            return [time.perf_counter()]
+        event = wp.Event(self.device, enable_timing=True)
+        self.stream.record_event(event)
+        return [event]
+
+    def _read_back(self, batch, rings: int):
+        # the results copied into pinned host buffers on this stream, after the press: no wait here
+        import warp as wp
+
+        from ..kernels.batch_press import contact_positions
+
+        if self.stream is None:
+            return None
+        n = batch.batch_size
+        buffers = self._pinned.get(rings)
+        if buffers is None or len(buffers[0]) < n:
+            buffers = self._pinned[rings] = [wp.empty(n, dtype=wp.vec3, device="cpu", pinned=True) for _ in range(3)]
+        out = [b[:n] for b in buffers]
+        for dst, src in zip(out, (batch.peak_reaction, batch.hold_reaction, contact_positions(batch))):
+            wp.copy(dst, src, stream=self.stream)
+        return out
+
+    def finish(self, plan: SweepPlan, origin=None) -> dict:
+        """Wait for the chunk started last and return its checked columns."""
+        import warp as wp
+
+        t0 = time.perf_counter()
+        if self.stream is not None:
+            with self.times.phase("waiting for the device"):
+                wp.synchronize_stream(self.stream)
+            at = lambda event: origin[1] + 1e-3 * wp.get_event_elapsed_time(origin[0], event)
+            self.busy = [(at(e[0]), at(e[1])) for *_, e in self.started]
+        else:
+            self.busy = [(e[0], e[1]) for *_, e in self.started]
+        results = []
+        with self.times.phase("read-back"):
+            for idx, batch, pinned, _ in self.started:
+                result = batch.finish_press() if pinned is None else batch.result_from(*(b.numpy() for b in pinned))
+                results.append((idx, result))
+            columns = plan.columns(*self.chunk, results)
+        with self.times.phase("checks"):
+            columns = checked_columns(columns)
+        self.host_s += time.perf_counter() - t0
+        self.times.host_per_chunk.append(self.host_s)
+        return columns
+
+
+def run_device(plan: SweepPlan, batches: list, take, put, times: SweepTimes, on_launch=None) -> None:
+    """Press the chunks that `take()` hands out (None: no more) on one device, a lane (Lane) for each
+    of `batches`: with two, chunk i + 1 is launched before chunk i is read; put(i, columns) each when done."""
+    lanes = [Lane(b, times) for b in batches]
+    origin = lanes[0].clock_origin()
+    busy, flying, n = [], None, 0
+
+    def finish(chunk):
+        j, lane = chunk
+        put(j, lane.finish(plan, origin))
+        busy.extend(lane.busy)
+
+    while True:
+        i = take()
+        lane = lanes[n % len(lanes)]
+        if flying is not None and flying[1] is lane:  # a single lane: its chunk is read first
+            finish(flying)
+            flying = None
+        if i is not None:
+            lane.start(plan, i, on_launch, origin)
+            n += 1
+        if flying is not None:
+            finish(flying)
+        if i is None:
+            break
+        flying = (i, lane)
+    times.add_press(busy)

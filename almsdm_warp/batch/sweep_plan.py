@@ -1,0 +1,191 @@
+"""A sweep's plan: everything that decides its numbers (SweepPlan, whose key names the parts a
+resume may reuse), its table's columns, its chunks and step, and the checks made before any work."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..export.tables import TableLayout
+from .sampling import Sampling
+
+COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "stiffness_N_per_mm", "recovery_error_mm", "rings")
+"""The table's columns; `rings`: the ring count of each point's region (the same for all but at --rings auto)."""
+SWEEP_TABLE = TableLayout("sweep table", {c: "int64" if c in ("vertex", "rings") else "float64" for c in COLUMNS},
+                          optional=("rings",))
+"""The sweep's table and its parts' (export/tables.py: .csv or .npz); a table written before the rings column has none."""
+
+
+def default_chunk(points: int, devices: list[str]) -> int:
+    """Points a chunk when the command line gives none: 64 on the CPU (the progress moves, a resume
+    loses little); on GPUs at least four chunks a device where the points allow (so the next chunk is
+    built while one presses, and the devices share the work), 16384..65536 points each (a launch
+    that fills an H200, a block a palpation, 40 times over; smaller chunks shorten what is not
+    overlapped: the first chunk's build before the first press, the last one's read-back and
+    writing after the last)."""
+    if all(d == "cpu" for d in devices):
+        return 64
+    per_device = -(-points // len(devices))
+    return max(1, min(per_device, max(16384, min(-(-per_device // 4), 65536))))
+
+
+@dataclass
+class SweepPlan:
+    """Everything that decides a sweep's numbers (its key names the parts a resume may reuse)."""
+
+    mesh: object
+    tissue: object
+    edge_scale: np.ndarray | None
+    anchor_scale: np.ndarray | None
+    rings: "int | np.ndarray"
+    """Rings of every point's region, or one ring count per point (--rings auto: sweep_auto.size_regions)."""
+    dt: float
+    depth: float
+    ramp: float
+    hold: float
+    settle: float
+    points: np.ndarray
+    vertices: np.ndarray
+    chunk: int
+    integrator: str = "explicit"
+    tol: float | None = None
+    """--rings auto: the tolerance [m] the ring counts were sized to (for the record), else None."""
+    probe_radius: float = 0.0
+    """The spherical probe's radius [m] (BatchPalpation's probe_radius); 0: the paper's probe."""
+    fixed_below: float | None = None
+    """Support plane [m] (Model's fixed_below), or None."""
+    sampling: "Sampling | None" = None
+    """Where `points` and `vertices` are still being sampled (Sampling, filled block by block), or None;
+    not part of the plan's numbers (the points are)."""
+
+    def wait(self, end: int | None = None) -> None:
+        """Return once the points up to `end` (all: None) are there (see `sampling`)."""
+        if self.sampling is not None:
+            self.sampling.wait(end)
+
+    def __getstate__(self) -> dict:
+        # pickled (Ray) with every point sampled and without the sampling's threads
+        self.wait()
+        return {**self.__dict__, "sampling": None}
+
+    def contacts(self, rings: int) -> np.ndarray | None:
+        """The contacts whose regions of `rings` rings a sweep builds once and gathers (a RegionTable's,
+        sorted), or None where no contact is pressed twice. Where the points are sampled behind the
+        sweep (`sampling`): every surface vertex (there are more points than those, each snapped to
+        one), whether or not the sampling is done, so that every device builds the same table."""
+        if self.sampling is not None:
+            return np.sort(self.mesh.surface_vertices).astype(np.int64)
+        times = np.bincount(self.vertices[self.point_rings == rings], minlength=self.mesh.vertex_count)
+        return np.flatnonzero(times) if times.max(initial=0) > 1 else None
+
+    @property
+    def point_rings(self) -> np.ndarray:
+        """Ring count of each point's region, int64 [points]."""
+        if isinstance(self.rings, (int, np.integer)):
+            return np.full(len(self.vertices), int(self.rings), dtype=np.int64)
+        return np.asarray(self.rings, dtype=np.int64)
+
+    @property
+    def ring_counts(self) -> list[int]:
+        """The distinct ring counts of the plan's regions, ascending."""
+        if isinstance(self.rings, (int, np.integer)):
+            return [int(self.rings)]
+        return [int(k) for k in np.unique(self.rings)]
+
+    def key(self) -> str:
+        self.wait()
+        h = hashlib.sha256()
+        scalars = ["table v2 (rings column)", self.mesh.path, self.mesh.vertex_count, self.dt, self.depth]
+        scalars += [self.ramp, self.hold, self.settle, self.chunk, self.integrator, self.tol]
+        if self.probe_radius or self.fixed_below is not None:
+            scalars += [self.probe_radius, self.fixed_below]
+        h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
+        for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings):
+            if a is not None:
+                h.update(np.ascontiguousarray(a).tobytes())
+        return h.hexdigest()[:16]
+
+    @property
+    def chunks(self) -> list[tuple[int, int]]:
+        """(begin, end) of each chunk of points (made once for the plan's point count and chunk size:
+        a CPU sweep of 1e6 points has 15,625 chunks, each looked up here)."""
+        n = len(self.vertices)
+        key = (n, self.chunk)
+        if self.__dict__.get("_chunks_key") != key:
+            self.__dict__["_chunks"] = [(i, min(i + self.chunk, n)) for i in range(0, n, self.chunk)]
+            self.__dict__["_chunks_key"] = key
+        return self.__dict__["_chunks"]
+
+    def critical_dt(self) -> float:
+        """The whole mesh's critical step [s] (Model.critical_dt at rest, a bound of every region's),
+        computed once a plan: the command line's cost check and the sweep's substeps share it."""
+        if "_critical_dt" not in self.__dict__:
+            self.__dict__["_critical_dt"] = self.model("cpu").critical_dt()
+        return self.__dict__["_critical_dt"]
+
+    def model(self, device):
+        from ..sim.model import Model
+        from ..warp_init import devices_started
+
+        if str(device) != "cpu":
+            devices_started()  # a context the command line started (warp_init.start_devices)
+
+        return Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale,
+                     fixed_below=self.fixed_below)
+
+    def columns(self, begin: int, end: int, results) -> dict:
+        """The output columns of points begin..end from [(indices in the chunk, BatchResult)], one per ring count."""
+        p = self.points[begin:end] * 1e3
+        n = end - begin
+        out = {"x_mm": p[:, 0], "y_mm": p[:, 1], "z_mm": p[:, 2], "vertex": np.empty(n, dtype=np.int64),
+               "rings": self.point_rings[begin:end].copy()}
+        for c in ("peak_force_N", "stiffness_N_per_mm", "recovery_error_mm"):
+            out[c] = np.empty(n, dtype=np.float64)
+        for idx, result in results:
+            out["vertex"][idx] = result.vertex
+            out["peak_force_N"][idx] = result.peak_force
+            out["stiffness_N_per_mm"][idx] = result.stiffness_N_per_mm
+            out["recovery_error_mm"][idx] = result.recovery_error * 1e3
+        return out
+
+
+def sweep_critical_dt(plan: SweepPlan) -> float | None:
+    """The whole mesh's critical step [s] (a bound of every region's, BatchPalpation.critical_dt_bound)
+    for an explicit plan, computed once a sweep; None for an implicit one."""
+    return plan.critical_dt() if plan.integrator == "explicit" else None
+
+
+def press_steps(plan: SweepPlan) -> int:
+    """Steps of one press of the plan (ramp, hold and settle), as BatchPalpation counts them."""
+    from ..protocol.schedule import PressSchedule
+
+    return PressSchedule.from_times(plan.dt, plan.ramp, plan.hold, plan.settle).total
+
+
+def auto_dt(model, limit: float = 1e-3, safety: float = 0.9) -> float:
+    """The step for a sweep: `limit` [s], or less where the model's critical step asks (a stiff lesion).
+
+    Below the critical step of semi-implicit Euler over the whole mesh (Model.critical_dt, which
+    bounds every region's), the step is `safety` x that, rounded down to a multiple of 0.05 ms.
+    """
+    crit = model.critical_dt()
+    if not math.isfinite(crit) or crit >= limit:
+        return limit
+    step = math.floor(safety * crit / 5e-5) * 5e-5
+    return step if step > 0 else safety * crit
+
+
+def check_sphere_travel(radius: float, depth: float, dt: float, ramp: float) -> None:
+    """InputError where a sphere of `radius` [m] would move its radius or more in one frame of the
+    press's ramp (it would pass through vertices), before any work; BatchPalpation checks it again."""
+    from ..protocol.schedule import PressSchedule
+
+    travel = depth / PressSchedule.from_times(dt, ramp, 0.0, 0.0).ramp_n
+    if radius > 0 and travel >= radius:
+        raise InputError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its "
+                         f"radius {radius * 1e3:g} mm: it would pass through vertices; ramp longer or use a smaller --dt-ms")

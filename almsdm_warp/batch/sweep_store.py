@@ -1,0 +1,151 @@
+"""A sweep's chunks on disk beside its output (OUT.parts/): each chunk's table written as it is done,
+atomically, with its checksum in plan.json, so that an interrupted sweep resumes from what it wrote."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import threading
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..export.output import atomic_write
+from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan
+
+
+def file_sha256(path) -> str:
+    """The SHA-256 of a file's bytes, in hex."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+class Parts:
+    """The chunks a sweep has written so far, beside its output: OUT.parts/{plan.json, chunk_*.npz}.
+
+    plan.json holds the plan's key and the SHA-256 of every chunk written (rewritten, atomically,
+    after each chunk). A chunk counts as done only when its bytes match that checksum: a chunk
+    truncated or changed on disk, or one written but not yet in plan.json (an interrupt between
+    the two), is removed and pressed again on resume (:attr:`damaged` lists them).
+    """
+
+    def __init__(self, out: Path, plan: SweepPlan):
+        self.dir = Path(str(out) + ".parts")
+        self.plan = plan
+        self._key = None
+        self._manifest_due = False  # a new folder's plan.json: written with its first chunk
+        self.sums: dict[int, str] = {}
+        """Chunk index -> SHA-256 of its file, as written."""
+        self.damaged: list[int] = []
+        """Chunks found on disk by open() that did not match their checksum (removed, to be pressed again)."""
+        self.written: dict[int, dict] = {}
+        """Chunk index -> the columns this process wrote to its file (gather() takes them as they are)."""
+        self.table: dict | None = None
+        """The output's columns, every point, filled in as write() writes each chunk (on the writer's
+        thread, while the next chunks press): gather() returns it when this process wrote every chunk."""
+        self.rows_file = None
+        """An NpzRows of the output (export/npz_rows.py) that write() also writes each chunk's rows to,
+        or None."""
+        self._lock = threading.Lock()  # chunks finish on several threads (several GPUs)
+
+    @property
+    def key(self) -> str:
+        """The plan's key (SweepPlan.key: it hashes every point, so it waits for their sampling)."""
+        if self._key is None:
+            self._key = self.plan.key()
+        return self._key
+
+    @property
+    def manifest(self) -> Path:
+        return self.dir / "plan.json"
+
+    def chunk_path(self, i: int) -> Path:
+        return self.dir / f"chunk_{i:06d}.npz"
+
+    def open(self) -> list[int]:
+        """Create or reuse the parts folder; returns the chunk indices already done (checksums verified).
+
+        A new folder's plan.json is written with its first chunk (on the writer's thread: the key waits
+        for the points), so a folder with neither plan.json nor a chunk is one a run left before its
+        first chunk: taken as new."""
+        if self.dir.exists() and (self.manifest.exists() or any(self.dir.glob("chunk_*.npz"))):
+            try:
+                data = json.loads(self.manifest.read_text())
+                found = data["key"]
+                self.sums = {int(i): str(h) for i, h in data.get("chunks", {}).items()}
+            except (OSError, ValueError, KeyError, TypeError, AttributeError):
+                found = None
+            if found != self.key:
+                raise InputError(
+                    f"{self.dir} holds parts of a different sweep (other mesh, points or parameters): "
+                    f"delete it, or give another --out"
+                )
+        else:
+            self.dir.mkdir(exist_ok=True)
+            self._manifest_due = True
+            return []
+        done, self.damaged = [], []
+        present = {p.name for p in self.dir.iterdir()}  # one listing, not a look-up a chunk
+        for i in range(len(self.plan.chunks)):
+            path = self.chunk_path(i)
+            if path.name not in present:
+                continue
+            if self.sums.get(i) == file_sha256(path):
+                done.append(i)
+            else:
+                self.damaged.append(i)
+                path.unlink()
+                self.sums.pop(i, None)
+        return done
+
+    def _write_manifest(self) -> None:
+        data = {"key": self.key, "points": len(self.plan.vertices), "chunks": {str(i): h for i, h in sorted(self.sums.items())}}
+        atomic_write(self.manifest, lambda tmp: Path(tmp).write_text(json.dumps(data)))
+
+    def write(self, i: int, columns: dict) -> None:
+        """Write chunk `i` atomically, then its checksum into plan.json."""
+        with self._lock:
+            if self._manifest_due:  # before any chunk: a folder with a chunk always has its plan.json
+                self._write_manifest()
+                self._manifest_due = False
+        digest = file_sha256(SWEEP_TABLE.write(self.chunk_path(i), columns))
+        with self._lock:
+            self.sums[i] = digest
+            self._write_manifest()
+            self.written[i] = columns
+            if self.table is None:
+                n = len(self.plan.vertices)
+                self.table = {c: np.empty(n, dtype=np.asarray(columns[c]).dtype) for c in COLUMNS}
+            begin, end = self.plan.chunks[i]
+            for c in COLUMNS:
+                self.table[c][begin:end] = columns[c]
+        if self.rows_file is not None:  # the output's rows too, in place (one writer thread: no lock)
+            self.rows_file.rows(begin, columns)
+
+    def gather(self) -> dict:
+        """Every chunk's columns, in point order: those this process wrote from memory, the others read
+        back; InputError for a chunk found damaged."""
+        if len(self.written) == len(self.plan.chunks):
+            return self.table
+        parts = []
+        for i in range(len(self.plan.chunks)):
+            if i in self.written:
+                parts.append(self.written[i])
+                continue
+            path = self.chunk_path(i)
+            try:
+                if self.sums.get(i) != file_sha256(path):
+                    raise ValueError("its checksum does not match plan.json")
+                parts.append(SWEEP_TABLE.read(path))
+            except (OSError, ValueError, KeyError, zipfile.BadZipFile, InputError) as exc:
+                raise InputError(f"{path}: damaged ({exc}); run the same command again to press that chunk again") from exc
+        return {c: np.concatenate([p[c] for p in parts]) for c in COLUMNS}
+
+    def remove(self) -> None:
+        shutil.rmtree(self.dir, ignore_errors=True)

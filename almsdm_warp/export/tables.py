@@ -1,0 +1,150 @@
+"""Tables of columns by suffix: every table the package writes or reads (a sweep's, its parts', a
+dataset's, a trace) goes through :data:`TABLE_FORMATS`.
+
+What a table holds is data, a :class:`TableLayout` (its columns in order, each one's dtype, the
+columns an older or a smaller table may lack, and entries a format may keep beside the columns,
+such as a dataset's "schema"); how a file holds it is a :class:`TableFormat`. A new format is a
+writer and a reader (and, where the format can take rows as they come, a row writer such as
+export/npz_rows.py's NpzRows) and one line of TABLE_FORMATS; every table, and the suffixes the
+command line takes for one (export/writers.py), follow. Writes are atomic (export/output.py).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..errors import InputError
+from .npz_rows import NpzRows
+from .output import atomic_write
+
+CSV_BLOCK = 1 << 16
+"""Rows formatted at once in a CSV (each column a block at a time)."""
+
+
+@dataclass(frozen=True)
+class TableLayout:
+    """What a table holds, whatever the file's format."""
+
+    name: str
+    """The table in a few words, for messages ("sweep table": "PATH: not a sweep table ...")."""
+    dtypes: dict
+    """Column -> "int64", "float64" or "str", in the table's order."""
+    optional: tuple = ()
+    """Columns a table may lack (written where the columns given hold them; a reader takes a table without them)."""
+    meta: dict = field(default_factory=dict)
+    """Entry -> text, kept beside the columns by a format that can (an .npz: a 0-d string array each, first)."""
+
+    def columns(self, present) -> list[str]:
+        """The columns of a table that holds `present`: every required one, the optional ones present, in order."""
+        return [c for c in self.dtypes if c in present or c not in self.optional]
+
+    def cast(self, columns: dict) -> dict:
+        """`columns` as arrays of their dtypes, in order (a required one missing: KeyError)."""
+        return {c: np.asarray(columns[c]).astype(_dtype(self.dtypes[c]), copy=False) for c in self.columns(columns)}
+
+    def write(self, path, columns: dict) -> Path:
+        """Write `columns` to `path` in its suffix's format, atomically."""
+        fmt, columns = table_format(path), self.cast(columns)
+        atomic_write(path, lambda tmp: fmt.write(tmp, columns, self))
+        return Path(path)
+
+    def read(self, path) -> dict:
+        """The columns of the table at `path` (by its suffix); InputError for a file that is not one."""
+        return table_format(path).read(Path(path), self)
+
+    def rows(self, path, n: int):
+        """A writer of `n` rows to `path` as they come (rows(begin, columns), finish(columns), discard()),
+        or None where the format writes a table only whole (or the layout has entries beside the columns)."""
+        fmt = table_format(path)
+        if fmt.rows is None or self.meta:
+            return None
+        return fmt.rows(path, n, {c: _dtype(d) for c, d in self.dtypes.items()})
+
+
+def _dtype(name: str):
+    return str if name == "str" else np.dtype(name)
+
+
+# -- CSV: a header line, then a row a line; floats as repr writes them (the shortest text that reads back the same)
+def write_csv(tmp, columns: dict, layout: TableLayout) -> None:
+    names = list(columns)
+    n = len(columns[names[0]]) if names else 0
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(",".join(names) + "\n")
+        for b in range(0, n, CSV_BLOCK):
+            text = [map(repr if col.dtype.kind == "f" else str, col[b : b + CSV_BLOCK].tolist()) for col in columns.values()]
+            f.write("".join(line + "\n" for line in map(",".join, zip(*text))))
+
+
+def read_csv(path: Path, layout: TableLayout) -> dict:
+    with open(path, encoding="utf-8") as f:
+        header = f.readline().strip().split(",")
+    if header != layout.columns(header):
+        raise InputError(f"{path}: not a {layout.name} (header {header})")
+    parsed = {"str": object, "int64": np.int64, "float64": np.float64}  # str: read as Python strings, then sized
+    dtype = np.dtype([(c, parsed[layout.dtypes[c]]) for c in header])
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "loadtxt: input contained no data")  # a header alone: no rows
+        data = np.loadtxt(path, delimiter=",", skiprows=1, dtype=dtype, comments=None, ndmin=1, encoding="utf-8")
+    return {c: np.array(data[c].tolist(), dtype=str) if layout.dtypes[c] == "str" else np.array(data[c]) for c in header}
+
+
+# -- NPZ: a NumPy archive, one array a column (np.load reads it without pickle)
+def write_npz(tmp, columns: dict, layout: TableLayout) -> None:
+    with open(tmp, "wb") as f:
+        np.savez(f, **{k: np.array(text) for k, text in layout.meta.items()}, **columns)
+
+
+def read_npz(path: Path, layout: TableLayout) -> dict:
+    with np.load(path, allow_pickle=False) as z:
+        missing = [c for c in layout.columns(z.files) if c not in z.files]
+        if missing:
+            raise InputError(f"{path}: not a {layout.name} (no column {missing[0]!r})")
+        return {c: z[c] for c in layout.columns(z.files)}
+
+
+@dataclass(frozen=True)
+class TableFormat:
+    """One file format a table may be written in."""
+
+    suffix: str
+    """The file name's suffix, lower case, with its dot."""
+    what: str
+    """The format in a few words."""
+    write: Callable[[object, dict, TableLayout], None]
+    """write(temporary path, columns cast to the layout's dtypes, layout): the whole file there."""
+    read: Callable[[Path, TableLayout], dict]
+    """read(path, layout) -> columns; InputError for a file that does not hold the layout's table."""
+    rows: Callable | None = None
+    """rows(path, n, dtypes) -> a writer of rows as they come (export/npz_rows.py's NpzRows), or None."""
+
+
+TABLE_FORMATS: dict[str, TableFormat] = {
+    f.suffix: f
+    for f in (
+        TableFormat(".csv", "comma-separated columns, a header line first", write_csv, read_csv),
+        TableFormat(".npz", "a NumPy archive, one array a column", write_npz, read_npz, NpzRows),
+    )
+}
+"""Every table format, by suffix."""
+
+
+def suffix_error(path, what: str, allowed, flag: str | None = None) -> InputError:
+    """The InputError for `path` whose suffix is not one of `allowed` for a `what` output."""
+    p = Path(path)
+    where = f"{flag} {p}" if flag else str(p)
+    got = repr(p.suffix) if p.suffix else "(none)"
+    return InputError(f"{where}: unknown {what} suffix {got} (allowed: {', '.join(allowed)})")
+
+
+def table_format(path) -> TableFormat:
+    """The table format of `path`, from its suffix; InputError for one no format has."""
+    fmt = TABLE_FORMATS.get(Path(path).suffix.lower())
+    if fmt is None:
+        raise suffix_error(path, "table", TABLE_FORMATS)
+    return fmt
