@@ -3,25 +3,9 @@
 SI units inside (m, kg, s, N); millimetres where people read (command line, JSON keys ending _mm).
 """
 
-import os as _os
-
-# In a source checkout that is not installed, almsdm_warp.kernels lives in ../kernels; an installed
-# package has it inside (pyproject maps kernels/ to almsdm_warp.kernels). Map only that package.
-def _map_source_kernels():
-    import importlib.util
-    import sys
-
-    here = _os.path.dirname(_os.path.abspath(__file__))
-    src = _os.path.join(_os.path.dirname(here), "kernels", "__init__.py")
-    if _os.path.isdir(_os.path.join(here, "kernels")) or not _os.path.isfile(src):
-        return
-    spec = importlib.util.spec_from_file_location(__name__ + ".kernels", src)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-
-
-_map_source_kernels()
+# almsdm_warp.kernels is the top-level kernels/ folder: installed there by pyproject's package-dir,
+# and in a source checkout reached through the link almsdm_warp/kernels -> ../kernels, so that
+# Python, editors and import tools all see the kernels' modules where the host imports them.
 
 # The public names, each from the module that defines it; imported when first used (PEP 562), so
 # that `import almsdm_warp` (and the command line's start, which must answer Ctrl-C at once) does

@@ -90,7 +90,7 @@ def worker(args) -> None:
     if args.threads and (args.worker_scene or args.probe_radius_mm):
         options["threads"] = args.threads
     if args.max_registers and (args.worker_scene or args.probe_radius_mm):
-        import almsdm_warp.kernels.batch_press_fast as bkf
+        import almsdm_warp.kernels.explicit.batch_fast as bkf
 
         bkf.MAX_REGISTERS = bkf.SPHERE_MAX_REGISTERS = args.max_registers  # read when the kernel is made: this process's only
     surface = np.random.default_rng(0).permutation(surface)

@@ -30,7 +30,7 @@ def main(argv=None):
     from adaptive_accuracy import load
 
     from almsdm_warp.protocol.adaptive import fixed_ring_estimate
-    from almsdm_warp.kernels.ring_motion import eval_region_motion
+    from almsdm_warp.kernels.region.ring_motion import eval_region_motion
     from almsdm_warp.sim.model import PROBE_DISPLACEMENT
     from almsdm_warp.protocol.palpation import Palpation
     from almsdm_warp.region.region import ring_distances

@@ -17,7 +17,7 @@ import numpy as np
 import warp as wp
 
 from almsdm_warp.evaluation.adaptive_accuracy import hold_press
-from almsdm_warp.kernels.ring_motion import eval_region_motion
+from almsdm_warp.kernels.region.ring_motion import eval_region_motion
 from almsdm_warp.protocol.palpation import Palpation
 from almsdm_warp.scene.loader import resolve_scene_or_mesh
 

@@ -51,7 +51,7 @@ def main(argv=None) -> int:
 
     wp.config.quiet = True
     wp.init()
-    from almsdm_warp.kernels.batch_press_fast import MAX_REGISTERS, press_kernel_fast
+    from almsdm_warp.kernels.explicit.batch_fast import MAX_REGISTERS, press_kernel_fast
 
     print("| plan | threads | springs a thread | register cap | ptxas |\n|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:

@@ -22,7 +22,7 @@ from almsdm_warp.tissue.material import Material
 from conftest import SCENES
 from almsdm_warp.evaluation.adaptive_accuracy import auto_point, fixed_point, global_reference
 from almsdm_warp.cli.main import main
-from almsdm_warp.kernels.ring_motion import eval_region_motion
+from almsdm_warp.kernels.region.ring_motion import eval_region_motion
 from almsdm_warp.sim.model import PROBE_DISPLACEMENT
 from almsdm_warp.protocol.palpation import Palpation
 

@@ -96,7 +96,7 @@ def test_pressed_supported_ball_settles_at_the_linear_static_solution(ball, inte
     force, q = hold(pal, vertex, depth, 3000)
     model = pal.model
     x = ball.vertices
-    K = spring_stiffness_matrix(x, ball.edges.astype(np.int64), model._ke_host, ball.edge_rest_length, 0.0).tocsr()
+    K = spring_stiffness_matrix(x, ball.edges.astype(np.int64), model.spring_ke_host, ball.edge_rest_length, 0.0).tocsr()
     known = np.zeros(ball.vertex_count, dtype=bool)
     known[model.support_mask] = True
     known[vertex] = True

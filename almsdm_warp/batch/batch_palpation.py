@@ -18,11 +18,11 @@ import warp as wp
 
 from ..mesh.device_mesh import check_vertex
 from ..kernels.arrays import BatchPress, BatchRegionArrays, BatchSphere, struct_from
-from ..kernels import batch_press as bk
-from ..kernels.block_cg import CGScratch
-from ..kernels import batch_press_fast as bkf
-from ..kernels import batch_press_implicit as bki
-from ..kernels import batch_rings as br
+from ..kernels.explicit import batch as bk
+from ..kernels.implicit.block_cg import CGScratch
+from ..kernels.explicit import batch_fast as bkf
+from ..kernels.implicit import batch as bki
+from ..kernels.region import batch_rings as br
 from ..checks import LIMITS, fixed_substeps, substeps_for
 from ..protocol.palpation import PATCH_DEPTH, SimulationDiverged, check_probe_radius, force_bound
 from ..sim.model import Model

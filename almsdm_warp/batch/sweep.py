@@ -179,7 +179,8 @@ def preload_modules(devices: list[str]) -> None:
     sampled, rather than on the way to the first press. Errors are left to that launch."""
     import warp as wp
 
-    from ..kernels import batch_press, batch_rings
+    from ..kernels.explicit import batch as batch_press
+    from ..kernels.region import batch_rings
 
     for d in devices:
         if wp.get_device(d).is_cuda:

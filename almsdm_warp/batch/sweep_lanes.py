@@ -172,7 +172,7 @@ class Lane:
         # the results copied into pinned host buffers on this stream, after the press: no wait here
         import warp as wp
 
-        from ..kernels.batch_press import contact_positions
+        from ..kernels.explicit.batch import contact_positions
 
         if self.stream is None:
             return None

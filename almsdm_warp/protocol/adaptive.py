@@ -24,8 +24,8 @@ import math
 import numpy as np
 import warp as wp
 
-from ..kernels.region_state import clear_region
-from ..kernels.ring_motion import eval_region_motion
+from ..kernels.region.state import clear_region
+from ..kernels.region.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, PROBE_SPHERE
 from .palpation import Palpation, replayer
 from .schedule import PressSchedule

@@ -20,9 +20,9 @@ import warp as wp
 from .adaptive import FORCE_TOL, MARGIN, coherent_count, fixed_ring_estimate, force_error_estimate, vertex_stiffness
 from ..mesh.device_mesh import check_vertex
 from ..kernels.arrays import ProbeArrays, struct_from
-from ..kernels.multi_probe import drive_probe_vertices
-from ..kernels.region_state import clear_region
-from ..kernels.ring_motion import eval_region_motion
+from ..kernels.probes.multi import drive_probe_vertices
+from ..kernels.region.state import clear_region
+from ..kernels.region.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
 from ..checks import LIMITS, substeps_for
 from .palpation import PressResult, SimulationDiverged, capture_step_pair

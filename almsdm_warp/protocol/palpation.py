@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from ..kernels.integrate_explicit import hold_probe
-from ..kernels.region_state import reset_vertices_left_behind
+from ..kernels.probes.press import hold_probe
+from ..kernels.region.state import reset_vertices_left_behind
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE, Model
 from ..region.region import Region
 from ..solvers import make_solver

@@ -33,11 +33,12 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
-from ..kernels import region_state
-from ..kernels.region_state import reset_vertices_left_behind
+from ..kernels.region import state as region_state
+from ..kernels.region.state import reset_vertices_left_behind
 from ..kernels.arrays import struct_from
-from ..kernels.stroke_contact import StrokeSpheres, constrain_spheres
-from ..kernels.stroke_step import STROKE_COUNTS, integrate_stroke
+from ..kernels.probes.stroke import StrokeSpheres, constrain_spheres
+from ..kernels.explicit.step import integrate_explicit
+from ..kernels.probes.stroke import STROKE_COUNTS
 from ..kernels.arrays import ProbeArrays
 from ..region.region import Region
 from ..sim.model import PROBE_SPHERE
@@ -88,7 +89,7 @@ class _Spheres:
 
 class _Slot:
     """One region buffer as the stroke's frame reads it: arrays whose addresses never change and the
-    counts (kernels/stroke_step.STROKE_COUNTS) in a device array, so that a frame captured once serves
+    counts (kernels/probes/stroke.STROKE_COUNTS) in a device array, so that a frame captured once serves
     every region built into this buffer. `own`: the free vertices and local indices are copied here
     (a model with supports, whose solver reorders them into new arrays at each region); otherwise the
     region's (or the global solver's) own arrays, which are never replaced."""
@@ -405,10 +406,12 @@ class ProbeStroke(Palpation):
         calls = []
         if not self._warm:  # the first frame (uncaptured) starts where it is; on CUDA after the centres' copy in
             calls.append(functools.partial(wp.copy, sp.previous, sp.centre))
+        threads = 1 if self.device.is_cpu else self.model.particle_count
         for s in range(n):
             if solver.conditionally_stable:
-                calls.append(functools.partial(integrate_stroke, self.model, slot.free_vertex, slot.counts,
-                                               solver.anchor_scale, a, b, h))
+                # the Control is off here (the stroke's spheres are put on by the contact pass below)
+                calls.append(functools.partial(integrate_explicit, self.model, slot.free_vertex, slot.counts, threads,
+                                               solver.anchor_scale, a, b, self.control, h))
             else:
                 calls.append(functools.partial(solver.step, a, b, self.control, h))
             calls.append(functools.partial(

@@ -8,7 +8,7 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import as_device_mesh
-from ..kernels import contact as ck
+from ..kernels.region import contact as ck
 
 
 class Contacts(NamedTuple):

@@ -6,7 +6,7 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import as_device_mesh, check_vertex
-from ..kernels import rings as rk
+from ..kernels.region import rings as rk
 from ..kernels.arrays import RegionArrays, struct_from
 
 

@@ -11,9 +11,9 @@ import math
 import numpy as np
 import warp as wp
 
-from ..errors import InputError
 from ..kernels.arrays import ProbeArrays, ProbeSphereArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
+from ..tissue.laws import law_entry
 from ..tissue.material import Material, damping, springs_for_mesh
 from ..tissue.params import TissueParams
 
@@ -26,7 +26,7 @@ PROBE_FORCE = 2
 PROBE_SPHERE = 3
 """The probe is a rigid sphere (centre `probe_target`, radius `probe_radius`): frictionless one-sided
 contact on every free surface vertex it would contain; the reaction is the sum of the contact
-reactions (kernels/probe_contact.py)."""
+reactions (kernels/probes/sphere.py)."""
 
 
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -45,7 +45,7 @@ class Model:
     """The static tissue model on one device: rest shape, topology, masses, springs, anchors."""
 
     def __init__(self, mesh, tissue=None, device=None, *, edge_scale=None, anchor_scale=None, fixed_below=None,
-                 support=None, anchors=None):
+                 support=None, anchors=None, law: str = "springs"):
         """mesh: TissueMesh or DeviceMesh. tissue: TissueParams (the paper's per-spring constants, SI;
         default: the stomach scene's) or Material (every spring, anchor, damper and mass derived per
         edge and vertex by tissue.material.springs_for_mesh).
@@ -56,8 +56,12 @@ class Model:
         fixed_below [m]: every vertex with z below it is supported (fixed); support: vertex ids, also
         fixed. anchors: keep the anchor springs k_i (True), drop them (False), or None: dropped on a
         supported tet mesh (the support holds it), kept otherwise; the vertex dampers d_i stay (with
-        a material they hold the mass-proportional Rayleigh damping).
+        a material they hold the mass-proportional Rayleigh damping). law: the tissue law, a key of
+        almsdm_warp.tissue.laws.LAWS (its kernels' functions, critical step and stiffness bound).
         """
+        self.law_entry = law_entry(law)
+        self.law = self.law_entry.name
+        """The tissue law's name: the step kernels are made for it (kernels/laws)."""
         self.dmesh = dm = as_device_mesh(mesh, device)
         self.mesh = dm.mesh
         self.device = dm.device
@@ -109,7 +113,8 @@ class Model:
             TissueArrays, self, q_rest=dm.rest_position, adj_offsets=dm.adj_offsets, adj_vertex=dm.adj_vertex, adj_edge=dm.adj_edge
         )
         """The arrays above as one kernel argument (kernels/arrays.py)."""
-        self._ke_host, self._kd_host, self._ka_host, self._da_host = ke, kd, ka, da
+        self.spring_ke_host, self.spring_kd_host, self.anchor_ke_host, self.anchor_kd_host = ke, kd, ka, da
+        """The constants above in float64 (host), as derived: the law's critical step reads them."""
 
     def _tissue_constants(self, t):
         """(k_ij, d_ij per edge; k_i, d_i, m_i per vertex), float64 host arrays, from either tissue."""
@@ -151,65 +156,13 @@ class Model:
         return Control(self.device, self.particle_count, self.mesh.surface_vertices)
 
     def critical_dt(self, vertices=None, anchors: bool = True) -> float:
-        """Largest stable step [s] of semi-implicit Euler, for the model linearized at rest.
+        """Largest stable step [s] of semi-implicit Euler over the free `vertices` (default: all; the
+        others held fixed), linearized at rest: the tissue law's (almsdm_warp.tissue.laws)."""
+        return self.law_entry.critical_dt(self, vertices, anchors)
 
-        The stiffest mode of M^-1/2 K M^-1/2 over the free `vertices` (default: all; the others
-        held fixed) has eigenvalue w^2; with that mode's damping g = v^T M^-1/2 C M^-1/2 v, the
-        scheme is stable while dt <= (-g + sqrt(g^2 + 4 w^2)) / w^2 (for g = 0: 2 / w). An estimate:
-        a deep press adds geometric stiffness to the stretched springs.
-        """
-        import scipy.sparse as sp
-        from scipy.sparse.linalg import ArpackError, eigsh
-
-        n = self.particle_count
-        free = np.arange(n) if vertices is None else np.unique(np.asarray(vertices, dtype=np.int64))
-        if len(free) == 0:
-            return float("inf")
-        e = self.mesh.edges.astype(np.int64)
-        d = self.mesh.vertices[e[:, 1]] - self.mesh.vertices[e[:, 0]]
-        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
-        ddt = d[:, :, None] * d[:, None, :]  # [e, 3, 3]
-        scale = 1.0 if anchors else 0.0
-
-        def assemble(edge_coef, vertex_coef):
-            blocks = edge_coef[:, None, None] * ddt
-            rows, cols, vals = [], [], []
-            for a, b, sign in ((0, 0, 1.0), (1, 1, 1.0), (0, 1, -1.0), (1, 0, -1.0)):
-                for r in range(3):
-                    for c in range(3):
-                        rows.append(3 * e[:, a] + r)
-                        cols.append(3 * e[:, b] + c)
-                        vals.append(sign * blocks[:, r, c])
-            diag = np.repeat(vertex_coef * scale, 3)
-            rows.append(np.arange(3 * n))
-            cols.append(np.arange(3 * n))
-            vals.append(diag)
-            return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
-
-        dof = (3 * free[:, None] + np.arange(3)).ravel()
-        w = np.repeat(1.0 / np.sqrt(self.particle_mass_host), 3)[dof]
-        Winv = sp.diags(w)
-        with np.errstate(all="ignore"):  # an overflow is reported below, in words
-            K = Winv @ assemble(self._ke_host, self._ka_host)[dof][:, dof] @ Winv
-            C = Winv @ assemble(self._kd_host, self._da_host)[dof][:, dof] @ Winv
-        if not (np.all(np.isfinite(K.data)) and np.all(np.isfinite(C.data))):
-            raise InputError(
-                f"the model's stiffness or damping over mass is not finite (largest spring {self._ke_host.max():.3g} N/m, "
-                f"anchor {self._ka_host.max():.3g} N/m; a lesion's stiffness_factor too large?): it has no stable step"
-            )
-        if K.shape[0] <= 60:
-            vals, vecs = np.linalg.eigh(K.toarray())
-            lam, v = vals[-1], vecs[:, -1]
-        else:
-            try:
-                vals, vecs = eigsh(K, k=1, which="LA", tol=1e-6)
-                lam, v = vals[0], vecs[:, 0]
-            except ArpackError:  # no convergence: Gershgorin's bounds, which under-estimate the step
-                lam, v = float(abs(K).sum(axis=1).max()), None
-        if lam <= 0:
-            return float("inf")
-        g = float(v @ (C @ v)) if v is not None else float(abs(C).sum(axis=1).max())
-        return float((-g + np.sqrt(g * g + 4.0 * lam)) / lam)
+    def stiffness_bound(self) -> float:
+        """The stiffest vertex's stiffness [N/m] (the tissue law's): what bounds a force that has not diverged."""
+        return self.law_entry.stiffness_bound(self)
 
 
 class State:

@@ -23,7 +23,7 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import as_device_mesh
-from ..kernels import normals as nk
+from ..kernels.region import normals as nk
 
 STRATEGIES = ("global", "search", "precomputed")
 """global: all faces and vertices; search: the moved vertices, faces found by scanning every

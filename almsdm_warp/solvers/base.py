@@ -28,20 +28,24 @@ class SolverBase:
         self.free_vertex = None
         self.free_count = 0
         self.vertex_local = None
+        self.counts = wp.zeros(1, dtype=wp.int32, device=model.device)
+        """The free count on the device ([free_count], int32), as the explicit step reads it."""
         self.anchor_scale = 1.0
 
     def set_region(self, region) -> None:
         """Integrate the region's vertices but its fixed outer ring (local order: ring after ring)."""
-        self.free_vertex, self.free_count, self.vertex_local = self.without_supports(
-            region.region_vertex, region.free_count, region.vertex_local)
-        self.anchor_scale = 1.0
-        self.reset_warm_start()
+        self.set_free(*self.without_supports(region.region_vertex, region.free_count, region.vertex_local), 1.0)
 
     def set_global(self, anchors: bool = True) -> None:
         """Integrate every vertex: the global anchored model, or without anchors the paper's free surface."""
-        self.free_vertex, self.free_count, self.vertex_local = self.without_supports(
-            self._identity, self.model.particle_count, self._identity)
-        self.anchor_scale = 1.0 if anchors else 0.0
+        self.set_free(*self.without_supports(self._identity, self.model.particle_count, self._identity), 1.0 if anchors else 0.0)
+
+    def set_free(self, free_vertex, free_count: int, vertex_local, anchor_scale: float) -> None:
+        """Step the first `free_count` vertices of `free_vertex` (`vertex_local`: each mesh vertex's
+        index in it), anchors scaled by `anchor_scale`."""
+        self.free_vertex, self.free_count, self.vertex_local = free_vertex, int(free_count), vertex_local
+        self.counts.fill_(self.free_count)
+        self.anchor_scale = anchor_scale
         self.reset_warm_start()
 
     def without_supports(self, free_vertex, free_count: int, vertex_local):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..kernels.integrate_explicit import integrate_explicit
+from ..kernels.explicit.step import integrate_explicit
 from .base import SolverBase
 
 
@@ -14,4 +14,5 @@ class SolverExplicit(SolverBase):
     conditionally_stable = True
 
     def integrate(self, state_in, state_out, control, dt: float) -> None:
-        integrate_explicit(self.model, self.free_vertex, self.free_count, self.anchor_scale, state_in, state_out, control, dt)
+        threads = 1 if self.model.device.is_cpu else self.free_count
+        integrate_explicit(self.model, self.free_vertex, self.counts, threads, self.anchor_scale, state_in, state_out, control, dt)

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from ..kernels.block_cg import CGScratch
-from ..kernels.integrate_implicit import integrate_implicit
+from ..kernels.implicit.block_cg import CGScratch
+from ..kernels.implicit.step import integrate_implicit
 from .base import SolverBase
 
 

@@ -17,7 +17,7 @@ sums are gathers per vertex, never float atomics.
 
 import warp as wp
 
-from .arrays import MeshArrays
+from ..arrays import MeshArrays
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})

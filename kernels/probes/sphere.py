@@ -9,7 +9,7 @@ leaves one contact vertex and the paper's probe).
 
 import warp as wp
 
-from .block_cg import filter_normal
+from ..implicit.block_cg import filter_normal
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -70,6 +70,14 @@ def sphere_project(x_in: wp.vec3, x_out: wp.vec3, u_out: wp.vec3, f: wp.vec3, ce
         x1, u1, n1 = onto_sphere_from(x_in, x_out, centre, radius, dt)
         return x1, u1, sphere_contact_reaction(f, n1), True
     return x_out, u_out, wp.vec3(0.0), False
+
+
+@wp.func
+def sphere_contact_step(x_in: wp.vec3, u_in: wp.vec3, x_out: wp.vec3, u_out: wp.vec3, m: float, centre: wp.vec3, radius: float, dt: float):
+    # the explicit step's contact at a free surface vertex the step took from (x_in, u_in) to
+    # (x_out, u_out): sphere_project with the step's own internal force, f = m (u_out - u_in) / dt
+    f = m * (u_out - u_in) / dt
+    return sphere_project(x_in, x_out, u_out, f, centre, radius, dt)
 
 
 @wp.func

@@ -1,7 +1,7 @@
 """A batch of presses, semi-implicit Euler, exact: one block per palpation, many steps in one launch.
 
 The reference batch kernel: the CPU's, and CUDA's where a batch's regions do not fit the fast
-kernel (kernels/batch_press_fast.py).
+kernel (kernels/explicit/batch_fast.py).
 
 Each palpation's region (its state, rest positions, masses, anchors and the local topology of
 its free vertices: neighbour local index and spring parameters per CSR entry) is loaded once
@@ -11,20 +11,23 @@ give Warp an array view of them: kernels/block_memory.py) and a block's threads 
 (the CPU, or regions too large for shared memory) they are per-palpation slices of global
 scratch arrays and a block is one thread.
 
-The arithmetic is the one-palpation step's (kernels/integrate_explicit.py), in the same order: the
-anchor term first, then the vertex's neighbours in mesh CSR order; velocity, then position; the
-probe's target computed in float64 as the host computes it, then rounded to float32. So a batch
-gives the same bits as ``Palpation.press`` on the same device (tests/test_batch.py).
+It is the one-region step's composition (kernels/explicit/step.py) on a batch's layout: the law's
+`vertex_force` (kernels/laws) over each free vertex's local CSR entries, `advance`, the driven vertex
+and the press's schedule and force record (kernels/probes/press.py), the sphere's contact
+(kernels/probes/sphere.py). So a batch gives the same bits as ``Palpation.press`` on the same
+device (tests/test_batch.py).
 """
 
 import functools
 
 import warp as wp
 
-from .arrays import BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
-from .block_memory import SHARED_BYTES_MAX, block_sync, work_array
-from .forces import add_spring_force, anchor_force
-from .probe_contact import sphere_project
+from ..arrays import BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
+from ..block_memory import SHARED_BYTES_MAX, block_sync, work_array
+from ..laws import LAWS
+from ..probes.press import drive_vertex, press_target, record_peak
+from ..probes.sphere import sphere_contact_step
+from .step import advance
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -32,80 +35,61 @@ wp.set_module_options({"enable_backward": False})
 __all__ = ["SHARED_BYTES_MAX", "press_batch", "press_kernel", "scratch_sizes", "shared_bytes"]
 
 
-@wp.func
-def substep_explicit(
-    lane: int,
-    threads: int,
-    nf: int,
-    off: wp.array(dtype=wp.int32),
-    nbr: wp.array(dtype=wp.int32),
-    spring_ke: wp.array(dtype=wp.float32),
-    spring_kd: wp.array(dtype=wp.float32),
-    spring_rest_length: wp.array(dtype=wp.float32),
-    q_rest: wp.array(dtype=wp.vec3),
-    particle_mass: wp.array(dtype=wp.float32),
-    anchor_ke: wp.array(dtype=wp.float32),
-    anchor_kd: wp.array(dtype=wp.float32),
-    anchor_scale: float,
-    pressed: int,
-    target: wp.vec3,
-    dt: float,
-    q_in: wp.array(dtype=wp.vec3),
-    qd_in: wp.array(dtype=wp.vec3),
-    q_out: wp.array(dtype=wp.vec3),
-    qd_out: wp.array(dtype=wp.vec3),
-):
-    # one step of the free vertices this lane owns; returns the reaction on local vertex 0 (the
-    # probe's), which lane 0 owns. Local indices: arrays are the region's, not the mesh's.
-    reaction = wp.vec3(0.0)
-    for i in range(lane, nf, threads):
-        x = q_in[i]
-        u = qd_in[i]
-        f = anchor_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale)
-        for k in range(off[i], off[i + 1]):
-            j = nbr[k]
-            f = add_spring_force(f, x, u, q_in[j], qd_in[j], spring_ke[k], spring_kd[k], spring_rest_length[k])
-        if i == 0 and pressed != 0:
-            reaction = f  # the feedback force: the tissue's internal forces on the probe
-            # displacement control: the vertex is where the probe puts it
-            q_out[i] = target
-            qd_out[i] = (target - x) / dt
-        else:
-            # m u'' + d u' + k u = F, eq. (3), by semi-implicit Euler: velocity first, then position
-            u1 = u + dt * f / particle_mass[i]
-            q_out[i] = x + dt * u1
-            qd_out[i] = u1
-    return reaction
-
-
-@wp.func
-def contact_sphere(
-    nf: int, region_vertex: wp.array2d(dtype=wp.int32), b: int, probe_surface: wp.array(dtype=wp.int32),
-    particle_mass: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, dt: float,
-    q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3), q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
-):
-    # the sphere after the step (one thread, local order, as the one-palpation contact pass): each
-    # free surface vertex inside it onto its surface; returns the sum of the contact reactions
-    total = wp.vec3(0.0)
-    for i in range(nf):
-        if probe_surface[region_vertex[b, i]] != 0:
-            f = particle_mass[i] * (qd_out[i] - qd_in[i]) / dt  # the internal force of the step
-            x1, u1, c, touched = sphere_project(q_in[i], q_out[i], qd_out[i], f, centre, radius, dt)
-            if touched:
-                q_out[i] = x1
-                qd_out[i] = u1
-                total += c
-    return total
-
-
 @functools.cache
-def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool, sphere: bool = False):
-    """The batch press kernel for regions of up to `vertex_capacity` vertices and `entry_capacity`
-    CSR entries of free vertices; working arrays in shared memory on CUDA when `shared`. `sphere`:
-    the probe is a sphere (BatchSphere; no vertex driven, a contact pass after each pressed step),
-    a variant of its own so that the paper's probe runs none of it."""
+def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bool, sphere: bool = False):
+    """The batch press kernel of tissue law `law` (a key of kernels.laws.LAWS) for regions of up to
+    `vertex_capacity` vertices and `entry_capacity` CSR entries of free vertices; working arrays in
+    shared memory on CUDA when `shared`. `sphere`: the probe is a sphere (BatchSphere; no vertex
+    driven, a contact pass after each pressed step), a variant of its own so that the paper's probe
+    runs none of it."""
     cv, ce = int(vertex_capacity), int(entry_capacity)
     SPHERE = bool(sphere)
+    vertex_force = LAWS[law].vertex_force
+
+    @wp.func
+    def substep(
+        lane: int, threads: int, nf: int, off: wp.array(dtype=wp.int32), nbr: wp.array(dtype=wp.int32),
+        spring: wp.array(dtype=wp.vec3), q_rest: wp.array(dtype=wp.vec3), particle_mass: wp.array(dtype=wp.float32),
+        anchor_ke: wp.array(dtype=wp.float32), anchor_kd: wp.array(dtype=wp.float32), anchor_scale: float,
+        pressed: int, target: wp.vec3, dt: float,
+        q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3), q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
+    ):
+        # one step of the free vertices this lane owns; returns the reaction on local vertex 0 (the
+        # probe's), which lane 0 owns. Local indices: arrays are the region's, not the mesh's.
+        reaction = wp.vec3(0.0)
+        for i in range(lane, nf, threads):
+            x = q_in[i]
+            u = qd_in[i]
+            f = vertex_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale, off[i], off[i + 1], nbr, spring, 0, q_in, qd_in)
+            if i == 0 and pressed != 0:
+                reaction = f  # the feedback force: the tissue's internal forces on the probe
+                xd, ud = drive_vertex(x, target, dt)  # displacement control
+                q_out[i] = xd
+                qd_out[i] = ud
+            else:
+                x1, u1 = advance(x, u, dt * f / particle_mass[i], dt)
+                q_out[i] = x1
+                qd_out[i] = u1
+        return reaction
+
+    @wp.func
+    def contact(
+        nf: int, region_vertex: wp.array2d(dtype=wp.int32), b: int, probe_surface: wp.array(dtype=wp.int32),
+        particle_mass: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, dt: float,
+        q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3), q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
+    ):
+        # the sphere after the step (one thread, local order, as the one-region contact pass): each
+        # free surface vertex inside it onto its surface; returns the sum of the contact reactions
+        total = wp.vec3(0.0)
+        for i in range(nf):
+            if probe_surface[region_vertex[b, i]] != 0:
+                x1, u1, c, touched = sphere_contact_step(q_in[i], qd_in[i], q_out[i], qd_out[i], particle_mass[i], centre, radius, dt)
+                if touched:
+                    q_out[i] = x1
+                    qd_out[i] = u1
+                    total += c
+        return total
+
     w_q_a = work_array("q_a", wp.vec3, cv, shared)
     w_qd_a = work_array("qd_a", wp.vec3, cv, shared)
     w_q_b = work_array("q_b", wp.vec3, cv, shared)
@@ -114,9 +98,7 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool, sphere
     w_mass = work_array("mass", wp.float32, cv, shared)
     w_ka = work_array("ka", wp.float32, cv, shared)
     w_kda = work_array("kda", wp.float32, cv, shared)
-    w_ke = work_array("ke", wp.float32, ce, shared)
-    w_kd = work_array("kd", wp.float32, ce, shared)
-    w_l0 = work_array("l0", wp.float32, ce, shared)
+    w_spring = work_array("spring", wp.vec3, ce, shared)
     w_off = work_array("off", wp.int32, cv + 1, shared)
     w_nbr = work_array("nbr", wp.int32, ce, shared)
 
@@ -143,17 +125,15 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool, sphere
         nf = regions.free_count[b]
         ne = regions.local_offsets[b, nf]
         # working arrays (shared memory on CUDA; offsets are used only by the global fallback)
-        q_a = w_q_a(scratch_vec3, (5 * b + 0) * cv)
-        qd_a = w_qd_a(scratch_vec3, (5 * b + 1) * cv)
-        q_b = w_q_b(scratch_vec3, (5 * b + 2) * cv)
-        qd_b = w_qd_b(scratch_vec3, (5 * b + 3) * cv)
-        rest = w_rest(scratch_vec3, (5 * b + 4) * cv)
-        mass = w_mass(scratch_float, b * (3 * cv + 3 * ce))
-        ka = w_ka(scratch_float, b * (3 * cv + 3 * ce) + cv)
-        kda = w_kda(scratch_float, b * (3 * cv + 3 * ce) + 2 * cv)
-        ke = w_ke(scratch_float, b * (3 * cv + 3 * ce) + 3 * cv)
-        kd = w_kd(scratch_float, b * (3 * cv + 3 * ce) + 3 * cv + ce)
-        l0 = w_l0(scratch_float, b * (3 * cv + 3 * ce) + 3 * cv + 2 * ce)
+        q_a = w_q_a(scratch_vec3, b * (5 * cv + ce))
+        qd_a = w_qd_a(scratch_vec3, b * (5 * cv + ce) + cv)
+        q_b = w_q_b(scratch_vec3, b * (5 * cv + ce) + 2 * cv)
+        qd_b = w_qd_b(scratch_vec3, b * (5 * cv + ce) + 3 * cv)
+        rest = w_rest(scratch_vec3, b * (5 * cv + ce) + 4 * cv)
+        spring = w_spring(scratch_vec3, b * (5 * cv + ce) + 5 * cv)
+        mass = w_mass(scratch_float, b * 3 * cv)
+        ka = w_ka(scratch_float, b * 3 * cv + cv)
+        kda = w_kda(scratch_float, b * 3 * cv + 2 * cv)
         off = w_off(scratch_int, b * (cv + 1 + ce))
         nbr = w_nbr(scratch_int, b * (cv + 1 + ce) + cv + 1)
         # load the region once: state, per-vertex parameters, local topology with spring parameters
@@ -172,9 +152,7 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool, sphere
         for k in range(lane, ne, threads):
             nbr[k] = regions.local_neighbour[b, k]
             e = regions.local_edge[b, k]
-            ke[k] = tissue.spring_ke[e]
-            kd[k] = tissue.spring_kd[e]
-            l0[k] = tissue.spring_rest_length[e]
+            spring[k] = wp.vec3(tissue.spring_ke[e], tissue.spring_kd[e], tissue.spring_rest_length[e])
         block_sync()
 
         dt = press.dt
@@ -190,33 +168,25 @@ def press_kernel(vertex_capacity: int, entry_capacity: int, shared: bool, sphere
             target = wp.vec3(0.0)
             if s < press.press_steps:
                 pressed = 1
-                # the probe's target, in float64 as the host computes it, then float32
-                frac = wp.min(wp.float64(s + 1) / wp.float64(press.ramp_steps), wp.float64(1.0))
-                target = wp.vec3(rest0 + direction * press.depth * frac)
+                target = press_target(rest0, direction, press.depth, s, press.ramp_steps)
             driven = pressed
             if wp.static(SPHERE):
                 driven = 0
             if (s - step_begin) % 2 == 0:
-                f = substep_explicit(lane, threads, nf, off, nbr, ke, kd, l0, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_a, qd_a, q_b, qd_b)
+                f = substep(lane, threads, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_a, qd_a, q_b, qd_b)
             else:
-                f = substep_explicit(lane, threads, nf, off, nbr, ke, kd, l0, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_b, qd_b, q_a, qd_a)
+                f = substep(lane, threads, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_b, qd_b, q_a, qd_a)
             if wp.static(SPHERE):
                 if pressed != 0:
                     block_sync()
                     if lane == 0:
                         rv = regions.region_vertex
                         if (s - step_begin) % 2 == 0:
-                            f = contact_sphere(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_a, qd_a, q_b, qd_b)
+                            f = contact(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_a, qd_a, q_b, qd_b)
                         else:
-                            f = contact_sphere(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_b, qd_b, q_a, qd_a)
+                            f = contact(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_b, qd_b, q_a, qd_a)
             if lane == 0 and pressed != 0:
-                fx = wp.float64(f[0])
-                fy = wp.float64(f[1])
-                fz = wp.float64(f[2])
-                m = wp.sqrt(fx * fx + fy * fy + fz * fz)
-                if m > peak:
-                    peak = m
-                    peak_f = f
+                peak, peak_f = record_peak(peak, peak_f, f)
                 if s == press.press_steps - 1:
                     press.hold_reaction[b] = f
             block_sync()
@@ -241,19 +211,19 @@ def scratch_sizes(batch: int, vertex_capacity: int, entry_capacity: int, shared:
     if shared:
         return 1, 1, 1
     cv, ce = vertex_capacity, entry_capacity
-    return batch * 5 * cv, batch * (3 * cv + 3 * ce), batch * (cv + 1 + ce)
+    return batch * (5 * cv + ce), batch * 3 * cv, batch * (cv + 1 + ce)
 
 
 def shared_bytes(vertex_capacity: int, entry_capacity: int) -> int:
     """Shared memory a block of the press kernel takes [bytes]."""
     cv, ce = vertex_capacity, entry_capacity
-    return 5 * cv * 12 + (3 * cv + 3 * ce) * 4 + (cv + 1 + ce) * 4
+    return (5 * cv + ce) * 12 + 3 * cv * 4 + (cv + 1 + ce) * 4
 
 
 def press_batch(batch, step_begin, step_count):
     """Advance every palpation of `batch` (an almsdm_warp.batch.batch_palpation.BatchPalpation) `step_count` steps."""
     m, r, p = batch.model, batch.regions, batch
-    kernel = press_kernel(p.vertex_capacity, p.entry_capacity, p.shared, p.probe_radius > 0)
+    kernel = press_kernel(m.law, p.vertex_capacity, p.entry_capacity, p.shared, p.probe_radius > 0)
     wp.launch(
         kernel,
         dim=p.batch_size * p.threads,

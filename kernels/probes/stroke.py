@@ -2,7 +2,7 @@
 
 After each integrator step, one thread goes over the region's vertices in local order: a free
 surface vertex the step left inside a sphere is put on its surface (the law of
-kernels/probe_contact.py: frictionless, one-sided), and its contact reaction is summed into that
+kernels/probes/sphere.py: frictionless, one-sided), and its contact reaction is summed into that
 sphere's feedback force (a gather in a fixed order: the same bits every run). With the explicit
 step the internal force is the step's own, f = m (v_out - v_in) / dt: the forces at its start,
 where the last pass left every contact vertex on the sphere. The implicit step holds sphere 0 in its
@@ -10,22 +10,29 @@ own solve (`held`), but only the vertices its test finds in the sphere at the st
 on the trailing side of a sliding sphere are released, relax into it within the step and come back
 here. Its m dv / dt is the force at that relaxed end, a third short of the static equilibrium's
 (docs/stroke.md). So with `held`, a second launch reads each contact reaction from the internal force
-(kernels/forces.py) at the end of the step, with every contact vertex on the sphere. The same pass tells
+(kernels/laws) at the end of the step, with every contact vertex on the sphere. The same pass tells
 the host, per sphere, how many vertices it touches and whether it came within `guard` of a vertex
 on ring `near_ring` or beyond: there the region no longer holds the contact and must be rebuilt
 around it before the sphere reaches the fixed outer ring.
 """
 
+import functools
+
 import warp as wp
 
-from .arrays import struct_of
-from .integrate_implicit import CONTACT_SLACK
-from .forces import add_spring_force, anchor_force
-from .probe_contact import onto_sphere_from, sphere_contact_reaction, sphere_normal
+from ..arrays import struct_of
+from ..implicit.step import CONTACT_SLACK
+from ..laws import LAWS
+from .sphere import onto_sphere_from, sphere_contact_reaction, sphere_normal
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
+
+STROKE_COUNTS = ("free_count", "vertex_count", "near_ring")
+"""The entries of a stroke's counts array (int32, device): the free vertices the step moves (read by
+the explicit step, kernels/explicit/step.py, as its counts[0]), the region's vertices the contact
+pass goes over, the first ring whose vertices near a sphere move the region."""
 
 HELD_SLACK = wp.constant(CONTACT_SLACK)
 """With the implicit step, a vertex within radius x (1 + this) of a centre is on the sphere (float32 positions)."""
@@ -51,30 +58,34 @@ def held_centre(spheres: StrokeSpheres, p: int, alpha: float):
     return c0 + alpha * (spheres.centre[p] - c0)
 
 
-@wp.kernel
-def sum_stroke_reactions(
-    region_vertex: _INT, counts: _INT, vertex_local: _INT, surface: _INT, spheres: StrokeSpheres,
-    probe_count: int, radius: float, adj_offsets: _INT, adj_vertex: _INT, adj_spring: _VEC, q_rest: _VEC,
-    anchor_ke: _FLOAT, anchor_kd: _FLOAT, anchor_scale: float, q_out: _VEC, qd_out: _VEC,
-):
-    # one thread, after constrain_stroke_spheres (the implicit step): each contact's reaction from the
-    # internal force at the end of the step, eqs. (3)-(6), summed in local order
-    free_count = counts[0]
-    for i in range(counts[1]):
-        v = region_vertex[i]
-        if surface[v] == 0 or vertex_local[v] >= free_count:
-            continue
-        x = q_out[v]
-        u = qd_out[v]
-        for p in range(probe_count):
-            n, l = sphere_normal(x, spheres.centre[p])
-            if l < radius * (1.0 + HELD_SLACK):
-                f = anchor_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale)
-                for k in range(adj_offsets[v], adj_offsets[v + 1]):
-                    j = adj_vertex[k]
-                    spring = adj_spring[k]  # (k_ij, d_ij, rest length)
-                    f = add_spring_force(f, x, u, q_out[j], qd_out[j], spring[0], spring[1], spring[2])
-                spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n)
+@functools.cache
+def reactions_kernel(law: str):
+    """The stroke's contact reactions at the end of an implicit step, of tissue law `law` (kernels.laws.LAWS)."""
+    vertex_force = LAWS[law].vertex_force
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def sum_stroke_reactions(
+        region_vertex: _INT, counts: _INT, vertex_local: _INT, surface: _INT, spheres: StrokeSpheres,
+        probe_count: int, radius: float, adj_offsets: _INT, adj_vertex: _INT, adj_spring: _VEC, q_rest: _VEC,
+        anchor_ke: _FLOAT, anchor_kd: _FLOAT, anchor_scale: float, q_out: _VEC, qd_out: _VEC,
+    ):
+        # one thread, after constrain_stroke_spheres (the implicit step): each contact's reaction from the
+        # internal force at the end of the step, eqs. (3)-(6), summed in local order
+        free_count = counts[0]
+        for i in range(counts[1]):
+            v = region_vertex[i]
+            if surface[v] == 0 or vertex_local[v] >= free_count:
+                continue
+            x = q_out[v]
+            u = qd_out[v]
+            for p in range(probe_count):
+                n, l = sphere_normal(x, spheres.centre[p])
+                if l < radius * (1.0 + HELD_SLACK):
+                    f = vertex_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale,
+                                     adj_offsets[v], adj_offsets[v + 1], adj_vertex, adj_spring, 0, q_out, qd_out)
+                    spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n)
+
+    return sum_stroke_reactions
 
 
 @wp.kernel
@@ -118,7 +129,7 @@ def constrain_spheres(model, region_vertex, counts, vertex_ring, vertex_local, s
                       count, radius, guard, dt, state_in, state_out, held, anchor_scale, alpha=1.0):
     """Put the free surface vertices a step left inside the spheres (`spheres`, a StrokeSpheres of `count`)
     on their surfaces; write each sphere's reaction [N], contact count and near-the-edge flag. `counts`
-    (device int32, laid out as kernels/stroke_step.STROKE_COUNTS, read when the launch runs, so that a
+    (device int32, laid out as STROKE_COUNTS, read when the launch runs, so that a
     captured launch serves every region): the region's first vertex_count vertices (`region_vertex`,
     ring of each mesh vertex `vertex_ring`) are gone over; those with `vertex_local` < free_count move,
     and one on ring near_ring or beyond that comes within `guard` of a sphere sets its flag. held=1 (the implicit step, which held
@@ -142,7 +153,7 @@ def constrain_spheres(model, region_vertex, counts, vertex_ring, vertex_local, s
     if held:
         dm = model.dmesh
         wp.launch(
-            sum_stroke_reactions,
+            reactions_kernel(model.law),
             dim=1,
             inputs=[region_vertex, counts, vertex_local, surface, spheres, count, radius, dm.adj_offsets,
                     dm.adj_vertex, model.adj_spring, dm.rest_position, model.anchor_ke, model.anchor_kd, float(anchor_scale),

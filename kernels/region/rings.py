@@ -10,7 +10,7 @@ the new ring in the array is then made deterministic by a radix sort on vertex i
 
 import warp as wp
 
-from .arrays import MeshArrays, RegionArrays
+from ..arrays import MeshArrays, RegionArrays
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})

@@ -2,7 +2,7 @@
 
 import warp as wp
 
-from .arrays import RegionArrays, TissueArrays
+from ..arrays import RegionArrays, TissueArrays
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})

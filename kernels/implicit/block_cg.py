@@ -1,7 +1,7 @@
 """Block-Jacobi preconditioned conjugate gradients on a region's 3x3 blocks: the implicit steps' solve.
 
-One function for the one-palpation step (kernels/integrate_implicit.py) and the batch
-(kernels/batch_press_implicit.py, on each palpation's row views). It runs in the calling thread,
+One function for the one-region step (kernels/implicit/step.py) and the batch
+(kernels/implicit/batch.py, on each palpation's row views). It runs in the calling thread,
 its sums in a fixed order, so a rerun gives the same bits on any device. Called once per step:
 its array arguments are copied once, not per vertex.
 
@@ -25,7 +25,7 @@ wrong dv (a vertex left deep inside the sphere, a force spike, another hold equi
 
 import warp as wp
 
-from .arrays import CG_FIELDS, BatchCGArrays, CGArrays, struct_from
+from ..arrays import CG_FIELDS, BatchCGArrays, CGArrays, struct_from
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})

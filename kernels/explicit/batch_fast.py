@@ -1,7 +1,9 @@
 """A batch of presses on CUDA, fast: one block per palpation, the springs spread over its threads.
 
-The same step as kernels/batch_press.py (and the one-palpation step), arranged for a GPU, with
-the same force laws (kernels/forces.py) and the same order of every sum:
+The same step as kernels/explicit/batch.py (and the one-region step), arranged for a GPU: a layout of
+the springs law (kernels/laws/springs.py), not a re-write of its physics. The same pieces
+(the spring force, the anchor, `advance`, the sphere's contact, the force record's squares) and the
+same order of every sum:
 - the region's state lives in shared memory for the whole launch, each vertex's position and
   velocity in 24 bytes (x, y, z, vx | vy, vz: one 16- and one 8-byte load);
 - thread `lane` owns free vertex `lane`: its position, velocity, degree and constants (rest
@@ -29,9 +31,11 @@ import functools
 
 import warp as wp
 
-from .block_memory import add_entry16, block_sync, cpu_blocks, load2, load4, load_xyz, named, rsqrt_approx, shared_array, store_xyz, work_array
-from .forces import EPS_LENGTH, anchor_force, spring_force_along
-from .probe_contact import sphere_project
+from ..block_memory import add_entry16, block_sync, cpu_blocks, load2, load4, load_xyz, named, rsqrt_approx, shared_array, store_xyz, work_array
+from ..laws.springs import EPS_LENGTH, anchor_force, spring_force_along
+from ..probes.press import force_square
+from ..probes.sphere import sphere_project
+from .step import advance
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -159,10 +163,7 @@ def sum_contact_parts(threads: int):
 def record_force_fast(f: wp.vec3, hold: bool, p64: wp.array(dtype=wp.float64), pv: wp.array(dtype=wp.vec4)):
     # the feedback force's records in shared memory: the largest squared magnitude (p64[7]) and its
     # force (pv[0]); the force at the end of the hold (pv[2])
-    fx = wp.float64(f[0])
-    fy = wp.float64(f[1])
-    fz = wp.float64(f[2])
-    mag2 = fx * fx + fy * fy + fz * fz
+    mag2 = force_square(f)
     if mag2 > p64[7]:
         p64[7] = mag2
         store_xyz(pv, 0, f)
@@ -360,10 +361,9 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                 for k in range(deg):
                     f = add_entry16(f, fe, code, k * cf + i)
                 if wp.static(SPHERE):
-                    # every free vertex steps; then the sphere's contact (kernels/probe_contact.py)
+                    # every free vertex steps; then the sphere's contact (kernels/probes/sphere.py)
                     x0 = xo
-                    uo = uo + f * dto
-                    xo = xo + dt * uo
+                    xo, uo = advance(x0, uo, f * dto, dt)
                     if s < press_steps and so != 0:
                         xo, uo, c, touched = sphere_project(x0, xo, uo, f, centre, radius, dt)
                         part += c
@@ -379,9 +379,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                     uo = (target - xo) * tf[3]
                     xo = target
                 else:
-                    # m u'' + d u' + k u = F, eq. (3), semi-implicit Euler: velocity first, then position
-                    uo = uo + f * dto
-                    xo = xo + dt * uo
+                    xo, uo = advance(xo, uo, f * dto, dt)  # eq. (3), semi-implicit Euler
                 qa[i] = wp.vec4(xo[0], xo[1], xo[2], uo[0])
                 qb[i] = wp.vec2(uo[1], uo[2])
             for i in range(lane + T, nf, T):
@@ -393,8 +391,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                 f = anchor_force(x, u, wp.vec3(c4[0], c4[1], c4[2]), c4[3], kda[i], -1.0)
                 for k in range(wp.int32(off[i + 1]) - wp.int32(off[i])):
                     f = add_entry16(f, fe, code, k * cf + i)
-                u1 = u + f * dtm[i]
-                x1 = x + dt * u1
+                x1, u1 = advance(x, u, f * dtm[i], dt)
                 if wp.static(SPHERE):
                     if s < press_steps and w_surf()[i] != wp.int16(0):
                         x1, u1, c, touched = sphere_project(x, x1, u1, f, centre, radius, dt)

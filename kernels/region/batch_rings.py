@@ -12,7 +12,7 @@ needed per palpation (memory stays proportional to B x region, not B x mesh).
 
 import warp as wp
 
-from .arrays import BatchPress, BatchRegionArrays, MeshArrays, TissueArrays
+from ..arrays import BatchPress, BatchRegionArrays, MeshArrays, TissueArrays
 from .rings import sort_ring
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)

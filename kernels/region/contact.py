@@ -8,7 +8,7 @@ it. Ties go to the lower vertex id, as a brute-force argmin would.
 
 import warp as wp
 
-from .arrays import MeshArrays
+from ..arrays import MeshArrays
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
