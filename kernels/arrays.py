@@ -76,7 +76,7 @@ CG_FIELDS = (
     ("csr_local", wp.int32, "entry"),
     ("stats", wp.float32, "stats"),
 )
-"""The conjugate-gradient solve's arrays (kernels/block_cg.py): name, element type and size
+"""The conjugate-gradient solve's arrays (kernels/implicit/block_cg.py): name, element type and size
 (per unknown, per CSR entry, or the solve's (iterations, relative residual)); `normal`: the unit
 normal of an unknown constrained along it (a sphere's contact), else zero."""
 

@@ -297,14 +297,23 @@ def test_batch_supports_never_move(device, stomach, supported):
     assert moved > 0
 
 
-def test_batch_sphere_patches_are_palpations(stomach, supported):
-    from almsdm_warp.batch.batch_palpation import sphere_patches
+def test_sphere_patches_follow_their_rule_in_any_chunking(stomach, supported):
+    """The one patch rule (Palpation's ring 0 and the batch's, region.patch.sphere_patches) against a
+    loop over the surface: within sqrt(2 R d) plus the longest edge, facing the probe, and the contact."""
+    import math
+
+    from almsdm_warp.region.patch import sphere_patches
 
     contacts = [0, 17, 311, 500, 693, 1001]
     pal = Palpation(stomach, rings=2, device="cpu", probe_radius=0.006)
     offsets, ids = sphere_patches(pal.model, np.array(contacts), 0.006, 0.008, chunk=4)  # chunks of 4: two of them
+    x, normals = stomach.vertices, pal.model.vertex_normal_rest
+    reach = math.sqrt(2 * 0.006 * 0.008) + float(stomach.edge_rest_length.max())
     for b, v in enumerate(contacts):
-        np.testing.assert_array_equal(ids[offsets[b] : offsets[b + 1]], pal.sphere_patch(v, 0.008))
+        expected = sorted({v} | {int(s) for s in stomach.surface_vertices
+                                 if math.dist(x[s], x[v]) <= reach and float(np.dot(normals[s], normals[v])) > 0.0})
+        np.testing.assert_array_equal(ids[offsets[b] : offsets[b + 1]], expected)
+        np.testing.assert_array_equal(pal.sphere_patch(v, 0.008), expected)
 
 
 def test_batch_sphere_on_anchors_is_winklers_foundation(device, anchor_bed):

@@ -156,7 +156,7 @@ def test_every_output_written_whole_and_none_left_from_a_run_that_fails(tmp_path
     assert data["probe"] == "stroke" and "contact_vertex" not in data  # no one vertex for a stroke: the path is the Probe's
 
     # a run that fails half way leaves no file and no temporary
-    from almsdm_warp.protocol.palpation import SimulationDiverged
+    from almsdm_warp.solvers.stepper import SimulationDiverged
     from almsdm_warp.protocol.stroke import ProbeStroke
 
     for p in files.values():

@@ -1,4 +1,4 @@
-"""Vertex normals (kernels/normals.py, almsdm_warp/sim/normals.py) against independent answers:
+"""Vertex normals (kernels/region/normals.py, almsdm_warp/sim/normals.py) against independent answers:
 trimesh's normals on the rest shape, a float64 NumPy sum on deformed shapes, and the three
 strategies against each other, on every device; surface meshes and a tet mesh's surface."""
 

@@ -245,7 +245,7 @@ def test_runaway_under_the_critical_step_is_not_blamed_on_dt(device, integrator)
     it): the state runs away, and the error said 'dt = 1 ms exceeds the critical step of about
     1.609 ms', which is false (and meaningless for the implicit integrator). It now says what
     happened."""
-    from almsdm_warp.protocol.palpation import SimulationDiverged
+    from almsdm_warp.solvers.stepper import SimulationDiverged
 
     scene, mesh = scene_and_mesh()
     p = Palpation(mesh, scene.tissue, rings=4, integrator=integrator, dt=1e-3, device=device)

@@ -191,7 +191,7 @@ def test_probe_on_a_fixed_neighbour_gives_no_nan(device, integrator):
 
 def linear_backward_euler(tri, q, qd, dt):
     """One step of (M + dt C + dt^2 K) dv = dt (f0 - dt K v0) for vertex 0 (3x3, float64), with K and
-    C as kernels/forces.py (spring_block) documents them: K_e = ke (d d^T + max(1 - L0/l, 0) (I - d d^T)), C_e = kd d d^T."""
+    C as kernels/laws/springs.py (spring_block) documents them: K_e = ke (d d^T + max(1 - L0/l, 0) (I - d d^T)), C_e = kd d d^T."""
     t = tri.tissue
     q = np.asarray(q, dtype=np.float32).astype(np.float64)
     qd = np.asarray(qd, dtype=np.float32).astype(np.float64)

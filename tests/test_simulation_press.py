@@ -17,7 +17,8 @@ from helpers import spring_stiffness_matrix
 
 from almsdm_warp import Region
 from almsdm_warp.sim.model import PROBE_DISPLACEMENT, PROBE_OFF
-from almsdm_warp.protocol.palpation import Palpation, SimulationDiverged
+from almsdm_warp.protocol.palpation import Palpation
+from almsdm_warp.solvers.stepper import SimulationDiverged
 from almsdm_warp.scene.loader import resolve_scene_or_mesh
 
 DEPTH = 10.0e-3  # [m]

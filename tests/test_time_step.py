@@ -14,7 +14,8 @@ from almsdm_warp.batch.batch_palpation import BatchPalpation
 from almsdm_warp.checks import LIMITS, substeps_for
 from almsdm_warp.cli.main import main
 from almsdm_warp.errors import InputError
-from almsdm_warp.protocol.palpation import Palpation, SimulationDiverged
+from almsdm_warp.protocol.palpation import Palpation
+from almsdm_warp.solvers.stepper import SimulationDiverged
 from almsdm_warp.region.contact import top_vertex
 from almsdm_warp.scene.loader import resolve_scene_or_mesh
 from almsdm_warp.sim.model import PROBE_DISPLACEMENT, Model

@@ -1,9 +1,9 @@
 """Many palpations at once on one mesh: B contacts, each with its own region, probe and state.
 
 ``BatchPalpation(mesh).touch(vertices)`` builds B ring regions on the device in one launch
-(kernels/batch_rings.py); ``press(depth, ramp, hold, settle)`` runs the press protocol of
+(kernels/region/batch_rings.py); ``press(depth, ramp, hold, settle)`` runs the press protocol of
 ``Palpation.press`` on all of them, many steps per launch, one block per palpation with the
-region on chip on CUDA (kernels/batch_press_fast.py; the exact kernel, kernels/batch_press.py,
+region on chip on CUDA (kernels/explicit/batch_fast.py; the exact kernel, kernels/explicit/batch.py,
 on the CPU). The physics, summation order and integration formula are the one-palpation explicit
 step's, so a palpation of the exact kernel gives the same bits as ``Palpation`` on the same device.
 """
@@ -19,19 +19,18 @@ import warp as wp
 from ..mesh.device_mesh import check_vertex
 from ..kernels.arrays import BatchPress, BatchRegionArrays, BatchSphere, struct_from
 from ..kernels.explicit import batch as bk
-from ..kernels.implicit.block_cg import CGScratch
 from ..kernels.explicit import batch_fast as bkf
-from ..kernels.implicit import batch as bki
 from ..kernels.region import batch_rings as br
-from ..checks import LIMITS, fixed_substeps, substeps_for
-from ..protocol.palpation import PATCH_DEPTH, SimulationDiverged, check_probe_radius, force_bound
+from ..checks import fixed_substeps, substeps_for
+from ..protocol.palpation import PATCH_DEPTH, check_probe_radius
+from ..solvers import integrators, solver_class
+from ..solvers.stepper import check_results, force_bound, plan_substeps
 from ..sim.model import Model
+from ..region.patch import sphere_patches
 from ..region.region import check_rings
 
 
 KERNELS = ("fast", "exact")
-BATCH_INTEGRATORS = ("explicit", "implicit")
-"""The integrators a batch has kernels for (kernels/batch_press*.py), a subset of solvers.INTEGRATORS."""
 
 
 def host_copy(a: wp.array) -> np.ndarray:
@@ -98,29 +97,6 @@ def _pow2(n: int, minimum: int = 1) -> int:
     return max(minimum, 1 << max(int(n) - 1, 0).bit_length())
 
 
-def sphere_patches(model, vertices, radius: float, depth: float, chunk: int = 1024):
-    """Each contact's sphere patch as CSR (offsets [B + 1], sorted vertex ids), by Palpation.sphere_patch's
-    rule, vectorised: the surface vertices within sqrt(2 R d) plus the mesh's longest edge of the
-    contact, facing the probe (rest normals within 90 degrees of the contact's), and the contact itself."""
-    mesh = model.mesh
-    n = mesh.vertex_count
-    surface = np.zeros(n, dtype=bool)
-    surface[mesh.surface_vertices] = True
-    normals = model.vertex_normal_rest
-    reach = math.sqrt(2.0 * radius * max(float(depth), 0.0)) + float(mesh.edge_rest_length.max(initial=0.0))
-    counts, ids = [], []
-    for begin in range(0, len(vertices), chunk):
-        v = vertices[begin : begin + chunk]
-        near = np.linalg.norm(mesh.vertices[None, :, :] - mesh.vertices[v][:, None, :], axis=2) <= reach
-        mask = near & (normals[v] @ normals.T > 0.0) & surface[None, :]
-        mask[np.arange(len(v)), v] = True
-        rows, cols = np.nonzero(mask)
-        counts.append(np.bincount(rows, minlength=len(v)))
-        ids.append(cols)
-    offsets = np.concatenate([[0], np.cumsum(np.concatenate(counts))])
-    return offsets.astype(np.int32), np.concatenate(ids).astype(np.int32)
-
-
 @dataclass
 class BatchResult:
     """One press at each of B contact vertices (SI inside; the properties give people's units)."""
@@ -145,7 +121,7 @@ class BatchResult:
 
 
 class BatchRegions:
-    """Compacted per-palpation regions of fixed capacity, on the device (see kernels/batch_rings.py)."""
+    """Compacted per-palpation regions of fixed capacity, on the device (see kernels/region/batch_rings.py)."""
 
     def __init__(self, batch_size: int, vertex_capacity: int, entry_capacity: int, rings: int, device, zeros=True, buffers=None):
         # zeros=False: left uninitialised, for a gather that writes every element (RegionTable.gather);
@@ -277,8 +253,9 @@ class BatchPalpation:
             raise ValueError(f"dt must be > 0, got {dt}")
         self.frame_dt = float(dt)
         """The frame [s]: the dt asked for; the kernels step `dt`, the frame over its substeps."""
-        if integrator not in BATCH_INTEGRATORS:
-            raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(BATCH_INTEGRATORS)})")
+        if integrator not in integrators(batch=True):
+            solver_class(integrator)  # an unknown name: the registry's error
+            raise ValueError(f"the {integrator} integrator has no batch press (those that have: {', '.join(integrators(batch=True))})")
         self.integrator = self.requested_integrator = integrator
         self._fixed_substeps = fixed_substeps(substeps)
         # substeps (explicit steps a frame), critical_dt [s] of the batch's free vertices and notes (what
@@ -372,28 +349,25 @@ class BatchPalpation:
     step_dt = dt
 
     def plan_substeps(self) -> None:
-        """Substeps of the explicit integrator for the batch's regions (or the implicit fall-back)."""
-        self.integrator, self.substeps = self.requested_integrator, 1
-        if self.integrator != "explicit":
-            return
+        """Substeps of the explicit integrator for the batch's regions (or the implicit fall-back):
+        solvers.stepper.plan_substeps over the critical step of the batch's free vertices together."""
+        plan = plan_substeps(self.requested_integrator, self.frame_dt, self._union_critical_dt, self._fixed_substeps, "the batch")
+        if plan.note and plan.note not in self.notes:
+            self.notes.append(plan.note)
+        self.integrator, self.substeps, self.critical_dt = plan.integrator, plan.substeps, plan.critical_dt
+
+    def _union_critical_dt(self) -> float:
+        # the critical step of the union of the batch's free vertices (Model.critical_dt), cached by
+        # that set; critical_dt_bound where one substep is stable under it (no shorter: the same substeps)
         bound = self.critical_dt_bound
         if not self._fixed_substeps and bound is not None and substeps_for(self.frame_dt, (1 - 1e-4) * bound) == 1:
-            self.critical_dt = bound  # the union's critical step is at least this: one substep
-            return
+            return bound
         rv = host_copy(self.regions.region_vertex)
         free = rv[np.arange(rv.shape[1])[None, :] < self.free_vertex_counts[:, None]]
         key = np.unique(free).tobytes()
         if key not in self._critical_cache:
             self._critical_cache[key] = self.model.critical_dt(np.unique(free))
-        self.critical_dt = crit = self._critical_cache[key]
-        n = self._fixed_substeps or substeps_for(self.frame_dt, crit)
-        if n > LIMITS["substeps"]:
-            note = (f"the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {self.frame_dt * 1e3:g} ms "
-                    f"(critical step {crit * 1e3:.3g} ms): the batch runs the implicit integrator instead")
-            if note not in self.notes:
-                self.notes.append(note)
-            self.integrator, n = "implicit", 1
-        self.substeps = n
+        return self._critical_cache[key]
 
     def _checked_vertices(self, vertices) -> np.ndarray:
         verts = np.asarray(vertices)
@@ -548,36 +522,11 @@ class BatchPalpation:
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
         self.press_arrays = struct_from(BatchPress, self)
         br.rest_states(self)
-        if self.integrator == "implicit":
-            self._implicit_press(total, on_launch)
-            return
-        chunk = total if steps_per_launch is None else max(int(steps_per_launch), 1)
-        for begin in range(0, total, chunk):
-            count = min(chunk, total - begin)
-            self.launch_steps(begin, count)
-            if on_launch is not None:
-                on_launch(count)
-
-    def _implicit_press(self, total, on_launch):
-        # two states (the fixed ring at rest in both) and CG scratch per palpation; one launch a step
-        d, r = self.device, self.regions
-        other = (wp.clone(self.q_state), wp.clone(self.qd_state))
-        scratch = CGScratch(r.vertex_capacity, r.entry_capacity, d, rows=self.batch_size)
-        states = [(self.q_state, self.qd_state), other]
-        for s in range(total):
-            bki.step_batch(self, s, states[s % 2], states[1 - s % 2], scratch, self.cg_max_iterations, self.cg_tolerance)
-            if on_launch is not None and (s % 100 == 99 or s == total - 1):
-                on_launch(s % 100 + 1)
-        if total % 2 == 1:  # the last step wrote the other state
-            wp.copy(self.q_state, other[0])
-            wp.copy(self.qd_state, other[1])
+        solver_class(self.integrator).press_batch(self, total, steps_per_launch, on_launch)
 
     def launch_steps(self, begin: int, count: int) -> None:
-        """Launch steps begin..begin+count of the press scheduled by start_press (no wait)."""
-        if self.kernel == "fast":
-            bkf.press_batch_fast(self, begin, count)
-        else:
-            bk.press_batch(self, begin, count)
+        """Launch steps begin..begin+count of the explicit press scheduled by start_press (no wait)."""
+        solver_class("explicit").launch_batch_steps(self, begin, count)
 
     def finish_press(self) -> BatchResult:
         """Wait for the press and read it back (the force magnitudes as Palpation's host code takes them)."""
@@ -609,15 +558,8 @@ class BatchPalpation:
     def _check_results(self, peak, hold, recovery) -> None:
         """SimulationDiverged naming the first palpation whose force or recovery is not finite or runs away."""
         size = float(np.ptp(self.mesh.vertices, axis=0).max())
-        bad = ~(np.isfinite(peak) & np.isfinite(hold) & np.isfinite(recovery))
-        bad |= (peak > self._bound) | (recovery > 2.0 * size)
-        if np.any(bad):
-            b = int(np.flatnonzero(bad)[0])
-            raise SimulationDiverged(
-                f"the batch's {self.integrator} integrator diverged at {int(bad.sum())} of {self.batch_size} contacts, the "
-                f"first at vertex {int(self.vertices[b])} (peak force {peak[b]:.3g} N, recovery {recovery[b] * 1e3:.3g} mm; "
-                f"dt {self.frame_dt * 1e3:g} ms in {self.substeps} substep(s), critical step {self.critical_dt * 1e3:.3g} ms)"
-            )
+        check_results(f"batch's {self.integrator}", self.vertices, peak, recovery, self._bound, size, self.frame_dt,
+                      self.substeps, self.critical_dt, hold=hold)
 
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, **kw) -> BatchResult:
         """Press every contact: ramp to `depth` [m] along the inward normal over `ramp` [s], hold

@@ -31,7 +31,7 @@ from ..checks import AUTO, check_limit, check_protocol, check_value, describe
 from ..errors import InputError
 from ..export.output import atomic_write, check_regular
 from ..export.tables import TableLayout
-from ..solvers import INTEGRATORS
+from ..solvers import integrators
 from .sampling import pressable_points, sample_points
 from .sweep import run_local
 from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, check_sphere_travel
@@ -135,8 +135,8 @@ def load_spec(path) -> DatasetSpec:
     spec = DatasetSpec(scenes=_scenes(ds, p, where), points=_int(ds, "points", where, "[dataset]", None), source=data)
     spec.rings = _int(ds, "rings", where, "[dataset]", None, required=False)
     spec.integrator = ds.get("integrator", "explicit")
-    if spec.integrator not in INTEGRATORS:
-        raise InputError(f"{where}: [dataset] integrator {spec.integrator!r} is not one of {', '.join(INTEGRATORS)}")
+    if spec.integrator not in integrators(batch=True):
+        raise InputError(f"{where}: [dataset] integrator {spec.integrator!r} is not one of {', '.join(integrators(batch=True))}")
     spec.dt = _number(ds, "dt_ms", where, "[dataset]", 1.0, "> 0") / 1000.0
     spec.maps = ds.get("maps", "scene")
     if spec.maps not in MAPS:

@@ -16,7 +16,7 @@ from .sweep_times import SweepTimes
 
 def checked_columns(columns: dict) -> dict:
     """`columns`, or SimulationDiverged where a number is not finite: a sweep never writes one."""
-    from ..protocol.palpation import SimulationDiverged
+    from ..solvers.stepper import SimulationDiverged
 
     for name, values in columns.items():
         bad = np.flatnonzero(~np.isfinite(values))

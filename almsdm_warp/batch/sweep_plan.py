@@ -157,7 +157,9 @@ class SweepPlan:
 def sweep_critical_dt(plan: SweepPlan) -> float | None:
     """The whole mesh's critical step [s] (a bound of every region's, BatchPalpation.critical_dt_bound)
     for an explicit plan, computed once a sweep; None for an implicit one."""
-    return plan.critical_dt() if plan.integrator == "explicit" else None
+    from ..solvers import solver_class
+
+    return plan.critical_dt() if solver_class(plan.integrator).conditionally_stable else None
 
 
 def press_steps(plan: SweepPlan) -> int:

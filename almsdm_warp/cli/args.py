@@ -203,11 +203,11 @@ MATERIAL_FLAGS = {
 Any of them switches the run to the material model (tissue/material.py) with the scene's values as defaults."""
 
 
-def add_integrator_arg(parser) -> None:
-    """--integrator, the names of solvers.INTEGRATORS (palpate, trace)."""
-    from ..solvers import INTEGRATORS
+def add_integrator_arg(parser, batch: bool = False) -> None:
+    """--integrator, the names of solvers.INTEGRATORS (with batch, those that press a batch: sweep)."""
+    from ..solvers import integrators
 
-    parser.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
+    parser.add_argument("--integrator", choices=integrators(batch), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
 
 
 def add_probe_radius_arg(parser) -> None:

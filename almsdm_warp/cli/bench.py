@@ -43,13 +43,15 @@ def cmd_bench(args) -> int:
     blocks, steps = (2, 200) if args.quick else (args.blocks, 2000)
     single = []
     print("single palpation (probe held 5 mm in, force read every step):")
-    for integrator in ("explicit", "implicit"):
+    from ..solvers import INTEGRATORS
+
+    for integrator in INTEGRATORS:
         for rings in sorted({1, 2, 3, 4, args.rings}):  # --rings: the batch's, also single for the ratio
             row = measure(mesh, rings, integrator, device.alias, blocks, steps)
             single.append({k: row[k] for k in ("rings", "integrator", "steps_per_s", "step_us_median")})
             print(f"  {rings} rings {integrator}: {row['step_us_median']:.2f} us/step, {row['steps_per_s']:,.0f} steps/s")
     glob = []
-    for integrator in ("explicit", "implicit"):
+    for integrator in INTEGRATORS:
         row = measure(mesh, "global", integrator, device.alias, max(blocks // 5, 1), max(steps // 10, 20))
         glob.append({"integrator": integrator, "steps_per_s": row["steps_per_s"]})
         print(f"  global {integrator}: {row['step_us_median']:.1f} us/step, {row['steps_per_s']:,.0f} steps/s")

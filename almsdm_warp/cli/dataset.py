@@ -21,7 +21,7 @@ def cmd_dataset(args, devices: list[str]) -> int:
     from ..batch import dataset as ds
     from ..errors import InputError
     from ..progress import Progress
-    from ..protocol.palpation import SimulationDiverged
+    from ..solvers.stepper import SimulationDiverged
     from ..checks import check_region_steps
     from .args import MATERIAL_FLAGS, quiet_warp
 

@@ -119,7 +119,7 @@ class _Run:
 def cmd_palpate(args) -> int:
     """Press the probe into a scene or mesh, report force, recovery and speed."""
     from ..export.writers import check_output, write_output
-    from ..protocol.palpation import SimulationDiverged
+    from ..solvers.stepper import SimulationDiverged
     from .record import check_record_args
 
     if args.json:
@@ -256,7 +256,7 @@ def _report_model(args, run: _Run, pal):
 def _press(args, run: _Run, pal) -> list:
     """Run the presses with the progress bar and the recording; print and return their results."""
     from ..progress import Progress
-    from ..protocol.palpation import SimulationDiverged
+    from ..solvers.stepper import SimulationDiverged
     from .record import Recording
 
     dt, ramp, hold, settle = run.dt, run.ramp, run.hold, run.settle

@@ -9,11 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..checks import LIMITS, check_limit, check_protocol, check_region_steps, check_ring_count, substeps_for
+from ..checks import LIMITS, check_limit, check_protocol, check_region_steps, check_ring_count
 from ..errors import InputError
-from ..solvers import INTEGRATORS
 from .dataset import add_dataset_arg, cmd_dataset
-from .args import (auto_tol, add_tissue_args, count_arg, get_device, number_arg, print_notes, quiet_warp, rings_arg,
+from .args import (auto_tol, add_integrator_arg, add_tissue_args, count_arg, get_device, number_arg, print_notes, quiet_warp, rings_arg,
                    scene_with_tissue_args)
 
 
@@ -35,7 +34,7 @@ def add_parser(sub) -> None:
     p.add_argument("--ramp-s", type=number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
     p.add_argument("--hold-s", type=number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
     p.add_argument("--settle-s", type=number_arg(">= 0"), default=None, metavar="S", help="settle window [s] (default: the scene's)")
-    p.add_argument("--integrator", choices=tuple(INTEGRATORS), default="explicit", help="explicit (semi-implicit Euler, the paper's; default) or implicit (backward Euler, CG: one thread a palpation)")
+    add_integrator_arg(p, batch=True)
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=None, metavar="MS", help="frame [ms] (default 1); the explicit integrator takes it in substeps under 0.9 x the critical step")
     p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
@@ -97,7 +96,7 @@ def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_s
     from ..batch.sweep import run_local, run_ray
     from ..batch.sweep_plan import SWEEP_TABLE, press_steps
     from ..progress import Progress
-    from ..protocol.palpation import SimulationDiverged
+    from ..solvers.stepper import SimulationDiverged
 
     out, steps, t0 = Path(args.out), press_steps(plan), time.perf_counter()
     try:
@@ -202,17 +201,14 @@ def _plan(args, devices, times):
 
 def _substeps(plan) -> int:
     """The explicit substeps a frame of the plan takes at most (the whole mesh's critical step bounds
-    every region's), or 1 after switching the plan to the implicit integrator past LIMITS["substeps"]."""
-    if plan.integrator != "explicit":
-        return 1
-    crit = plan.critical_dt()
-    n = substeps_for(plan.dt, crit)
-    if n > LIMITS["substeps"]:
-        print(f"note: the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {plan.dt * 1e3:g} ms "
-              f"(critical step {crit * 1e3:.3g} ms): the sweep runs the implicit integrator instead")
-        plan.integrator = "implicit"
-        return 1
-    return n
+    every region's), or 1 after switching the plan to the implicit fall-back (solvers.stepper.plan_substeps)."""
+    from ..solvers.stepper import plan_substeps
+
+    steps = plan_substeps(plan.integrator, plan.dt, plan.critical_dt, None, "the sweep")
+    if steps.note:
+        print(f"note: {steps.note}")
+        plan.integrator = steps.integrator
+    return steps.substeps
 
 
 def _resume(out: Path, plan):
@@ -245,7 +241,7 @@ def _report(columns, left: int, steps: int, elapsed: float) -> None:
 
 def _size(plan, scene, scales, tol, progress):
     """--rings auto: the ring count of each point (sweep_auto.size_regions, on the CPU), timed and said."""
-    from ..protocol.palpation import SimulationDiverged
+    from ..solvers.stepper import SimulationDiverged
     from ..progress import Progress
     from ..batch.sweep_auto import rings_summary, size_regions
 

@@ -249,7 +249,7 @@ def _builtin_path(stroke, dt):
 def run_trace(args, stroke, times, centres, coupling) -> dict:
     """Step the stroke at every time of `times` with the probe at `centres` [m] (through the
     coupling where there is one); the trace's columns at every `--report-every`th step and the last."""
-    from ..protocol.palpation import SimulationDiverged
+    from ..solvers.stepper import SimulationDiverged
 
     n, every = len(times), args.report_every
     count = (n - 1) // every + 1 + ((n - 1) % every > 0)  # every Nth step and the last

@@ -29,7 +29,8 @@ def run_anatomy(settings, device, tasks, folder=None) -> dict:
     of a step of the 4-ring and the global model."""
     from .common import press_curve, shipped_scene
     from ..mesh.io import load_mesh
-    from ..protocol.palpation import Palpation, SimulationDiverged
+    from ..protocol.palpation import Palpation
+    from ..solvers.stepper import SimulationDiverged
 
     folder = shared_meshes_dir() if folder is None else Path(folder)
     if folder is None:

@@ -45,7 +45,8 @@ TABLE2_ROWS = (
 def run_recovery(settings, device, tasks) -> dict:
     """Fig. 9: `settings.presses` presses at the top of the stomach, 10 mm, explicit, dt 1 ms;
     the contact vertex's residual after each, for rings 1..4 and the unanchored global model."""
-    from ..protocol.palpation import Palpation, SimulationDiverged
+    from ..protocol.palpation import Palpation
+    from ..solvers.stepper import SimulationDiverged
 
     scene, mesh = paper_scene("stomach")
     vertex = top_vertex(mesh)

@@ -36,7 +36,7 @@ def classify(result) -> str:
 
 
 def _cell(pal, check_every) -> str:
-    from ..protocol.palpation import SimulationDiverged
+    from ..solvers.stepper import SimulationDiverged
 
     try:
         result = pal.press(DEPTH, RAMP, HOLD, SETTLE, check_every=check_every)

@@ -3,7 +3,7 @@
 Criterion (docs/adaptive.md). A region of N rings holds ring N at rest; against the global
 anchored model its largest displacement error is then the displacement ring N has in the global
 model (measured: equal to 4 digits on the stomach and the liver). Every few steps one kernel
-(kernels/ring_motion.py) returns the largest displacement of each free ring and a one-step Jacobi
+(kernels/region/ring_motion.py) returns the largest displacement of each free ring and a one-step Jacobi
 estimate u_J of the fixed ring's (each fixed vertex freed alone, its neighbours held). For a chain
 with anchors the Jacobi ratio rho = u_J / u_(N-1) is lambda / (1 + lambda^2), lambda the decay per
 ring, and freeing the whole far field multiplies u_J by (1 + lambda^2) / (1 - lambda^2): that is
@@ -27,7 +27,8 @@ import warp as wp
 from ..kernels.region.state import clear_region
 from ..kernels.region.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, PROBE_SPHERE
-from .palpation import Palpation, replayer
+from ..solvers.stepper import replayer
+from .palpation import Palpation
 from .schedule import PressSchedule
 
 MARGIN = 1.2

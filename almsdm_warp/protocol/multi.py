@@ -2,7 +2,7 @@
 
 The same Model, States and solver as one Palpation: a *patch* is a region with its own
 solver, and every patch's step (plus the drive of its probes' vertices) goes into one captured
-graph. Regions are grown from several seeds (kernels/rings.py), so merging two patches is
+graph. Regions are grown from several seeds (kernels/region/rings.py), so merging two patches is
 rebuilding one region from both probes' vertices with the larger ring count, which holds both.
 With `tol` and no `rings`, each patch grows as AdaptivePalpation's region does (the criterion in
 almsdm_warp.adaptive) and, once all its probes are off and it is back within `tol` of rest, is
@@ -24,8 +24,8 @@ from ..kernels.probes.multi import drive_probe_vertices
 from ..kernels.region.state import clear_region
 from ..kernels.region.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from ..checks import LIMITS, substeps_for
-from .palpation import PressResult, SimulationDiverged, capture_step_pair
+from ..solvers.stepper import capture_step_pair, check_results, force_bound, plan_substeps
+from .palpation import PressResult
 from ..region.region import Region, check_rings
 from ..solvers import make_solver, solver_class
 from .schedule import PressSchedule, check_press
@@ -109,7 +109,9 @@ class MultiPalpation:
     The other parameters are AdaptivePalpation's. Probe i holds ``vertices[i]``. As Palpation's,
     the explicit integrator takes each frame of dt in `substeps` under 0.9 x the critical step of
     the patches' free vertices together (re-planned whenever the patches change); past
-    LIMITS["substeps"] a step raises SimulationDiverged: use the implicit integrator.
+    LIMITS["substeps"] it runs the implicit integrator instead and says so in `notes`
+    (solvers.stepper.plan_substeps). A press raises SimulationDiverged where a force or a
+    displacement is not finite or runs away.
     """
 
     def __init__(self, mesh, tissue=None, *, tol=1e-4, rings=None, integrator="explicit", dt=1e-3, device=None,
@@ -146,7 +148,11 @@ class MultiPalpation:
         self._dirty = True
         self.substeps, self._parity = 1, 1
         """Explicit steps in each frame of dt (1 for the implicit integrator)."""
-
+        self.critical_dt = math.inf
+        """Critical step [s] of the explicit integrator over the patches' free vertices (inf: not asked)."""
+        self.notes = []
+        """What the palpation changed on its own (a fall-back to the implicit integrator), one line each."""
+        self._bound = force_bound(self.model)
     @property
     def state(self):
         return self.states[self._cur]
@@ -236,25 +242,32 @@ class MultiPalpation:
             if int(i) not in held:
                 self.patches.append(Patch(self, [int(i)], self.start_rings))
         self._merge()
+        self._plan_substeps()
         driven = self.vertices[self._driven]
         for p in self.patches:
             p.set_driven(self.model, driven)
-        self._plan_substeps()
         self._graphs = None
         self._dirty = False
 
     def _plan_substeps(self):
-        """Substeps of the explicit integrator for the patches as they are now."""
+        """Substeps of the explicit integrator for the patches as they are now, or the implicit
+        fall-back (solvers.stepper.plan_substeps: every patch's solver then made anew)."""
         self.substeps, self._parity = 1, 1
-        if not self.patches or not solver_class(self.integrator).conditionally_stable:
+        if not self.patches:
             return
-        free = np.unique(np.concatenate([p.region.vertices()[: p.region.free_count] for p in self.patches]))
-        crit = self.model.critical_dt(free)
-        n = substeps_for(self.dt, crit)
-        if n > LIMITS["substeps"]:
-            raise SimulationDiverged(f"the explicit integrator would need more than {LIMITS['substeps']} substeps of dt "
-                                     f"{self.dt * 1e3:g} ms (critical step {crit * 1e3:.3g} ms): use integrator='implicit'")
-        self.substeps, self._parity = n, n & 1
+
+        def critical():
+            free = np.unique(np.concatenate([p.region.vertices()[: p.region.free_count] for p in self.patches]))
+            return self.model.critical_dt(free)
+
+        plan = plan_substeps(self.integrator, self.dt, critical, None, "the palpation")
+        if plan.integrator != self.integrator:
+            self.notes.append(plan.note)
+            self.integrator = plan.integrator
+            for p in self.patches:
+                p.solver = make_solver(self.model, self.integrator, **self.solver_kw)
+        self.critical_dt = plan.critical_dt
+        self.substeps, self._parity = plan.substeps, plan.substeps & 1
 
     # -- stepping ------------------------------------------------------------------------------
     def _launch_step(self, a, b):
@@ -357,8 +370,9 @@ class MultiPalpation:
             force[:, s] = np.linalg.norm(f, axis=1)
             q = self.state.particle_q.numpy()
             disp[:, s] = np.linalg.norm(q[self.vertices] - rest, axis=1)
-        if not np.all(np.isfinite(force)) or not np.all(np.isfinite(disp)):
-            raise FloatingPointError(f"the {self.integrator} integrator diverged: use a smaller dt or the implicit one")
+        size = float(np.ptp(self.mesh.vertices, axis=0).max())
+        check_results(self.integrator, self.vertices, force.max(axis=1), disp.max(axis=1), self._bound, size, self.dt,
+                      self.substeps, self.critical_dt)
         return [
             PressResult(
                 vertex=int(v), depth=float(depth), dt=self.dt, release_step=release, force=force[i], displacement=disp[i]

@@ -7,7 +7,6 @@ no allocation and no extra copy on the CPU (on CUDA, pinned buffers copied insid
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field
 
@@ -17,9 +16,11 @@ import warp as wp
 from ..kernels.probes.press import hold_probe
 from ..kernels.region.state import reset_vertices_left_behind
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE, Model
+from ..region.patch import sphere_patches
 from ..region.region import Region
 from ..solvers import make_solver
-from ..checks import LIMITS, fixed_substeps, substeps_for
+from ..solvers.stepper import SimulationDiverged, capture_step_pair, diverged, force_bound, plan_substeps
+from ..checks import fixed_substeps
 from .schedule import PressSchedule, check_press
 
 GLOBAL_MODELS = ("global", "global-free")
@@ -36,66 +37,6 @@ def check_probe_radius(radius) -> float:
     if not (math.isfinite(radius) and radius >= 0):
         raise ValueError(f"probe_radius must be >= 0 m and finite, got {radius}")
     return float(radius)
-
-
-def replayer(graph, device):
-    """A call that replays `graph` (and, on CUDA, waits for it so the pinned outputs are readable).
-
-    On the CPU it binds Warp's native replay of a live capture directly: `wp.capture_launch` checks
-    the graph's kind in Python first, ~0.3-0.8 us a step at these sizes (docs/performance.md).
-    """
-    if device.is_cpu:
-        try:
-            import warp._src.context as wpc
-
-            native = wpc.runtime.core.wp_apic_cpu_replay_state
-            state = graph.apic_state
-            if graph._native_graph is None and state is not None:
-                replay = functools.partial(native, state)
-                replay.graph = graph  # the graph owns `state`: keep it alive as long as the call
-                return replay
-        except AttributeError:  # another Warp version: the public path
-            pass
-        return functools.partial(wp.capture_launch, graph)
-
-    def replay():
-        wp.capture_launch(graph)
-        wp.synchronize_device(device)
-
-    return replay
-
-
-def capture_step_pair(launch_step, states, device):
-    """Two replays: launch_step(states[0], states[1]) and back, each captured once (see replayer)."""
-    replays = []
-    for i in (0, 1):
-        with wp.ScopedCapture(device=device, force_module_load=False) as cap:
-            launch_step(states[i], states[1 - i])
-        replays.append(replayer(cap.graph, device))
-    return replays
-
-
-class SimulationDiverged(RuntimeError):
-    """The simulation blew up: a force or position is not finite or beyond what the model can hold."""
-
-
-FORCE_BOUND_FACTOR = 100.0
-"""A feedback force beyond this many times the stiffest vertex's springs and anchor stretched by
-the mesh's size is a run that diverged (a press the model holds stays far under it)."""
-
-
-def force_bound(model) -> float:
-    """The largest feedback force [N] a run that has not diverged can report (see FORCE_BOUND_FACTOR)."""
-    mesh = model.mesh
-    e = mesh.edges
-    k = np.zeros(model.particle_count)
-    ke = model.spring_ke.numpy().astype(np.float64)
-    np.add.at(k, e[:, 0], ke)
-    np.add.at(k, e[:, 1], ke)
-    k += model.anchor_ke.numpy()
-    size = float(np.ptp(mesh.vertices, axis=0).max())
-    bound = FORCE_BOUND_FACTOR * float(k.max(initial=0.0)) * size
-    return bound if math.isfinite(bound) and bound > 0 else math.inf
 
 
 @dataclass
@@ -276,18 +217,13 @@ class Palpation:
         self._graphs = None
 
     def sphere_patch(self, vertex: int, depth: float) -> np.ndarray:
-        """Surface vertices the sphere may touch pressed `depth` [m] at `vertex`: within sqrt(2 R d)
-        (the contact circle's radius on a flat surface) plus the mesh's longest edge, facing the
-        probe (their rest normals within 90 degrees of the contact's); `vertex` among them."""
+        """Surface vertices the sphere may touch pressed `depth` [m] at `vertex` (region.patch.sphere_patches);
+        `vertex` among them."""
         from ..mesh.device_mesh import check_vertex
 
         vertex = check_vertex(self.mesh, vertex, "contact vertex")
-        surface = self.mesh.surface_vertices
-        x = self.mesh.vertices[surface]
-        reach = math.sqrt(2.0 * self.probe_radius * max(float(depth), 0.0)) + float(self.mesh.edge_rest_length.max(initial=0.0))
-        near = np.linalg.norm(x - self.mesh.vertices[vertex], axis=1) <= reach
-        facing = self.model.vertex_normal_rest[surface] @ self.model.vertex_normal_rest[vertex] > 0.0
-        return np.union1d(surface[near & facing], [vertex]).astype(np.int32)
+        offsets, ids = sphere_patches(self.model, np.array([vertex]), self.probe_radius, depth)
+        return ids[offsets[0] : offsets[1]]
 
     def expand(self, rings: int = 1) -> None:
         """Grow the local region by `rings` rings in place (during a press, too)."""
@@ -315,29 +251,20 @@ class Palpation:
         return self._critical_cache[key]
 
     def plan_substeps(self) -> None:
-        """Substeps of the explicit integrator for the current region (or the implicit fall-back)."""
+        """Substeps of the explicit integrator for the current region, or the implicit fall-back
+        (solvers.stepper.plan_substeps)."""
         self._graphs = None
-        if not self.solver.conditionally_stable:
-            self.substeps, self._parity = 1, 1
-            return
-        self.critical_dt = crit = self.region_critical_dt()
-        if self._fixed_substeps is not None:
-            self.substeps, self._parity = self._fixed_substeps, self._fixed_substeps & 1
-            return
-        n = substeps_for(self.dt, crit)
-        if n > LIMITS["substeps"]:
-            self.notes.append(
-                f"the explicit integrator would need more than {LIMITS['substeps']} substeps of dt {self.dt * 1e3:g} ms "
-                f"(critical step {crit * 1e3:.3g} ms): it runs the implicit integrator instead"
-            )
-            region = self.region
-            self.solver = make_solver(self.model, "implicit", **self._solver_kw)
-            if region is not None:
-                self.solver.set_region(region)
+        plan = plan_substeps(self.solver.integrator, self.dt, self.region_critical_dt, self._fixed_substeps, "the palpation")
+        if plan.integrator != self.solver.integrator:
+            self.notes.append(plan.note)
+            self.solver = make_solver(self.model, plan.integrator, **self._solver_kw)
+            if self.region is not None:
+                self.solver.set_region(self.region)
             else:
                 self.solver.set_global(anchors=(self.rings == "global"))
-            n = 1
-        self.substeps, self._parity = n, n & 1
+        if math.isfinite(plan.critical_dt):
+            self.critical_dt = plan.critical_dt
+        self.substeps, self._parity = plan.substeps, plan.substeps & 1
 
     # -- stepping ------------------------------------------------------------------------------
     def _launch_step(self, a, b):
@@ -395,11 +322,8 @@ class Palpation:
         """Raise SimulationDiverged for a feedback force that is not finite or beyond force_bound."""
         f = np.asarray(self._force_view, dtype=np.float64)
         at = "" if step_index is None else f" at step {step_index}"
-        raise SimulationDiverged(
-            f"the {self.solver.integrator} integrator diverged{at}: the feedback force {f.tolist()} N is not finite or "
-            f"more than {self._bound:.3g} N (dt {self.dt * 1e3:g} ms in {self.substeps} substep(s), critical step "
-            f"{self.critical_dt * 1e3:.3g} ms); the press is deeper, or its force larger, than the model holds"
-        )
+        raise diverged(self.solver.integrator, f"{at}: the feedback force {f.tolist()} N is not finite or more than "
+                                              f"{self._bound:.3g} N", self.dt, self.substeps, self.critical_dt)
 
     def _step_setup(self) -> np.ndarray:
         if self.vertex < 0:

@@ -2,7 +2,7 @@
 
 `ProbeStroke.step(centres)` puts each sphere's centre where the path says and returns the tissue's
 force on each. Contact is found on the device, from the current surface, by one pass over the
-region after each integrator step (kernels/stroke_contact.py), which also flags a sphere that
+region after each integrator step (kernels/probes/stroke.py), which also flags a sphere that
 comes within `guard` of the region's outer rings. The region is then rebuilt, between two steps,
 as `rings` rings around the patches the spheres may cover soon (the surface vertices at rest
 within `radius + lead` of each centre) and every vertex still moving (the trailing wake: its
@@ -20,7 +20,7 @@ the contact (its reaction is the internal force at the projected positions).
 The explicit integrator's substeps are planned once, from the critical step of the whole mesh's
 free vertices, which bounds every region's (a region's stiffness is a principal submatrix of the
 mesh's: Cauchy's interlacing), so a relocation solves no eigenproblem. Nor does it capture a graph:
-the explicit frame reads the region's counts from a device array (kernels/stroke_step.py), and the
+the explicit frame reads the region's counts from a device array (kernels/explicit/step.py), and the
 graphs captured at the first step, one per region buffer and state, serve every region.
 """
 
@@ -42,7 +42,8 @@ from ..kernels.probes.stroke import STROKE_COUNTS
 from ..kernels.arrays import ProbeArrays
 from ..region.region import Region
 from ..sim.model import PROBE_SPHERE
-from .palpation import Palpation, SimulationDiverged, check_probe_radius, replayer
+from ..solvers.stepper import diverged, replayer
+from .palpation import Palpation, check_probe_radius
 
 WAKE_TIME = 0.01
 """[s] A vertex faster than tol / WAKE_TIME is still moving: it stays free when the region moves."""
@@ -229,10 +230,8 @@ class ProbeStroke(Palpation):
         f = self._sphere_force.astype(np.float64)
         total = float(np.abs(f).sum())
         if not total < self._bound:
-            raise SimulationDiverged(
-                f"the {self.solver.integrator} integrator diverged: the spheres' forces {f.tolist()} N are not finite "
-                f"or more than {self._bound:.3g} N (dt {self.dt * 1e3:g} ms in {self.substeps} substep(s))"
-            )
+            raise diverged(self.solver.integrator, f": the spheres' forces {f.tolist()} N are not finite or more than "
+                                                  f"{self._bound:.3g} N", self.dt, self.substeps, self.critical_dt)
         return f[0] if single and self.probe_count == 1 else f
 
     @property
@@ -363,7 +362,7 @@ class ProbeStroke(Palpation):
         # one frame. The explicit frame reads its counts and the region's arrays from the current
         # buffer (_Slot): one graph per buffer and state, captured at the end of the first step, serves
         # every region, so a relocation captures nothing. The implicit solve takes its free count as a
-        # scalar (kernels/integrate_implicit.py): its frame is captured again after each relocation,
+        # scalar (kernels/implicit/step.py): its frame is captured again after each relocation,
         # at the second step (the first runs uncaptured).
         i = self._cur
         if self._frames is not None:

@@ -195,7 +195,7 @@ class Control:
         self.probe_move = wp.zeros(2, dtype=wp.vec3d, device=device)
         """The frame's move [m] in float64: [0] where it starts (the last frame's target), [1] its
         target (probe_target before rounding to float32), shape [2], vec3d. A frame of n > 1 substeps
-        sets probe_target to (s + 1) / n of this move before substep s (kernels/integrate_explicit.py)."""
+        sets probe_target to (s + 1) / n of this move before substep s (kernels/explicit/step.py)."""
         self.probe_reaction_peak = wp.zeros(1, dtype=wp.vec3, device=device)
         """Output: the largest probe_reaction over a frame's substeps [N], shape [1], vec3 (written by
         frames of more than one step)."""

@@ -86,3 +86,14 @@ class SolverBase:
     def integrate(self, state_in, state_out, control, dt: float) -> None:
         """One step of the free vertices (there are some): the integrator's own."""
         raise NotImplementedError
+
+    @staticmethod
+    def press_batch(batch, total: int, steps_per_launch: int | None, on_launch) -> None:
+        """Launch `total` steps of the press `batch` (a BatchPalpation) has scheduled, from its rest
+        states to its q_state / qd_state; on_launch(steps) after each launch (or group of steps)."""
+        raise NotImplementedError
+
+    @classmethod
+    def has_batch(cls) -> bool:
+        """Whether the integrator presses a batch too (overrides press_batch)."""
+        return cls.press_batch is not SolverBase.press_batch

@@ -1,7 +1,7 @@
 """Several probes at once: the probes' vertices driven.
 
 A region of several probes is one region grown from all their vertices (ring 0 = the seeds:
-kernels/rings.py), so two regions that touch merge by being rebuilt from the union of their seeds. The solver integrates
+kernels/region/rings.py), so two regions that touch merge by being rebuilt from the union of their seeds. The solver integrates
 the region's free vertices but the driven ones, which it treats like its fixed ring (known, their
 velocity kept through the step); `drive_probes` then puts each driven vertex where its probe
 holds it and writes the reaction, as the single-probe step does for its one probe.
