@@ -234,6 +234,7 @@ class BatchPalpation:
     ):
         self.probe_radius = check_probe_radius(probe_radius)
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
+        self.model.law_entry.require(integrator=integrator, path="batch")
         self.device = self.model.device
         held = self.model.support_mask if self.model.support_count else np.zeros(1, dtype=bool)
         self.support = wp.array(held.astype(np.int32), dtype=wp.int32, device=self.device)

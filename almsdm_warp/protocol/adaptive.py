@@ -93,6 +93,8 @@ class AdaptivePalpation(Palpation):
     press rebuilds it. ``rings_chosen`` and ``auto_reason`` say how large it grew and why.
     """
 
+    protocol = "adaptive"
+
     def __init__(self, mesh, tissue=None, *, tol=1e-4, start_rings=1, max_rings=64, check_interval=0.01, retire=True,
                  force_tol=FORCE_TOL, margin=MARGIN, **kw):
         if "rings" in kw:

@@ -106,11 +106,16 @@ class Palpation:
     fixed_below [m]: vertices with z below it are supported (fixed), as Model's. probe_radius [m]: 0, the
     paper's probe (the contact vertex is driven); > 0, a rigid sphere in frictionless one-sided
     contact with every free surface vertex it would contain, its region grown from the patch it
-    covers at full depth.
+    covers at full depth. law: the tissue law (almsdm_warp.tissue.laws.LAWS: "springs", the paper's;
+    "neo-hookean", stable neo-Hookean tets of a material on a tet mesh, explicit steps so far).
     """
 
+    protocol = "palpation"
+    """What this class is, as a tissue law's `paths` name it (a law without kernels for it is refused)."""
+
     def __init__(self, mesh, tissue=None, *, rings=4, integrator="explicit", dt=1e-3, device=None, capture=True,
-                 edge_scale=None, anchor_scale=None, fixed_below=None, substeps="auto", probe_radius=0.0, **solver_kw):
+                 edge_scale=None, anchor_scale=None, fixed_below=None, substeps="auto", probe_radius=0.0, law="springs",
+                 **solver_kw):
         if not (isinstance(rings, (int, np.integer)) and not isinstance(rings, bool)) and rings not in GLOBAL_MODELS:
             raise ValueError(f"rings must be an int >= 1 or one of {GLOBAL_MODELS}, got {rings!r}")
         if isinstance(rings, (int, np.integer)) and rings < 1:
@@ -118,7 +123,8 @@ class Palpation:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
         self.probe_radius = check_probe_radius(probe_radius)
-        self.model = Model(mesh, tissue, device, edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below)
+        self.model = Model(mesh, tissue, device, edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below, law=law)
+        self.model.law_entry.require(path=self.protocol)
         self.device = self.model.device
         self.mesh = self.model.mesh
         self.rings = rings

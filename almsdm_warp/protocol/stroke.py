@@ -131,6 +131,8 @@ class ProbeStroke(Palpation):
     step(centres) advances one frame of dt with the spheres at `centres` and returns their forces.
     """
 
+    protocol = "stroke"
+
     def __init__(self, mesh, tissue=None, *, probe_radius, rings=4, integrator="explicit", dt=1e-3, device=None,
                  fixed_below=None, probes=1, lead=None, margin=2, guard=None, tol=1e-5, capture=True, substeps="auto",
                  edge_scale=None, anchor_scale=None, **solver_kw):

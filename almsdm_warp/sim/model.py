@@ -68,6 +68,8 @@ class Model:
         self.tissue = t = tissue if tissue is not None else TissueParams()
         if not isinstance(t, (TissueParams, Material)):
             raise TypeError(f"tissue must be a TissueParams or a Material, got {type(t).__name__}")
+        if self.law_entry.check is not None:
+            self.law_entry.check(self.law, self.mesh, t)
         n, e = dm.vertex_count, dm.edge_count
         self.particle_count = n
         self.spring_count = e
@@ -115,6 +117,13 @@ class Model:
         """The arrays above as one kernel argument (kernels/arrays.py)."""
         self.spring_ke_host, self.spring_kd_host, self.anchor_ke_host, self.anchor_kd_host = ke, kd, ka, da
         """The constants above in float64 (host), as derived: the law's critical step reads them."""
+        if self.law != "springs" and (edge_scale is not None or anchor_scale is not None):
+            raise ValueError(f"the {self.law} law takes no per-spring or per-anchor scales (a lesion): they scale springs")
+        self.entry_offsets, self.entry_topology, self.entry_params = self.law_entry.entries(self)
+        """Each vertex's entries that its law's vertex_force gathers (kernels/laws): CSR offsets
+        [particle_count + 1], and per entry its topology and parameters, typed by the law (the springs
+        law: the CSR adjacency, each neighbour and its spring's constants; the neo-Hookean law: the
+        incident tets)."""
 
     def _tissue_constants(self, t):
         """(k_ij, d_ij per edge; k_i, d_i, m_i per vertex), float64 host arrays, from either tissue."""

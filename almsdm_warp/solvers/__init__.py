@@ -29,8 +29,11 @@ def integrators(batch: bool = False) -> tuple[str, ...]:
 
 
 def make_solver(model, integrator: str = "explicit", **kw) -> SolverBase:
-    """A solver of `integrator` on `model`; kw: the integrator's own options (implicit: cg_max_iterations, cg_tolerance)."""
-    return solver_class(integrator)(model, **kw)
+    """A solver of `integrator` on `model`; kw: the integrator's own options (implicit: cg_max_iterations, cg_tolerance).
+    ValueError where the model's tissue law has no kernels for it."""
+    cls = solver_class(integrator)
+    model.law_entry.require(integrator=integrator)
+    return cls(model, **kw)
 
 
 __all__ = ["INTEGRATORS", "SolverBase", "SolverExplicit", "SolverImplicit", "integrators", "make_solver", "solver_class"]

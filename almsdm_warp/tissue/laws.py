@@ -14,53 +14,27 @@ from ..errors import InputError
 from ..kernels.laws import LAWS as KERNEL_LAWS
 
 
-def springs_critical_dt(model, vertices=None, anchors: bool = True) -> float:
-    """Largest stable step [s] of semi-implicit Euler for the springs law, linearized at rest.
+def stable_step(mass, K, C, vertices=None, what: str = "") -> float:
+    """Largest stable step [s] of semi-implicit Euler for stiffness K and damping C (3n x 3n, sparse)
+    and lumped `mass` [n], over the free `vertices` (default: all; the others held fixed).
 
-    The stiffest mode of M^-1/2 K M^-1/2 over the free `vertices` (default: all; the others
-    held fixed) has eigenvalue w^2; with that mode's damping g = v^T M^-1/2 C M^-1/2 v, the
-    scheme is stable while dt <= (-g + sqrt(g^2 + 4 w^2)) / w^2 (for g = 0: 2 / w). An estimate:
-    a deep press adds geometric stiffness to the stretched springs.
-    """
+    The stiffest mode of M^-1/2 K M^-1/2 has eigenvalue w^2; with that mode's damping
+    g = v^T M^-1/2 C M^-1/2 v, the scheme is stable while dt <= (-g + sqrt(g^2 + 4 w^2)) / w^2
+    (for g = 0: 2 / w). InputError where K or C over the mass is not finite (`what` says whose)."""
     import scipy.sparse as sp
     from scipy.sparse.linalg import ArpackError, eigsh
 
-    n = model.particle_count
+    n = len(mass)
     free = np.arange(n) if vertices is None else np.unique(np.asarray(vertices, dtype=np.int64))
     if len(free) == 0:
         return float("inf")
-    e = model.mesh.edges.astype(np.int64)
-    d = model.mesh.vertices[e[:, 1]] - model.mesh.vertices[e[:, 0]]
-    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
-    ddt = d[:, :, None] * d[:, None, :]  # [e, 3, 3]
-    scale = 1.0 if anchors else 0.0
-
-    def assemble(edge_coef, vertex_coef):
-        blocks = edge_coef[:, None, None] * ddt
-        rows, cols, vals = [], [], []
-        for a, b, sign in ((0, 0, 1.0), (1, 1, 1.0), (0, 1, -1.0), (1, 0, -1.0)):
-            for r in range(3):
-                for c in range(3):
-                    rows.append(3 * e[:, a] + r)
-                    cols.append(3 * e[:, b] + c)
-                    vals.append(sign * blocks[:, r, c])
-        diag = np.repeat(vertex_coef * scale, 3)
-        rows.append(np.arange(3 * n))
-        cols.append(np.arange(3 * n))
-        vals.append(diag)
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
-
     dof = (3 * free[:, None] + np.arange(3)).ravel()
-    w = np.repeat(1.0 / np.sqrt(model.particle_mass_host), 3)[dof]
-    Winv = sp.diags(w)
+    Winv = sp.diags(np.repeat(1.0 / np.sqrt(mass), 3)[dof])
     with np.errstate(all="ignore"):  # an overflow is reported below, in words
-        K = Winv @ assemble(model.spring_ke_host, model.anchor_ke_host)[dof][:, dof] @ Winv
-        C = Winv @ assemble(model.spring_kd_host, model.anchor_kd_host)[dof][:, dof] @ Winv
+        K = Winv @ K[dof][:, dof] @ Winv
+        C = Winv @ C[dof][:, dof] @ Winv
     if not (np.all(np.isfinite(K.data)) and np.all(np.isfinite(C.data))):
-        raise InputError(
-            f"the model's stiffness or damping over mass is not finite (largest spring {model.spring_ke_host.max():.3g} N/m, "
-            f"anchor {model.anchor_ke_host.max():.3g} N/m; a lesion's stiffness_factor too large?): it has no stable step"
-        )
+        raise InputError(f"the model's stiffness or damping over mass is not finite ({what}): it has no stable step")
     if K.shape[0] <= 60:
         vals, vecs = np.linalg.eigh(K.toarray())
         lam, v = vals[-1], vecs[:, -1]
@@ -76,6 +50,55 @@ def springs_critical_dt(model, vertices=None, anchors: bool = True) -> float:
     return float((-g + np.sqrt(g * g + 4.0 * lam)) / lam)
 
 
+def _sparse(n: int, rows, cols, vals):
+    import scipy.sparse as sp
+
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
+
+
+def _vertex_diagonal(n: int, coef):
+    return [np.arange(3 * n)], [np.arange(3 * n)], [np.repeat(coef, 3)]
+
+
+def springs_matrices(model, anchors: bool = True):
+    """(K, C): the springs law's stiffness and damping at rest, 3n x 3n (springs along their edges, anchors)."""
+    n = model.particle_count
+    e = model.mesh.edges.astype(np.int64)
+    d = model.mesh.vertices[e[:, 1]] - model.mesh.vertices[e[:, 0]]
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
+    ddt = d[:, :, None] * d[:, None, :]  # [e, 3, 3]
+    scale = 1.0 if anchors else 0.0
+
+    def assemble(edge_coef, vertex_coef):
+        blocks = edge_coef[:, None, None] * ddt
+        rows, cols, vals = _vertex_diagonal(n, vertex_coef * scale)
+        for a, b, sign in ((0, 0, 1.0), (1, 1, 1.0), (0, 1, -1.0), (1, 0, -1.0)):
+            for r in range(3):
+                for c in range(3):
+                    rows.append(3 * e[:, a] + r)
+                    cols.append(3 * e[:, b] + c)
+                    vals.append(sign * blocks[:, r, c])
+        return _sparse(n, rows, cols, vals)
+
+    with np.errstate(all="ignore"):
+        return assemble(model.spring_ke_host, model.anchor_ke_host), assemble(model.spring_kd_host, model.anchor_kd_host)
+
+
+def springs_critical_dt(model, vertices=None, anchors: bool = True) -> float:
+    """Largest stable step [s] of semi-implicit Euler for the springs law, linearized at rest (stable_step).
+    An estimate: a deep press adds geometric stiffness to the stretched springs."""
+    K, C = springs_matrices(model, anchors)
+    return stable_step(model.particle_mass_host, K, C, vertices,
+                       f"largest spring {model.spring_ke_host.max():.3g} N/m, anchor {model.anchor_ke_host.max():.3g} N/m; "
+                       f"a lesion's stiffness_factor too large?")
+
+
+def springs_entries(model):
+    """The springs law's entries: each vertex's CSR adjacency (its springs) and their constants."""
+    dm = model.dmesh
+    return dm.adj_offsets, dm.adj_vertex, model.adj_spring
+
+
 def springs_stiffness_bound(model) -> float:
     """The stiffest vertex's springs and anchor together [N/m] (float32 constants as the device holds them)."""
     e = model.mesh.edges
@@ -85,6 +108,104 @@ def springs_stiffness_bound(model) -> float:
     np.add.at(k, e[:, 1], ke)
     k += model.anchor_ke.numpy()
     return float(k.max(initial=0.0))
+
+
+def lame(young: float, poisson: float) -> tuple[float, float]:
+    """(mu_0, lambda_0) [Pa] of Young's modulus [Pa] and Poisson's ratio."""
+    return young / (2.0 * (1.0 + poisson)), young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson))
+
+
+def check_volumetric(law: str, mesh, tissue) -> None:
+    """ValueError unless `mesh` has tets and `tissue` is a Material of Poisson's ratio in [0, 0.5)."""
+    from .material import Material
+
+    if not mesh.tet_count:
+        raise ValueError(f"the {law} law is a volumetric law: it needs a tet mesh, and {mesh.name} has no tetrahedra")
+    if not isinstance(tissue, Material):
+        raise ValueError(f"the {law} law needs a material (Young's modulus and Poisson's ratio), not the paper's per-spring constants")
+    if not 0.0 <= tissue.poisson_ratio < 0.5:
+        raise ValueError(f"the {law} law needs a Poisson's ratio in [0, 0.5), got {tissue.poisson_ratio}")
+
+
+def _tet_material(model):
+    # the tets (each oriented to a positive rest volume), their rest data, and (mu_0, lambda_0)
+    mesh, tissue = model.mesh, model.tissue
+    check_volumetric(model.law, mesh, tissue)
+    tets = mesh.tetrahedra.astype(np.int64).copy()
+    x = mesh.vertices
+    dm = np.stack([x[tets[:, c]] - x[tets[:, 0]] for c in (1, 2, 3)], axis=2)  # columns: edges from corner 0
+    det = np.linalg.det(dm)
+    flip = det < 0
+    tets[flip, 1], tets[flip, 2] = tets[flip, 2].copy(), tets[flip, 1].copy()
+    dm[flip, :, 0], dm[flip, :, 1] = dm[flip, :, 1].copy(), dm[flip, :, 0].copy()
+    det = np.abs(det)
+    if np.any(det <= 0):
+        bad = int(np.flatnonzero(det <= 0)[0])
+        raise ValueError(f"tet {bad} of {mesh.name} has no volume: the {model.law} law cannot hold it")
+    return tets, dm, det / 6.0, lame(tissue.youngs_modulus, tissue.poisson_ratio)
+
+
+def neo_hookean_entries(model):
+    """The neo-Hookean law's entries: each vertex's incident tets (vertex-to-tet CSR), each with the
+    tet's four vertex ids and its rest data (D_m^-1, V_0, mu, lambda = lambda_0 + mu_0, the corner)."""
+    import warp as wp
+
+    from ..kernels.laws.neo_hookean import TetEntry
+
+    tets, dm, volume, (mu, lam0) = _tet_material(model)
+    n = model.particle_count
+    corner_vertex = tets.ravel()
+    order = np.argsort(corner_vertex, kind="stable")  # by vertex, then tet, then corner
+    tet_of, corner = order // 4, order % 4
+    offsets = np.concatenate([[0], np.cumsum(np.bincount(corner_vertex, minlength=n))]).astype(np.int32)
+    dm_inv = np.linalg.inv(dm)
+    params = np.zeros(len(order), dtype=TetEntry.numpy_dtype())
+    params["dm_inv"] = dm_inv[tet_of]
+    params["volume"] = volume[tet_of]
+    params["mu"] = mu
+    params["lam"] = lam0 + mu
+    params["corner"] = corner
+    d = model.device
+    return (wp.array(offsets, dtype=wp.int32, device=d), wp.array(tets[tet_of].astype(np.int32), dtype=wp.vec4i, device=d),
+            wp.array(params, dtype=TetEntry, device=d))
+
+
+def tet_stiffness(model):
+    """Linear elasticity's stiffness at rest of the model's tets [N/m], 3n x 3n: the neo-Hookean law
+    linearized at rest (P1 tets, Lame parameters mu_0, lambda_0)."""
+    tets, dm, volume, (mu, lam) = _tet_material(model)
+    grads = np.linalg.inv(dm)  # rows: gradients of the barycentric coordinates of corners 1..3
+    g = np.concatenate([-grads.sum(axis=1, keepdims=True), grads], axis=1)  # [m, 4, 3]
+    # K_ab = V (mu (g_a . g_b) I + mu g_b g_a^T + lambda g_a g_b^T)
+    dots = np.einsum("mai,mbi->mab", g, g)
+    rows, cols, vals = [], [], []
+    for a in range(4):
+        for b in range(4):
+            block = volume[:, None, None] * (mu * dots[:, a, b][:, None, None] * np.eye(3) + mu * np.einsum("mi,mj->mij", g[:, b], g[:, a])
+                                             + lam * np.einsum("mi,mj->mij", g[:, a], g[:, b]))
+            for r in range(3):
+                for c in range(3):
+                    rows.append(3 * tets[:, a] + r)
+                    cols.append(3 * tets[:, b] + c)
+                    vals.append(block[:, r, c])
+    return _sparse(model.particle_count, rows, cols, vals)
+
+
+def neo_hookean_critical_dt(model, vertices=None, anchors: bool = True) -> float:
+    """Largest stable step [s] of semi-implicit Euler for the neo-Hookean law linearized at rest (its
+    tets' linear elasticity, the anchors and the vertex dampers; stable_step). A deep press stiffens
+    a compressed tet: Palpation takes its substeps under 0.9 of this."""
+    n = model.particle_count
+    scale = 1.0 if anchors else 0.0
+    K = tet_stiffness(model) + _sparse(n, *_vertex_diagonal(n, model.anchor_ke_host * scale))
+    C = _sparse(n, *_vertex_diagonal(n, model.anchor_kd_host * scale))
+    return stable_step(model.particle_mass_host, K, C, vertices, f"E {model.tissue.youngs_modulus:.3g} Pa")
+
+
+def neo_hookean_stiffness_bound(model) -> float:
+    """The largest row sum of |K| of the tets at rest plus the stiffest anchor [N/m]."""
+    K = tet_stiffness(model)
+    return float(abs(K).sum(axis=1).max()) + float(model.anchor_ke_host.max(initial=0.0))
 
 
 @dataclass(frozen=True)
@@ -99,10 +220,28 @@ class Law:
     stiffness_bound: Callable[..., float]
     """stiffness_bound(model): the stiffest vertex's stiffness [N/m]: a force past many times that
     stiffness times the mesh's size has diverged (almsdm_warp.solvers.stepper)."""
+    entries: Callable
+    """entries(model): (offsets, topology, params), the device arrays of each vertex's entries that the
+    law's vertex_force gathers (Model.entry_offsets, entry_topology, entry_params)."""
+    integrators: tuple = ("explicit", "implicit")
+    """The integrators with kernels for this law."""
+    paths: tuple = ("palpation", "batch", "stroke", "multi", "adaptive")
+    """The protocols with kernels for this law."""
+    check: Callable | None = None
+    """check(law, mesh, tissue): ValueError where the law cannot model this mesh or tissue (before any work)."""
+
+    def require(self, integrator: str | None = None, path: str | None = None) -> None:
+        """ValueError where this law has no kernels for `integrator` or the protocol `path`."""
+        if integrator is not None and integrator not in self.integrators:
+            raise ValueError(f"the {self.name} law has no {integrator} step (it has: {', '.join(self.integrators)})")
+        if path is not None and path not in self.paths:
+            raise ValueError(f"the {self.name} law has no kernels for a {path} (only: {', '.join(self.paths)})")
 
 
 LAWS = {
-    "springs": Law("springs", KERNEL_LAWS["springs"], springs_critical_dt, springs_stiffness_bound),
+    "springs": Law("springs", KERNEL_LAWS["springs"], springs_critical_dt, springs_stiffness_bound, springs_entries),
+    "neo-hookean": Law("neo-hookean", KERNEL_LAWS["neo-hookean"], neo_hookean_critical_dt, neo_hookean_stiffness_bound,
+                       neo_hookean_entries, integrators=("explicit",), paths=("palpation",), check=check_volumetric),
 }
 """Law name -> its entry."""
 

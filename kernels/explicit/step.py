@@ -43,17 +43,19 @@ def advance(x: wp.vec3, u: wp.vec3, dv: wp.vec3, dt: float):
 
 @functools.cache
 def region_kernel(law: str):
-    """The explicit one-region step of tissue law `law` (a key of kernels.laws.LAWS)."""
+    """The explicit one-region step of tissue law `law` (a key of kernels.laws.LAWS): its entries'
+    arrays are typed by the law (ENTRY_TOPOLOGY, ENTRY_PARAMS)."""
     vertex_force = LAWS[law].vertex_force
+    TOPOLOGY, PARAMS = LAWS[law].ENTRY_TOPOLOGY, LAWS[law].ENTRY_PARAMS
 
     @wp.kernel(module="unique", enable_backward=False)
     def integrate_region_explicit(
         free_vertex: wp.array(dtype=wp.int32),
         counts: wp.array(dtype=wp.int32),
         stride: int,
-        adj_offsets: wp.array(dtype=wp.int32),
-        adj_vertex: wp.array(dtype=wp.int32),
-        adj_spring: wp.array(dtype=wp.vec3),
+        entry_offsets: wp.array(dtype=wp.int32),
+        entry_topology: TOPOLOGY,
+        entry_params: PARAMS,
         q_rest: wp.array(dtype=wp.vec3),
         particle_mass: wp.array(dtype=wp.float32),
         anchor_ke: wp.array(dtype=wp.float32),
@@ -77,7 +79,7 @@ def region_kernel(law: str):
             x = q_in[v]
             u = qd_in[v]
             f = vertex_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale,
-                             adj_offsets[v], adj_offsets[v + 1], adj_vertex, adj_spring, 0, q_in, qd_in)
+                             entry_offsets[v], entry_offsets[v + 1], entry_topology, entry_params, 0, q_in, qd_in)
             if v == pv and mode != 0:
                 probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
             if v == pv and mode == 1:
@@ -133,12 +135,11 @@ def integrate_explicit(model, free_vertex, counts, threads, anchor_scale, state_
     read when the launch runs) by one semi-implicit Euler step of `dt` [s], on `threads` threads (1 on
     the CPU; on CUDA at least the free count); a Control with a sphere adds the sphere's contact (a
     second, one-thread launch)."""
-    dm = model.dmesh
     wp.launch(
         region_kernel(model.law),
         dim=threads,
         inputs=[
-            free_vertex, counts, threads, dm.adj_offsets, dm.adj_vertex, model.adj_spring, model.particle_q_rest,
+            free_vertex, counts, threads, model.entry_offsets, model.entry_topology, model.entry_params, model.particle_q_rest,
             model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale,
             control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force, dt,
             state_in.particle_q, state_in.particle_qd,

@@ -5,7 +5,8 @@ from the law's functions; the host's entry for the law (almsdm_warp/tissue/laws.
 critical step and its stiffness bound.
 """
 
-from . import springs
+from . import neo_hookean, springs
 
-LAWS = {"springs": springs}
-"""Law name -> its module of kernel functions (vertex_force, implicit_row)."""
+LAWS = {"springs": springs, "neo-hookean": neo_hookean}
+"""Law name -> its module of kernel functions (vertex_force; implicit_row and static_row where the law
+has them) and the types of its entries (ENTRY_TOPOLOGY, ENTRY_PARAMS: what a step kernel takes)."""

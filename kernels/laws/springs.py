@@ -22,6 +22,11 @@ import warp as wp
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
+ENTRY_TOPOLOGY = wp.array(dtype=wp.int32)
+"""Entry k of a vertex (its CSR adjacency): the neighbour at the spring's other end."""
+ENTRY_PARAMS = wp.array(dtype=wp.vec3)
+"""Entry k: its spring's (k_ij [N/m], d_ij [N s/m], rest length [m])."""
+
 EPS_LENGTH = 1.0e-9
 """Shorter springs than this [m] have no direction: their force is zero (no 1/0, no NaN)."""
 

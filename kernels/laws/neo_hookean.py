@@ -1,0 +1,86 @@
+"""Stable neo-Hookean linear tetrahedra: a volumetric law for tet meshes (Smith, de Goes & Kim 2018).
+
+Energy density of a tet with deformation gradient F = D_s D_m^-1 (D_s, D_m: its edge vectors from
+corner 0, deformed and at rest):
+
+    Psi(F) = mu / 2 (tr(F^T F) - 3) + lambda / 2 (J - alpha)^2,    J = det F,   alpha = 1 + mu / lambda
+
+defined through inversion (J <= 0: no log, no division), at rest stress-free. Linearized at rest it
+is linear elasticity of Lame parameters (mu, lambda - mu), so the model stores lambda = lambda_0 +
+mu_0 for a material's (mu_0, lambda_0) (almsdm_warp.tissue.laws). First Piola stress
+P = mu F + lambda (J - alpha) dJ/dF, dJ/dF = [f1 x f2, f2 x f0, f0 x f1] (f_i the columns of F); the
+tet's forces on corners 1..3 are the columns of -V_0 P D_m^-T, on corner 0 minus their sum.
+
+The law's entries are a vertex's incident tets (vertex-to-tet incidence, CSR): entry k holds the
+tet's four vertex ids (`ENTRY_TOPOLOGY`) and its rest data with the vertex's corner (`TetEntry`).
+`vertex_force` gathers them as the springs law gathers its springs: each tet's force is computed
+by each of its free corners (no atomics: the same bits on every run). Explicit steps only, so far.
+"""
+
+from typing import Any
+
+import warp as wp
+
+from .springs import anchor_force
+
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class TetEntry:
+    """One (tet, corner) incidence: the tet's rest data and which of its corners the vertex is."""
+
+    dm_inv: wp.mat33
+    """D_m^-1, the inverse of the rest edge matrix [1/m]."""
+    volume: float
+    """Rest volume V_0 [m^3]."""
+    mu: float
+    """mu [Pa]."""
+    lam: float
+    """lambda [Pa] (the material's lambda_0 + mu_0: see the module's docstring)."""
+    corner: int
+    """The vertex's corner in the tet, 0..3."""
+
+
+ENTRY_TOPOLOGY = wp.array(dtype=wp.vec4i)
+"""Entry k: the four vertex ids of its tet."""
+ENTRY_PARAMS = wp.array(dtype=TetEntry)
+"""Entry k: its tet's rest data and corner."""
+
+
+@wp.func
+def column(m: wp.mat33, c: int):
+    return wp.vec3(m[0, c], m[1, c], m[2, c])
+
+
+@wp.func
+def tet_corner_force(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, p: TetEntry):
+    # the tet's elastic force on its corner p.corner: -dE/dx with E = V_0 Psi(F)
+    F = wp.matrix_from_cols(x1 - x0, x2 - x0, x3 - x0) * p.dm_inv
+    f0 = column(F, 0)
+    f1 = column(F, 1)
+    f2 = column(F, 2)
+    J = wp.dot(f0, wp.cross(f1, f2))
+    dJ = wp.matrix_from_cols(wp.cross(f1, f2), wp.cross(f2, f0), wp.cross(f0, f1))
+    alpha = 1.0 + p.mu / p.lam
+    P = p.mu * F + (p.lam * (J - alpha)) * dJ
+    H = (-p.volume) * (P * wp.transpose(p.dm_inv))
+    if p.corner == 0:
+        return -(column(H, 0) + column(H, 1) + column(H, 2))
+    return column(H, p.corner - 1)
+
+
+@wp.func
+def vertex_force(
+    x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float,
+    begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, qd: Any,
+):
+    # the internal force on a vertex at x with velocity u: its anchor and damper (scaled by `scale`),
+    # eq. (3), then the elastic forces of its incident tets, entries begin..end (tet topology[k], rest
+    # data params[k + shift]; corner positions from q)
+    f = anchor_force(x, u, x_rest, ka, kda, scale)
+    for k in range(begin, end):
+        t = topology[k]
+        f += tet_corner_force(q[t[0]], q[t[1]], q[t[2]], q[t[3]], params[k + shift])
+    return f

@@ -1,0 +1,58 @@
+"""One palpation's CPU step with each tissue law on the same region, interleaved in one process.
+
+    python scripts/bench_laws.py [--rings 3] [--blocks 15] [--steps 1000]
+
+A 25 mm tet ball of 3 mm edges (mesh.primitives.tet_ball), E 10 kPa, nu 0.45, the top vertex held
+1 mm in, dt 0.1 ms in one substep (under both laws' critical steps); blocks of `steps`
+`Palpation.step()` calls alternate between the laws. Prints each law's median and best
+microseconds a step and their ratio. A benchmark, not a test.
+"""
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rings", type=int, default=3)
+    ap.add_argument("--blocks", type=int, default=15)
+    ap.add_argument("--steps", type=int, default=1000)
+    args = ap.parse_args(argv)
+    from almsdm_warp.warp_init import init_warp
+
+    init_warp()
+    from almsdm_warp.mesh.primitives import tet_ball
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.tissue.laws import LAWS
+    from almsdm_warp.tissue.material import Material
+
+    mesh = tet_ball(25.0, 3.0)
+    material = Material(youngs_modulus=10e3, poisson_ratio=0.45, density=1000.0, rayleigh_alpha=60.0)
+    top = int(np.argmax(mesh.vertices[:, 2]))
+    pals = {}
+    for law in LAWS:
+        p = Palpation(mesh, material, rings=args.rings, law=law, dt=1e-4, device="cpu", substeps=1)
+        p.touch(top)
+        p.set_probe(1, p.rest_position() + p.inward_normal() * 0.001)
+        for _ in range(300):
+            p.step()
+        pals[law] = p
+    first = next(iter(pals.values()))
+    print(f"{mesh.summary()}; {args.rings} rings: {first.region_vertices} region vertices, {first.solver.free_count} free")
+    times = {law: [] for law in pals}
+    for _ in range(args.blocks):
+        for law, p in pals.items():
+            t0 = time.perf_counter()
+            for _ in range(args.steps):
+                p.step()
+            times[law].append((time.perf_counter() - t0) / args.steps * 1e6)
+    base = statistics.median(times["springs"])
+    for law, t in times.items():
+        print(f"{law}: {statistics.median(t):.2f} us a step (median), best {min(t):.2f}; {statistics.median(t) / base:.2f} x springs")
+
+
+if __name__ == "__main__":
+    main()

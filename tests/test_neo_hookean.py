@@ -1,0 +1,130 @@
+"""The stable neo-Hookean tet law (kernels/laws/neo_hookean.py) against independent answers: the
+gradient of its energy by finite differences, linear elasticity at small strain (evaluation/fem.py's
+P1 tets, which share no code with the product), and the refusals of paths it has no kernels for yet."""
+
+import numpy as np
+import pytest
+import warp as wp
+
+from almsdm_warp.evaluation import fem
+from almsdm_warp.kernels.laws import neo_hookean
+from almsdm_warp.mesh.primitives import tet_ball
+from almsdm_warp.mesh.tissue_mesh import TissueMesh
+from almsdm_warp.protocol.palpation import Palpation
+from almsdm_warp.sim.model import Model
+from almsdm_warp.tissue.laws import lame
+from almsdm_warp.tissue.material import Material
+from almsdm_warp.tissue.params import TissueParams
+
+E, NU = 10e3, 0.3
+MATERIAL = Material(youngs_modulus=E, poisson_ratio=NU, density=1000.0, rayleigh_alpha=200.0)
+
+
+@wp.kernel
+def law_forces(offsets: wp.array(dtype=wp.int32), topology: neo_hookean.ENTRY_TOPOLOGY, params: neo_hookean.ENTRY_PARAMS,
+               q: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    v = wp.tid()
+    zero = wp.vec3(0.0)
+    out[v] = neo_hookean.vertex_force(q[v], zero, zero, 0.0, 0.0, 0.0, offsets[v], offsets[v + 1], topology, params, 0, q, q)
+
+
+def energy(x, tets, rest, mu0, lam0):
+    """Sum over tets of V_0 Psi(F), Psi = mu/2 (tr F^T F - 3) + lambda/2 (J - 1 - mu/lambda)^2, with
+    mu = mu_0 and lambda = lambda_0 + mu_0 (Smith, de Goes & Kim 2018), written out in NumPy."""
+    mu, lam = mu0, lam0 + mu0
+    total = 0.0
+    for t in tets:
+        Dm = np.stack([rest[t[c]] - rest[t[0]] for c in (1, 2, 3)], axis=1)
+        Ds = np.stack([x[t[c]] - x[t[0]] for c in (1, 2, 3)], axis=1)
+        F = Ds @ np.linalg.inv(Dm)
+        J = np.linalg.det(F)
+        total += abs(np.linalg.det(Dm)) / 6 * (mu / 2 * (np.trace(F.T @ F) - 3) + lam / 2 * (J - 1 - mu / lam) ** 2)
+    return total
+
+
+def two_tets():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], dtype=np.float64) * 1e-2
+    return TissueMesh.from_arrays(v * 1e3, tetrahedra=np.array([[0, 1, 2, 3], [1, 2, 3, 4]]), scale=1.0)
+
+
+def forces_at(model, x):
+    q = wp.array(x.astype(np.float32), dtype=wp.vec3, device=model.device)
+    out = wp.zeros(model.particle_count, dtype=wp.vec3, device=model.device)
+    wp.launch(law_forces, dim=model.particle_count, inputs=[model.entry_offsets, model.entry_topology, model.entry_params, q],
+              outputs=[out], device=model.device)
+    return out.numpy().astype(np.float64)
+
+
+@pytest.mark.parametrize("deformation", ["stretch", "shear and twist", "inverted"])
+def test_tet_forces_are_minus_the_energy_gradient(device, deformation):
+    mesh = two_tets()  # one tet in each orientation: the model orients them
+    model = Model(mesh, MATERIAL, device, law="neo-hookean")
+    rest = mesh.vertices
+    rng = np.random.default_rng(3)
+    if deformation == "stretch":
+        x = rest * np.array([1.3, 0.9, 1.1])
+    elif deformation == "shear and twist":
+        c, s = np.cos(0.4), np.sin(0.4)
+        x = rest @ np.array([[c, -s, 0.2], [s, c, 0.0], [0.0, 0.1, 1.0]]).T + rng.normal(0, 1e-3, rest.shape)
+    else:  # vertex 3 pushed through the opposite face of tet 0: J < 0
+        x = rest.copy()
+        x[3, 2] = -0.5e-2
+    mu0, lam0 = lame(E, NU)
+    got = forces_at(model, x)
+    h = 1e-7
+    want = np.zeros_like(x)
+    for i in range(len(x)):
+        for c in range(3):
+            xp, xm = x.copy(), x.copy()
+            xp[i, c] += h
+            xm[i, c] -= h
+            want[i, c] = -(energy(xp, mesh.tetrahedra, rest, mu0, lam0) - energy(xm, mesh.tetrahedra, rest, mu0, lam0)) / (2 * h)
+    np.testing.assert_allclose(got, want, rtol=2e-3, atol=2e-3 * np.abs(want).max())
+    assert np.abs(got).max() > 0.05  # a real deformation (E x area x strain ~ 0.1 N), not rounding
+
+
+def test_rest_and_rigid_motions_are_force_free(device):
+    mesh = two_tets()
+    model = Model(mesh, MATERIAL, device, law="neo-hookean")
+    c, s = np.cos(1.1), np.sin(1.1)
+    rotated = mesh.vertices @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T + 0.3
+    for x in (mesh.vertices, rotated):  # float32 rounding of the positions: ~1e-5 strain, 1e-5 N (30% strain: 0.1 N)
+        assert np.abs(forces_at(model, x)).max() < 1e-4
+
+
+def test_small_press_is_linear_elasticity(device):
+    """A 0.2 mm press of one vertex into a supported 10 mm ball: the explicit global model's hold force
+    within 1% of P1 linear elasticity on the same tets (fem.py; the springs law is 17% under it)."""
+    mesh = tet_ball(10.0, 3.0)
+    z_fix, depth = -5e-3, 0.2e-3
+    top = int(np.argmax(mesh.vertices[:, 2]))
+    pal = Palpation(mesh, MATERIAL, rings="global", law="neo-hookean", dt=1e-3, device=device, fixed_below=z_fix)
+    pal.touch(top)
+    result = pal.press(depth, ramp=0.05, hold=0.4, settle=0.01)
+    hold = result.force[result.release_step - 1]
+    x = mesh.vertices
+    fixed = np.zeros((len(x), 3), dtype=bool)
+    fixed[x[:, 2] < z_fix] = True
+    fixed[top] = True
+    values = np.zeros((len(x), 3))
+    values[top] = pal.inward_normal() * depth
+    _, reactions = fem.solve_dirichlet(fem.stiffness(x, mesh.tetrahedra.astype(np.int64), E, NU), fixed, values)
+    np.testing.assert_allclose(hold, np.linalg.norm(reactions.reshape(-1, 3)[top]), rtol=0.01)
+    assert pal.substeps > 1  # the tets' critical step, not the springs', sets the substeps
+
+
+def test_paths_without_kernels_are_refused():
+    mesh = two_tets()
+    with pytest.raises(ValueError, match="no implicit step"):
+        Palpation(mesh, MATERIAL, rings="global", law="neo-hookean", integrator="implicit", device="cpu")
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
+
+    with pytest.raises(ValueError, match="no kernels for a batch"):
+        BatchPalpation(model=Model(mesh, MATERIAL, "cpu", law="neo-hookean"))
+    with pytest.raises(ValueError, match="needs a material"):
+        Model(mesh, TissueParams(), "cpu", law="neo-hookean")
+    surface = TissueMesh.from_arrays(mesh.vertices[:4] * 1e3, triangles=np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]]))
+    with pytest.raises(ValueError, match="needs a tet mesh"):
+        Model(surface, MATERIAL, "cpu", law="neo-hookean")
+    with pytest.raises(ValueError, match="unknown tissue law"):
+        Model(mesh, MATERIAL, "cpu", law="hooke")
