@@ -89,7 +89,8 @@ def batch_kernel(law: str):
             # the springs from the mesh's CSR table: a free vertex's local entries are its mesh entries in order
             f, D, Kv, correction = implicit_row(
                 x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale, tissue.particle_mass[v], dt,
-                k0, regions.local_offsets[b, i + 1], neighbour, tissue.adj_spring, tissue.adj_offsets[v] - k0, q_in[b], qd_in[b],
+                k0, regions.local_offsets[b, i + 1], neighbour, tissue.adj_spring, tissue.adj_offsets[v] - k0,
+                k0, regions.local_offsets[b, i + 1], neighbour, q_in[b], qd_in[b],
                 neighbour, 1, i, driven, dv_driven, free_n, cg.csr_block[b], cg.csr_local[b], 0,
             )
             if i == 0 and driven == 0:

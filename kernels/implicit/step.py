@@ -50,8 +50,10 @@ def implicit_update(x: wp.vec3, u: wp.vec3, dv: wp.vec3, held_normal: wp.vec3, c
 
 @functools.cache
 def region_kernel(law: str):
-    """The implicit one-region step of tissue law `law` (a key of kernels.laws.LAWS)."""
+    """The implicit one-region step of tissue law `law` (a key of kernels.laws.LAWS): its entries'
+    arrays typed by the law; the linear system's rows are the mesh's CSR adjacency (TissueArrays)."""
     implicit_row = LAWS[law].implicit_row
+    TOPOLOGY, PARAMS = LAWS[law].ENTRY_TOPOLOGY, LAWS[law].ENTRY_PARAMS
 
     @wp.kernel(module="unique", enable_backward=False)
     def integrate_region_implicit(
@@ -59,6 +61,9 @@ def region_kernel(law: str):
         free_count: int,
         vertex_local: wp.array(dtype=wp.int32),
         tissue: TissueArrays,
+        entry_offsets: wp.array(dtype=wp.int32),
+        entry_topology: TOPOLOGY,
+        entry_params: PARAMS,
         anchor_scale: float,
         probe: ProbeArrays,
         sphere: ProbeSphereArrays,
@@ -94,7 +99,8 @@ def region_kernel(law: str):
             u = qd_in[v]
             f, D, Kv, correction = implicit_row(
                 x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale, tissue.particle_mass[v], dt,
-                tissue.adj_offsets[v], tissue.adj_offsets[v + 1], tissue.adj_vertex, tissue.adj_spring, 0, q_in, qd_in,
+                entry_offsets[v], entry_offsets[v + 1], entry_topology, entry_params, 0,
+                tissue.adj_offsets[v], tissue.adj_offsets[v + 1], tissue.adj_vertex, q_in, qd_in,
                 vertex_local, 0, v, driven, dv_driven, free_count, cg.csr_block, cg.csr_local, 0,
             )
             if v == pv and (mode == 1 or mode == 2):
@@ -159,7 +165,8 @@ def integrate_implicit(model, region_arrays, anchor_scale, state_in, state_out, 
         region_kernel(model.law),
         dim=1,
         inputs=[
-            free_vertex, free_count, vertex_local, model.arrays, anchor_scale, control.arrays, control.sphere_arrays, dt, max_iterations, tolerance,
+            free_vertex, free_count, vertex_local, model.arrays, model.entry_offsets, model.entry_topology, model.entry_params,
+            anchor_scale, control.arrays, control.sphere_arrays, dt, max_iterations, tolerance,
             state_in.particle_q, state_in.particle_qd, scratch.arrays,
         ],
         outputs=[state_out.particle_q, state_out.particle_qd],

@@ -14,7 +14,14 @@ tet's forces on corners 1..3 are the columns of -V_0 P D_m^-T, on corner 0 minus
 The law's entries are a vertex's incident tets (vertex-to-tet incidence, CSR): entry k holds the
 tet's four vertex ids (`ENTRY_TOPOLOGY`) and its rest data with the vertex's corner (`TetEntry`).
 `vertex_force` gathers them as the springs law gathers its springs: each tet's force is computed
-by each of its free corners (no atomics: the same bits on every run). Explicit steps only, so far.
+by each of its free corners (no atomics: the same bits on every run).
+
+`implicit_row` assembles a vertex's row of the implicit step with the Gauss-Newton part of each
+tet's Hessian, K_ab = V_0 (mu (b_a . b_b) I + lambda (dJ b_a)(dJ b_b)^T) (b_c: the gradient of
+corner c's barycentric coordinate at rest): positive semi-definite in every state, inverted tets
+included. It leaves out lambda (J - alpha) times J's curvature, which is indefinite (at rest it is
+mu (b_b b_a^T - b_a b_b^T), the rotation-free part of linear elasticity's shear block); the forces
+are exact, so a held press settles to the same static state.
 """
 
 from typing import Any
@@ -72,6 +79,15 @@ def tet_corner_force(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, p: TetE
 
 
 @wp.func
+def corner_gradient(dm_inv: wp.mat33, c: int):
+    # b_c: the gradient of corner c's barycentric coordinate at rest (rows of D_m^-1; corner 0 minus their sum)
+    if c == 0:
+        return -wp.vec3(dm_inv[0, 0] + dm_inv[1, 0] + dm_inv[2, 0], dm_inv[0, 1] + dm_inv[1, 1] + dm_inv[2, 1],
+                        dm_inv[0, 2] + dm_inv[1, 2] + dm_inv[2, 2])
+    return wp.vec3(dm_inv[c - 1, 0], dm_inv[c - 1, 1], dm_inv[c - 1, 2])
+
+
+@wp.func
 def vertex_force(
     x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float,
     begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, qd: Any,
@@ -84,3 +100,57 @@ def vertex_force(
         t = topology[k]
         f += tet_corner_force(q[t[0]], q[t[1]], q[t[2]], q[t[3]], params[k + shift])
     return f
+
+
+@wp.func
+def implicit_row(
+    x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float, m: float, dt: float,
+    begin: int, end: int, topology: Any, params: Any, shift: int, row_begin: int, row_end: int, row_neighbour: Any,
+    q: Any, qd: Any, local_of: Any, by_local: int, self_id: int, driven: int, dv_driven: wp.vec3, free_count: int,
+    csr_block: Any, csr_local: Any, out_shift: int,
+):
+    # one vertex's row of (M + dt C + dt^2 K) dv = dt (f0 - dt K v0) - A_ic dv_c (the springs law's
+    # implicit_row says what each argument is): the anchor's terms, then each incident tet's force
+    # and Gauss-Newton blocks (this module's docstring), the blocks of its other corners added into
+    # the row's CSR entries (row_begin..row_end of row_neighbour), which start from zero.
+    f = anchor_force(x, u, x_rest, ka, kda, scale)
+    ka_s = scale * ka
+    kda_s = scale * kda
+    D = (m + dt * kda_s + dt * dt * ka_s) * wp.identity(n=3, dtype=float)
+    Kv = ka_s * u
+    correction = wp.vec3(0.0)
+    for k in range(row_begin, row_end):
+        j = row_neighbour[k]
+        csr_block[k + out_shift] = wp.mat33(0.0)
+        lj = j
+        if by_local == 0:
+            lj = local_of[j]
+        if lj >= free_count or j == driven or self_id == driven:
+            lj = -1
+        csr_local[k + out_shift] = lj
+    for k in range(begin, end):
+        t = topology[k]
+        p = params[k + shift]
+        x0 = q[t[0]]
+        F = wp.matrix_from_cols(q[t[1]] - x0, q[t[2]] - x0, q[t[3]] - x0) * p.dm_inv
+        f0 = column(F, 0)
+        f1 = column(F, 1)
+        f2 = column(F, 2)
+        dJ = wp.matrix_from_cols(wp.cross(f1, f2), wp.cross(f2, f0), wp.cross(f0, f1))
+        f += tet_corner_force(x0, q[t[1]], q[t[2]], q[t[3]], p)
+        b_a = corner_gradient(p.dm_inv, p.corner)
+        g_a = dJ * b_a
+        for c in range(4):
+            b_c = corner_gradient(p.dm_inv, c)
+            K = p.volume * (p.mu * wp.dot(b_a, b_c) * wp.identity(n=3, dtype=float) + p.lam * wp.outer(g_a, dJ * b_c))
+            vc = t[c]
+            Kv += K * qd[vc]
+            if c == p.corner:
+                D += dt * dt * K
+            else:
+                for e in range(row_begin, row_end):
+                    if row_neighbour[e] == vc:
+                        csr_block[e + out_shift] = csr_block[e + out_shift] - dt * dt * K
+                if vc == driven:
+                    correction -= dt * dt * K * dv_driven
+    return f, D, Kv, correction

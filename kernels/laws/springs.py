@@ -125,16 +125,18 @@ def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, nei
 @wp.func
 def implicit_row(
     x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float, m: float, dt: float,
-    begin: int, end: int, neighbour: Any, spring: Any, shift: int, q: Any, qd: Any,
-    local_of: Any, by_local: int, self_id: int, driven: int, dv_driven: wp.vec3, free_count: int,
+    begin: int, end: int, neighbour: Any, spring: Any, shift: int, row_begin: int, row_end: int, row_neighbour: Any,
+    q: Any, qd: Any, local_of: Any, by_local: int, self_id: int, driven: int, dv_driven: wp.vec3, free_count: int,
     csr_block: Any, csr_local: Any, out_shift: int,
 ):
     # one vertex's row of (M + dt C + dt^2 K) dv = dt (f0 - dt K v0) - A_ic dv_c (Baraff & Witkin),
-    # over the same entries as vertex_force. Writes each entry's block dt C_e + dt^2 K_e to
-    # csr_block[k + out_shift] and the neighbour's unknown to csr_local[k + out_shift]: its local
-    # index (the neighbour id itself where by_local, else local_of[neighbour]), -1 where it is no
-    # unknown (the fixed ring past free_count, or the driven vertex, whose id is `driven` and whose
-    # known velocity change is dv_driven; self_id is this vertex's id in the same numbering).
+    # over the same entries as vertex_force. The system's row (the vertex's CSR adjacency,
+    # row_begin..row_end of row_neighbour) is the springs' own entries here. Writes each entry's
+    # block dt C_e + dt^2 K_e (minus the system's off-diagonal block) to csr_block[k + out_shift] and
+    # the neighbour's unknown to csr_local[k + out_shift]: its local index (the neighbour id itself
+    # where by_local, else local_of[neighbour]), -1 where it is no unknown (the fixed ring past
+    # free_count, or the driven vertex, whose id is `driven` and whose known velocity change is
+    # dv_driven; self_id is this vertex's id in the same numbering).
     # Returns (f0, the diagonal block, K v0, -A_ic dv_c).
     f = anchor_force(x, u, x_rest, ka, kda, scale)
     ka_s = scale * ka
