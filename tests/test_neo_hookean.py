@@ -10,7 +10,10 @@ from almsdm_warp.evaluation import fem
 from almsdm_warp.kernels.laws import neo_hookean
 from almsdm_warp.mesh.primitives import tet_ball
 from almsdm_warp.mesh.tissue_mesh import TissueMesh
+from almsdm_warp.protocol.adaptive import AdaptivePalpation
+from almsdm_warp.protocol.multi import MultiPalpation
 from almsdm_warp.protocol.palpation import Palpation
+from almsdm_warp.protocol.stroke import ProbeStroke, builtin_stroke
 from almsdm_warp.sim.model import Model
 from almsdm_warp.tissue.laws import lame
 from almsdm_warp.tissue.material import Material
@@ -136,6 +139,57 @@ def test_a_deep_fast_press_holds_with_the_implicit_step(device):
         assert np.all(np.isfinite(result.force))
         assert np.all(signed(held[release]) * np.sign(signed(mesh.vertices)) > 0)  # pressed: every tet the right way round
     np.testing.assert_allclose(forces["implicit"], forces["explicit"], rtol=0.01)
+
+
+def test_adaptive_region_is_the_global_model_within_1_percent(device):
+    """--rings auto for the neo-Hookean law: the hold force of a 2 mm press into a supported 15 mm ball
+    within 1% of the global model's (implicit, 2 ms steps)."""
+    mesh = tet_ball(15.0, 3.0)
+    top = int(np.argmax(mesh.vertices[:, 2]))
+    hold = {}
+    for name, cls, kw in (("global", Palpation, {"rings": "global"}), ("auto", AdaptivePalpation, {"tol": 1e-4})):
+        pal = cls(mesh, MATERIAL, law="neo-hookean", integrator="implicit", dt=2e-3, device=device, fixed_below=-8e-3, **kw)
+        pal.touch(top)
+        result = pal.press(2e-3, ramp=0.1, hold=0.4, settle=0.02)
+        hold[name] = result.force[result.release_step - 1]
+    assert hold["global"] > 0.05  # newtons of a real press
+    np.testing.assert_allclose(hold["auto"], hold["global"], rtol=0.01)
+
+
+def test_two_far_probes_press_as_each_alone(device):
+    """MultiPalpation with the neo-Hookean law: a probe's force at the end of the hold with another far
+    away equals its force alone (each region its own; during the ramp they differ by the pair's
+    substeps, planned over both regions, and its probes driven to the frame's target at each)."""
+    mesh = tet_ball(15.0, 3.0)
+    top = int(np.argmax(mesh.vertices[:, 2]))
+    surface = mesh.surface_vertices
+    far = int(surface[np.argmax(np.linalg.norm(mesh.vertices[surface] - mesh.vertices[top], axis=1))])
+    multi = MultiPalpation(mesh, MATERIAL, rings=2, law="neo-hookean", dt=1e-3, device=device)
+    multi.touch([top, far])
+    pair = multi.press(1e-3, ramp=0.05, hold=0.2, settle=0.02)
+    alone = Palpation(mesh, MATERIAL, rings=2, law="neo-hookean", dt=1e-3, device=device)
+    alone.touch(top)
+    single = alone.press(1e-3, ramp=0.05, hold=0.2, settle=0.02)
+    end = single.release_step - 1
+    assert single.force[end] > 0.02
+    np.testing.assert_allclose(pair[0].force[end], single.force[end], rtol=1e-3)
+
+
+def test_a_sphere_stroke_holds_the_same_force_with_either_integrator(device):
+    """ProbeStroke with the neo-Hookean law: a 5 mm sphere pressed 1 mm and held, the same force with
+    either integrator (0.1%), then slid 5 mm over the ball with finite forces."""
+    mesh = tet_ball(15.0, 3.0)
+    top = int(np.argmax(mesh.vertices[:, 2]))
+    path = builtin_stroke(mesh, 5e-3, depth=1e-3, length=5e-3, speed=20e-3, vertex=top, hold=0.05)
+    held = {}
+    for integrator in ("explicit", "implicit"):
+        stroke = ProbeStroke(mesh, MATERIAL, probe_radius=5e-3, rings=3, law="neo-hookean", integrator=integrator,
+                             device=device, fixed_below=-8e-3)
+        force = np.array([stroke.step(c) for c in path.centre])
+        held[integrator] = force[np.flatnonzero(path.phase == 0)[-1], 2]
+        assert np.all(np.isfinite(force)) and np.all(force[path.phase == 1][:, 2] > 0.5 * held[integrator])
+    assert held["explicit"] > 0.02
+    np.testing.assert_allclose(held["implicit"], held["explicit"], rtol=1e-3)
 
 
 def test_paths_without_kernels_are_refused():

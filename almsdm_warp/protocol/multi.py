@@ -116,7 +116,7 @@ class MultiPalpation:
 
     def __init__(self, mesh, tissue=None, *, tol=1e-4, rings=None, integrator="explicit", dt=1e-3, device=None,
                  start_rings=1, max_rings=64, check_interval=0.01, retire=True, force_tol=FORCE_TOL, margin=MARGIN,
-                 capture=True, **solver_kw):
+                 capture=True, law="springs", **solver_kw):
         if rings is not None:
             start_rings = check_rings(rings)
             if start_rings < 1:
@@ -125,7 +125,8 @@ class MultiPalpation:
             raise ValueError(f"tol must be a length > 0 [m], got {tol!r}")
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
-        self.model = Model(mesh, tissue, device)
+        self.model = Model(mesh, tissue, device, law=law)
+        self.model.law_entry.require(integrator=integrator, path="multi")
         self.device = self.model.device
         self.mesh = self.model.mesh
         self.integrator = integrator

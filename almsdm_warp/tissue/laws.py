@@ -241,7 +241,7 @@ class Law:
 LAWS = {
     "springs": Law("springs", KERNEL_LAWS["springs"], springs_critical_dt, springs_stiffness_bound, springs_entries),
     "neo-hookean": Law("neo-hookean", KERNEL_LAWS["neo-hookean"], neo_hookean_critical_dt, neo_hookean_stiffness_bound,
-                       neo_hookean_entries, paths=("palpation",), check=check_volumetric),
+                       neo_hookean_entries, paths=("palpation", "stroke", "multi", "adaptive"), check=check_volumetric),
 }
 """Law name -> its entry."""
 

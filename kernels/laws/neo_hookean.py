@@ -154,3 +154,27 @@ def implicit_row(
                 if vc == driven:
                     correction -= dt * dt * K * dv_driven
     return f, D, Kv, correction
+
+
+@wp.func
+def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, topology: Any, params: Any, shift: int, q: Any):
+    # the static equilibrium at a vertex whose neighbours are held where they are (velocities zero):
+    # its force (anchor and incident tets) and its diagonal stiffness block (the anchor's and the
+    # tets' Gauss-Newton blocks, as implicit_row's)
+    zero = wp.vec3(0.0)
+    f = anchor_force(x, zero, x_rest, ka, 0.0, 1.0)
+    D = ka * wp.identity(n=3, dtype=float)
+    for k in range(begin, end):
+        t = topology[k]
+        p = params[k + shift]
+        x0 = q[t[0]]
+        F = wp.matrix_from_cols(q[t[1]] - x0, q[t[2]] - x0, q[t[3]] - x0) * p.dm_inv
+        f0 = column(F, 0)
+        f1 = column(F, 1)
+        f2 = column(F, 2)
+        dJ = wp.matrix_from_cols(wp.cross(f1, f2), wp.cross(f2, f0), wp.cross(f0, f1))
+        f += tet_corner_force(x0, q[t[1]], q[t[2]], q[t[3]], p)
+        b_a = corner_gradient(p.dm_inv, p.corner)
+        g_a = dJ * b_a
+        D += p.volume * (p.mu * wp.dot(b_a, b_a) * wp.identity(n=3, dtype=float) + p.lam * wp.outer(g_a, g_a))
+    return f, D
