@@ -123,7 +123,9 @@ class Model:
         """Each vertex's entries that its law's vertex_force gathers (kernels/laws): CSR offsets
         [particle_count + 1], and per entry its topology and parameters, typed by the law (the springs
         law: the CSR adjacency, each neighbour and its spring's constants; the neo-Hookean law: the
-        incident tets)."""
+        incident tets); `entries` holds the three as one kernel argument (the law's Entries struct)."""
+        self.entries = self.law_entry.kernels.Entries()
+        self.entries.offsets, self.entries.topology, self.entries.params = self.entry_offsets, self.entry_topology, self.entry_params
 
     def _tissue_constants(self, t):
         """(k_ij, d_ij per edge; k_i, d_i, m_i per vertex), float64 host arrays, from either tissue."""

@@ -9,4 +9,5 @@ from . import neo_hookean, springs
 
 LAWS = {"springs": springs, "neo-hookean": neo_hookean}
 """Law name -> its module of kernel functions (vertex_force; implicit_row and static_row where the law
-has them) and the types of its entries (ENTRY_TOPOLOGY, ENTRY_PARAMS: what a step kernel takes)."""
+has them) and the types of its entries (ENTRY_TOPOLOGY, ENTRY_PARAMS, and the struct of the three,
+Entries: what a step kernel takes)."""

@@ -28,7 +28,7 @@ from typing import Any
 
 import warp as wp
 
-from .springs import anchor_force
+from .springs import anchor_force, anchor_row, row_unknown
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -56,20 +56,35 @@ ENTRY_PARAMS = wp.array(dtype=TetEntry)
 """Entry k: its tet's rest data and corner."""
 
 
+@wp.struct
+class Entries:
+    """The law's entries as one kernel argument (Model.entries): CSR offsets, topology, parameters."""
+
+    offsets: wp.array(dtype=wp.int32)
+    topology: ENTRY_TOPOLOGY
+    params: ENTRY_PARAMS
+
+
 @wp.func
 def column(m: wp.mat33, c: int):
     return wp.vec3(m[0, c], m[1, c], m[2, c])
 
 
 @wp.func
-def tet_corner_force(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, p: TetEntry):
-    # the tet's elastic force on its corner p.corner: -dE/dx with E = V_0 Psi(F)
-    F = wp.matrix_from_cols(x1 - x0, x2 - x0, x3 - x0) * p.dm_inv
+def tet_state(q: Any, t: wp.vec4i, p: TetEntry):
+    # the tet's deformation gradient F = D_s D_m^-1 and dJ/dF = [f1 x f2, f2 x f0, f0 x f1]
+    x0 = q[t[0]]
+    F = wp.matrix_from_cols(q[t[1]] - x0, q[t[2]] - x0, q[t[3]] - x0) * p.dm_inv
     f0 = column(F, 0)
     f1 = column(F, 1)
     f2 = column(F, 2)
-    J = wp.dot(f0, wp.cross(f1, f2))
-    dJ = wp.matrix_from_cols(wp.cross(f1, f2), wp.cross(f2, f0), wp.cross(f0, f1))
+    return F, wp.matrix_from_cols(wp.cross(f1, f2), wp.cross(f2, f0), wp.cross(f0, f1))
+
+
+@wp.func
+def tet_corner_force(F: wp.mat33, dJ: wp.mat33, p: TetEntry):
+    # the tet's elastic force on its corner p.corner: -dE/dx with E = V_0 Psi(F)
+    J = wp.dot(column(F, 0), column(dJ, 0))
     alpha = 1.0 + p.mu / p.lam
     P = p.mu * F + (p.lam * (J - alpha)) * dJ
     H = (-p.volume) * (P * wp.transpose(p.dm_inv))
@@ -97,8 +112,9 @@ def vertex_force(
     # data params[k + shift]; corner positions from q)
     f = anchor_force(x, u, x_rest, ka, kda, scale)
     for k in range(begin, end):
-        t = topology[k]
-        f += tet_corner_force(q[t[0]], q[t[1]], q[t[2]], q[t[3]], params[k + shift])
+        p = params[k + shift]
+        F, dJ = tet_state(q, topology[k], p)
+        f += tet_corner_force(F, dJ, p)
     return f
 
 
@@ -113,31 +129,16 @@ def implicit_row(
     # implicit_row says what each argument is): the anchor's terms, then each incident tet's force
     # and Gauss-Newton blocks (this module's docstring), the blocks of its other corners added into
     # the row's CSR entries (row_begin..row_end of row_neighbour), which start from zero.
-    f = anchor_force(x, u, x_rest, ka, kda, scale)
-    ka_s = scale * ka
-    kda_s = scale * kda
-    D = (m + dt * kda_s + dt * dt * ka_s) * wp.identity(n=3, dtype=float)
-    Kv = ka_s * u
+    f, D, Kv = anchor_row(x, u, x_rest, ka, kda, scale, m, dt)
     correction = wp.vec3(0.0)
     for k in range(row_begin, row_end):
-        j = row_neighbour[k]
         csr_block[k + out_shift] = wp.mat33(0.0)
-        lj = j
-        if by_local == 0:
-            lj = local_of[j]
-        if lj >= free_count or j == driven or self_id == driven:
-            lj = -1
-        csr_local[k + out_shift] = lj
+        csr_local[k + out_shift] = row_unknown(row_neighbour[k], local_of, by_local, self_id, driven, free_count)
     for k in range(begin, end):
         t = topology[k]
         p = params[k + shift]
-        x0 = q[t[0]]
-        F = wp.matrix_from_cols(q[t[1]] - x0, q[t[2]] - x0, q[t[3]] - x0) * p.dm_inv
-        f0 = column(F, 0)
-        f1 = column(F, 1)
-        f2 = column(F, 2)
-        dJ = wp.matrix_from_cols(wp.cross(f1, f2), wp.cross(f2, f0), wp.cross(f0, f1))
-        f += tet_corner_force(x0, q[t[1]], q[t[2]], q[t[3]], p)
+        F, dJ = tet_state(q, t, p)
+        f += tet_corner_force(F, dJ, p)
         b_a = corner_gradient(p.dm_inv, p.corner)
         g_a = dJ * b_a
         for c in range(4):
@@ -165,15 +166,9 @@ def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, top
     f = anchor_force(x, zero, x_rest, ka, 0.0, 1.0)
     D = ka * wp.identity(n=3, dtype=float)
     for k in range(begin, end):
-        t = topology[k]
         p = params[k + shift]
-        x0 = q[t[0]]
-        F = wp.matrix_from_cols(q[t[1]] - x0, q[t[2]] - x0, q[t[3]] - x0) * p.dm_inv
-        f0 = column(F, 0)
-        f1 = column(F, 1)
-        f2 = column(F, 2)
-        dJ = wp.matrix_from_cols(wp.cross(f1, f2), wp.cross(f2, f0), wp.cross(f0, f1))
-        f += tet_corner_force(x0, q[t[1]], q[t[2]], q[t[3]], p)
+        F, dJ = tet_state(q, topology[k], p)
+        f += tet_corner_force(F, dJ, p)
         b_a = corner_gradient(p.dm_inv, p.corner)
         g_a = dJ * b_a
         D += p.volume * (p.mu * wp.dot(b_a, b_a) * wp.identity(n=3, dtype=float) + p.lam * wp.outer(g_a, g_a))

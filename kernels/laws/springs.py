@@ -27,6 +27,15 @@ ENTRY_TOPOLOGY = wp.array(dtype=wp.int32)
 ENTRY_PARAMS = wp.array(dtype=wp.vec3)
 """Entry k: its spring's (k_ij [N/m], d_ij [N s/m], rest length [m])."""
 
+
+@wp.struct
+class Entries:
+    """The law's entries as one kernel argument (Model.entries): CSR offsets, topology, parameters."""
+
+    offsets: wp.array(dtype=wp.int32)
+    topology: ENTRY_TOPOLOGY
+    params: ENTRY_PARAMS
+
 EPS_LENGTH = 1.0e-9
 """Shorter springs than this [m] have no direction: their force is zero (no 1/0, no NaN)."""
 
@@ -123,6 +132,27 @@ def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, nei
 
 
 @wp.func
+def anchor_row(x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float, m: float, dt: float):
+    # a row's start, every law's: the anchor's force, eq. (3), the diagonal block m + dt d_i + dt^2 k_i
+    # and K v0's anchor term (anchors scaled by `scale`)
+    ka_s = scale * ka
+    kda_s = scale * kda
+    return anchor_force(x, u, x_rest, ka, kda, scale), (m + dt * kda_s + dt * dt * ka_s) * wp.identity(n=3, dtype=float), ka_s * u
+
+
+@wp.func
+def row_unknown(j: int, local_of: Any, by_local: int, self_id: int, driven: int, free_count: int):
+    # the unknown of neighbour j in a row's CSR entry: its local index (j itself where by_local, else
+    # local_of[j]), -1 where it is none (the fixed ring past free_count, the driven vertex)
+    lj = j
+    if by_local == 0:
+        lj = local_of[j]
+    if lj >= free_count or j == driven or self_id == driven:
+        lj = -1
+    return lj
+
+
+@wp.func
 def implicit_row(
     x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float, m: float, dt: float,
     begin: int, end: int, neighbour: Any, spring: Any, shift: int, row_begin: int, row_end: int, row_neighbour: Any,
@@ -138,11 +168,7 @@ def implicit_row(
     # free_count, or the driven vertex, whose id is `driven` and whose known velocity change is
     # dv_driven; self_id is this vertex's id in the same numbering).
     # Returns (f0, the diagonal block, K v0, -A_ic dv_c).
-    f = anchor_force(x, u, x_rest, ka, kda, scale)
-    ka_s = scale * ka
-    kda_s = scale * kda
-    D = (m + dt * kda_s + dt * dt * ka_s) * wp.identity(n=3, dtype=float)
-    Kv = ka_s * u
+    f, D, Kv = anchor_row(x, u, x_rest, ka, kda, scale, m, dt)
     correction = wp.vec3(0.0)
     for k in range(begin, end):
         j = neighbour[k]
@@ -150,12 +176,7 @@ def implicit_row(
         f = add_spring_force(f, x, u, q[j], qd[j], s[0], s[1], s[2])
         B, Kb = spring_block(s[0], s[1], s[2], q[j] - x, dt)
         csr_block[k + out_shift] = B
-        lj = j
-        if by_local == 0:
-            lj = local_of[j]
-        if lj >= free_count or j == driven or self_id == driven:
-            lj = -1
-        csr_local[k + out_shift] = lj
+        csr_local[k + out_shift] = row_unknown(j, local_of, by_local, self_id, driven, free_count)
         D += B
         Kv += Kb * (u - qd[j])
         if j == driven:

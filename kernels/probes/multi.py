@@ -25,13 +25,11 @@ PROBE_DISPLACEMENT = wp.constant(1)
 @functools.cache
 def drive_kernel(law: str):
     """The multi-probe drive of tissue law `law` (a key of kernels.laws.LAWS)."""
-    vertex_force = LAWS[law].vertex_force
-    TOPOLOGY, PARAMS = LAWS[law].ENTRY_TOPOLOGY, LAWS[law].ENTRY_PARAMS
+    vertex_force, Entries = LAWS[law].vertex_force, LAWS[law].Entries
 
     @wp.kernel(module="unique", enable_backward=False)
     def drive_probes(
-        patch_probe: wp.array(dtype=wp.int32), probes: ProbeArrays, tissue: TissueArrays,
-        entry_offsets: wp.array(dtype=wp.int32), entry_topology: TOPOLOGY, entry_params: PARAMS, dt: float,
+        patch_probe: wp.array(dtype=wp.int32), probes: ProbeArrays, tissue: TissueArrays, entries: Entries, dt: float,
         q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3),
         q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
     ):
@@ -44,7 +42,7 @@ def drive_kernel(law: str):
         # the feedback force: the tissue's internal forces on the held vertex, eqs. (3)-(6)
         x = q_in[v]
         probes.probe_reaction[p] = vertex_force(x, qd_in[v], tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], 1.0,
-                                                entry_offsets[v], entry_offsets[v + 1], entry_topology, entry_params, 0, q_in, qd_in)
+                                                entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0, q_in, qd_in)
         # displacement control: the vertex is where the probe puts it
         xd, ud = drive_vertex(x, probes.probe_target[p], dt)
         q_out[v] = xd
@@ -58,8 +56,7 @@ def drive_probe_vertices(model, patch_probe, probes, dt, state_in, state_out):
     wp.launch(
         drive_kernel(model.law),
         dim=patch_probe.shape[0],
-        inputs=[patch_probe, probes.arrays, model.arrays, model.entry_offsets, model.entry_topology, model.entry_params, dt,
-                state_in.particle_q, state_in.particle_qd],
+        inputs=[patch_probe, probes.arrays, model.arrays, model.entries, dt, state_in.particle_q, state_in.particle_qd],
         outputs=[state_out.particle_q, state_out.particle_qd],
         device=model.device,
     )

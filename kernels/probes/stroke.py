@@ -61,13 +61,12 @@ def held_centre(spheres: StrokeSpheres, p: int, alpha: float):
 @functools.cache
 def reactions_kernel(law: str):
     """The stroke's contact reactions at the end of an implicit step, of tissue law `law` (kernels.laws.LAWS)."""
-    vertex_force = LAWS[law].vertex_force
-    TOPOLOGY, PARAMS = LAWS[law].ENTRY_TOPOLOGY, LAWS[law].ENTRY_PARAMS
+    vertex_force, Entries = LAWS[law].vertex_force, LAWS[law].Entries
 
     @wp.kernel(module="unique", enable_backward=False)
     def sum_stroke_reactions(
         region_vertex: _INT, counts: _INT, vertex_local: _INT, surface: _INT, spheres: StrokeSpheres,
-        probe_count: int, radius: float, entry_offsets: _INT, entry_topology: TOPOLOGY, entry_params: PARAMS, q_rest: _VEC,
+        probe_count: int, radius: float, entries: Entries, q_rest: _VEC,
         anchor_ke: _FLOAT, anchor_kd: _FLOAT, anchor_scale: float, q_out: _VEC, qd_out: _VEC,
     ):
         # one thread, after constrain_stroke_spheres (the implicit step): each contact's reaction from the
@@ -83,7 +82,7 @@ def reactions_kernel(law: str):
                 n, l = sphere_normal(x, spheres.centre[p])
                 if l < radius * (1.0 + HELD_SLACK):
                     f = vertex_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale,
-                                     entry_offsets[v], entry_offsets[v + 1], entry_topology, entry_params, 0, q_out, qd_out)
+                                     entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0, q_out, qd_out)
                     spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n)
 
     return sum_stroke_reactions
@@ -156,8 +155,8 @@ def constrain_spheres(model, region_vertex, counts, vertex_ring, vertex_local, s
         wp.launch(
             reactions_kernel(model.law),
             dim=1,
-            inputs=[region_vertex, counts, vertex_local, surface, spheres, count, radius, model.entry_offsets,
-                    model.entry_topology, model.entry_params, dm.rest_position, model.anchor_ke, model.anchor_kd, float(anchor_scale),
+            inputs=[region_vertex, counts, vertex_local, surface, spheres, count, radius, model.entries,
+                    dm.rest_position, model.anchor_ke, model.anchor_kd, float(anchor_scale),
                     state_out.particle_q, state_out.particle_qd],
             device=model.device,
         )

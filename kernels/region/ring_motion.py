@@ -19,13 +19,12 @@ wp.set_module_options({"enable_backward": False})
 @functools.cache
 def motion_kernel(law: str):
     """The ring-motion check of tissue law `law` (a key of kernels.laws.LAWS)."""
-    static_row = LAWS[law].static_row
-    TOPOLOGY, PARAMS = LAWS[law].ENTRY_TOPOLOGY, LAWS[law].ENTRY_PARAMS
+    static_row, Entries = LAWS[law].static_row, LAWS[law].Entries
 
     @wp.kernel(module="unique", enable_backward=False)
     def eval_ring_motion(
-        region: RegionArrays, count: int, slots: int, tissue: TissueArrays, entry_offsets: wp.array(dtype=wp.int32),
-        entry_topology: TOPOLOGY, entry_params: PARAMS, q: wp.array(dtype=wp.vec3), motion: wp.array(dtype=wp.float32)
+        region: RegionArrays, count: int, slots: int, tissue: TissueArrays, entries: Entries, q: wp.array(dtype=wp.vec3),
+        motion: wp.array(dtype=wp.float32)
     ):
         # motion[0]: the largest displacement a fixed-ring vertex would take if it alone were freed;
         # motion[1 + r]: the largest displacement |q - q_rest| on ring r (free rings; 0 on the fixed one);
@@ -44,8 +43,8 @@ def motion_kernel(law: str):
                 # one Jacobi step of the static equilibrium K u = f at v: anchor and springs, eqs. (3)-(5),
                 # linearized at the current state, with v's neighbours held where they are
                 # (a static equilibrium: velocities zero, so the dampers add nothing)
-                f, D = static_row(x, tissue.q_rest[v], tissue.anchor_ke[v], entry_offsets[v], entry_offsets[v + 1],
-                                  entry_topology, entry_params, 0, q)
+                f, D = static_row(x, tissue.q_rest[v], tissue.anchor_ke[v], entries.offsets[v], entries.offsets[v + 1],
+                                  entries.topology, entries.params, 0, q)
                 if wp.determinant(D) > 0.0:
                     u_J = wp.inverse(D) * f
                     motion[0] = wp.max(motion[0], wp.length(u_J))
@@ -60,8 +59,7 @@ def eval_region_motion(model, region, state, motion):
     wp.launch(
         motion_kernel(model.law),
         dim=1,
-        inputs=[region.arrays, region.vertex_count, motion.shape[0], model.arrays, model.entry_offsets, model.entry_topology,
-                model.entry_params, state.particle_q],
+        inputs=[region.arrays, region.vertex_count, motion.shape[0], model.arrays, model.entries, state.particle_q],
         outputs=[motion],
         device=model.device,
     )
