@@ -117,14 +117,18 @@ class Model:
         """The arrays above as one kernel argument (kernels/arrays.py)."""
         self.spring_ke_host, self.spring_kd_host, self.anchor_ke_host, self.anchor_kd_host = ke, kd, ka, da
         """The constants above in float64 (host), as derived: the law's critical step reads them."""
-        if self.law != "springs" and (edge_scale is not None or anchor_scale is not None):
+        self._set_entries(edge_scale is not None or anchor_scale is not None)
+
+    def _set_entries(self, scaled: bool) -> None:
+        if self.law != "springs" and scaled:
             raise ValueError(f"the {self.law} law takes no per-spring or per-anchor scales (a lesion): they scale springs")
         self.entry_offsets, self.entry_topology, self.entry_params = self.law_entry.entries(self)
         """Each vertex's entries that its law's vertex_force gathers (kernels/laws): CSR offsets
         [particle_count + 1], and per entry its topology and parameters, typed by the law (the springs
         law: the CSR adjacency, each neighbour and its spring's constants; the neo-Hookean law: the
-        incident tets); `entries` holds the three as one kernel argument (the law's Entries struct)."""
+        incident tets)."""
         self.entries = self.law_entry.kernels.Entries()
+        """The three above as one kernel argument (the law's Entries struct)."""
         self.entries.offsets, self.entries.topology, self.entries.params = self.entry_offsets, self.entry_topology, self.entry_params
 
     def _tissue_constants(self, t):
