@@ -1,6 +1,8 @@
 """One palpation's CPU step with each tissue law on the same region, interleaved in one process.
 
     python scripts/bench_laws.py [--rings 3] [--blocks 15] [--steps 1000]
+    valgrind --tool=callgrind --instr-atstart=no --callgrind-out-file=/tmp/cg.out python scripts/bench_laws.py --callgrind
+        # instructions a step of each law (repeatable on a loaded host)
 
 A 25 mm tet ball of 3 mm edges (mesh.primitives.tet_ball), E 10 kPa, nu 0.45, the top vertex held
 1 mm in, dt 0.1 ms in one substep (under both laws' critical steps); blocks of `steps`
@@ -20,6 +22,7 @@ def main(argv=None):
     ap.add_argument("--rings", type=int, default=3)
     ap.add_argument("--blocks", type=int, default=15)
     ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--callgrind", action="store_true", help="run under valgrind's callgrind: instrument one block of each law, print instructions a step")
     args = ap.parse_args(argv)
     from almsdm_warp.warp_init import init_warp
 
@@ -42,6 +45,18 @@ def main(argv=None):
         pals[law] = p
     first = next(iter(pals.values()))
     print(f"{mesh.summary()}; {args.rings} rings: {first.region_vertices} region vertices, {first.solver.free_count} free")
+    if args.callgrind:
+        import os
+        import subprocess
+
+        for k, (law, p) in enumerate(pals.items(), start=1):
+            subprocess.run(["callgrind_control", "-i", "on", str(os.getpid())], stdout=subprocess.DEVNULL)
+            for _ in range(args.steps):
+                p.step()
+            subprocess.run(["callgrind_control", "-i", "off", str(os.getpid())], stdout=subprocess.DEVNULL)
+            subprocess.run(["callgrind_control", "-d", law, str(os.getpid())], stdout=subprocess.DEVNULL)
+            print(f"{law}: dump {k} (instructions a step: its totals over {args.steps})")
+        return
     times = {law: [] for law in pals}
     for _ in range(args.blocks):
         for law, p in pals.items():

@@ -165,6 +165,8 @@ def neo_hookean_entries(model):
     params["mu"] = mu
     params["lam"] = lam0 + mu
     params["corner"] = corner
+    grads = np.concatenate([-dm_inv.sum(axis=1, keepdims=True), dm_inv], axis=1)  # [m, 4, 3]: b_0..b_3
+    params["gradient"] = grads[tet_of, corner]
     d = model.device
     return (wp.array(offsets, dtype=wp.int32, device=d), wp.array(tets[tet_of].astype(np.int32), dtype=wp.vec4i, device=d),
             wp.array(params, dtype=TetEntry, device=d))

@@ -9,7 +9,8 @@ defined through inversion (J <= 0: no log, no division), at rest stress-free. Li
 is linear elasticity of Lame parameters (mu, lambda - mu), so the model stores lambda = lambda_0 +
 mu_0 for a material's (mu_0, lambda_0) (almsdm_warp.tissue.laws). First Piola stress
 P = mu F + lambda (J - alpha) dJ/dF, dJ/dF = [f1 x f2, f2 x f0, f0 x f1] (f_i the columns of F); the
-tet's forces on corners 1..3 are the columns of -V_0 P D_m^-T, on corner 0 minus their sum.
+tet's force on corner c is -V_0 P b_c, b_c the gradient of c's barycentric coordinate at rest (the
+rows of D_m^-1 for corners 1..3, minus their sum for corner 0), which each entry keeps.
 
 The law's entries are a vertex's incident tets (vertex-to-tet incidence, CSR): entry k holds the
 tet's four vertex ids (`ENTRY_TOPOLOGY`) and its rest data with the vertex's corner (`TetEntry`).
@@ -48,6 +49,9 @@ class TetEntry:
     """lambda [Pa] (the material's lambda_0 + mu_0: see the module's docstring)."""
     corner: int
     """The vertex's corner in the tet, 0..3."""
+    gradient: wp.vec3
+    """b: the gradient of that corner's barycentric coordinate at rest [1/m] (a row of D_m^-1; corner 0:
+    minus their sum), so that the tet's force on the corner is -V_0 P b."""
 
 
 ENTRY_TOPOLOGY = wp.array(dtype=wp.vec4i)
@@ -83,14 +87,10 @@ def tet_state(q: Any, t: wp.vec4i, p: TetEntry):
 
 @wp.func
 def tet_corner_force(F: wp.mat33, dJ: wp.mat33, p: TetEntry):
-    # the tet's elastic force on its corner p.corner: -dE/dx with E = V_0 Psi(F)
+    # the tet's elastic force on its corner: -dE/dx = -V_0 P b with E = V_0 Psi(F), P = mu F + lambda (J - alpha) dJ
     J = wp.dot(column(F, 0), column(dJ, 0))
     alpha = 1.0 + p.mu / p.lam
-    P = p.mu * F + (p.lam * (J - alpha)) * dJ
-    H = (-p.volume) * (P * wp.transpose(p.dm_inv))
-    if p.corner == 0:
-        return -(column(H, 0) + column(H, 1) + column(H, 2))
-    return column(H, p.corner - 1)
+    return (-p.volume) * (p.mu * (F * p.gradient) + (p.lam * (J - alpha)) * (dJ * p.gradient))
 
 
 @wp.func
@@ -139,7 +139,7 @@ def implicit_row(
         p = params[k + shift]
         F, dJ = tet_state(q, t, p)
         f += tet_corner_force(F, dJ, p)
-        b_a = corner_gradient(p.dm_inv, p.corner)
+        b_a = p.gradient
         g_a = dJ * b_a
         for c in range(4):
             b_c = corner_gradient(p.dm_inv, c)
@@ -169,7 +169,7 @@ def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, top
         p = params[k + shift]
         F, dJ = tet_state(q, topology[k], p)
         f += tet_corner_force(F, dJ, p)
-        b_a = corner_gradient(p.dm_inv, p.corner)
+        b_a = p.gradient
         g_a = dJ * b_a
         D += p.volume * (p.mu * wp.dot(b_a, b_a) * wp.identity(n=3, dtype=float) + p.lam * wp.outer(g_a, g_a))
     return f, D
