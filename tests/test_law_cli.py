@@ -181,6 +181,35 @@ def test_inverted_tets_count():
     assert inverted_tets(rest, x, tets) == det_f_count(rest, x, tets) == 2
 
 
+def test_a_deep_press_warns_of_inverted_tets(ball, tmp_path, capsys):
+    """6 mm into 4 mm tets (springs: nothing holds a tet's volume): the JSON's count and the warning
+    are those of an independent count at the end of the hold of the same press in Python."""
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.tissue.material import Material
+
+    out = tmp_path / "deep.json"
+    args = ["--youngs-modulus-kpa", "10", "--fixed-below-mm", "-5", *PRESS]
+    args[args.index("--depth-mm") + 1] = "6"
+    assert main(["palpate", str(ball), *args, "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    mesh = load_mesh(ball)
+    pal = Palpation(mesh, Material(youngs_modulus=10e3), rings=2, dt=1e-3, device="cpu", fixed_below=-5e-3)
+    pal.touch(data["contact"]["vertex"])
+    seen = {}
+
+    def at_release(k, total):
+        if k == release:
+            seen["count"] = det_f_count(mesh.vertices, pal.positions(), mesh.tetrahedra)
+
+    release = 100  # 50 ms ramp + 50 ms hold at 1 ms
+    result = pal.press(6e-3, 0.05, 0.05, 0.05, record=at_release)
+    assert result.release_step == release
+    assert data["presses"][0]["inverted_tets"] == result.inverted_tets == seen["count"] > 0
+    warning = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("warning:")]
+    assert warning == [f"warning: press 1: {seen['count']} of {mesh.tet_count} tetrahedra inverted (det F <= 0) at the end "
+                       f"of the hold: the press is too deep for these tets"]
+
+
 # -- slivers at load -------------------------------------------------------------------------------
 def test_quality_of_a_regular_tet_is_one():
     v = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=np.float64)
