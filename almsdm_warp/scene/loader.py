@@ -39,7 +39,7 @@ DEFAULT_LAW = "springs"
 """The tissue law of a scene that names none ([tissue] law): the paper's springs."""
 
 
-def check_law(law, what: str) -> str:
+def check_law_name(law, what: str) -> str:
     """`law` if it names a tissue law (a key of tissue.laws.LAWS), else InputError naming the allowed ones."""
     if not isinstance(law, str) or law not in LAWS:
         raise InputError(f"{what} = {law!r} is not a tissue law (allowed: {', '.join(map(repr, LAWS))})")
@@ -90,7 +90,7 @@ class Scene:
         if self.fixed_below is not None:
             object.__setattr__(self, "fixed_below", check_value(self.fixed_below, float, "number", "Scene.fixed_below"))
         object.__setattr__(self, "probe_radius", check_value(self.probe_radius, float, ">= 0", "Scene.probe_radius"))
-        check_law(self.law, "Scene.law")
+        check_law_name(self.law, "Scene.law")
         if self.tol is not None:
             object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
@@ -191,7 +191,7 @@ def load_scene(path) -> Scene:
         rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
         raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
     mesh_path = _mesh_path(values["mesh"].get("path"), p, where)
-    law = check_law(values["tissue"].pop("law", DEFAULT_LAW), f"{where}: [tissue] law")
+    law = check_law_name(values["tissue"].pop("law", DEFAULT_LAW), f"{where}: [tissue] law")
     tissue = _tissue(data.get("tissue", {}), values["tissue"], where)
 
     try:  # the SI values are checked again: say which file they came from
