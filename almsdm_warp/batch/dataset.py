@@ -32,6 +32,7 @@ from ..errors import InputError
 from ..export.output import atomic_write, check_regular
 from ..export.tables import TableLayout
 from ..solvers import integrators
+from ..tissue.laws import law_entry
 from .sampling import pressable_points, sample_points
 from .sweep import run_local
 from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, check_sphere_travel
@@ -61,15 +62,17 @@ SCHEMA = {
     "z_mm": ("float64", "mm", "contact point z"),
     "vertex": ("int64", "", "contact vertex (the mesh vertex nearest the point)"),
     "peak_force_N": ("float64", "N", "peak feedback force of the press"),
+    "hold_force_N": ("float64", "N", "feedback force at the end of the hold (full depth)"),
     "stiffness_N_per_mm": ("float64", "N/mm", "force at full depth / depth"),
     "recovery_error_mm": ("float64", "mm", "contact vertex's distance from rest at the end of the settle window"),
     "rings": ("int64", "", "rings of the local region"),
 }
 """Column -> (dtype, unit, meaning): written into table.npz as its "schema" entry."""
-DATASET_TABLE = TableLayout("dataset table", {c: SCHEMA[c][0] for c in DATASET_COLUMNS}, meta={"schema": json.dumps(
+DATASET_TABLE = TableLayout("dataset table", {c: SCHEMA[c][0] for c in DATASET_COLUMNS}, optional=("hold_force_N",), meta={"schema": json.dumps(
     {"format": FORMAT, "columns": {c: {"dtype": d, "unit": u, "meaning": m} for c, (d, u, m) in SCHEMA.items()}})})
 """The dataset table (export/tables.py): .npz (one array per column, plus "schema": JSON text of column ->
-{dtype, unit, meaning}; np.load reads it without pickle) or .csv (a header row)."""
+{dtype, unit, meaning}; np.load reads it without pickle) or .csv (a header row); a table written before the
+hold_force_N column has none."""
 MAPS = ("scene", "items", "none")
 SPEC_KEYS = {
     "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "chunk"),
@@ -310,6 +313,10 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     if rings == AUTO:
         raise InputError(f"scene {name!r} has rings = 'auto'; a dataset presses a fixed ring count: give [dataset] rings")
     mesh = scene.load_mesh()
+    try:  # the scene's [tissue] law: a batch's kernels, before any work
+        law_entry(scene.law).require(integrator=spec.integrator, path="batch")
+    except ValueError as exc:
+        raise InputError(f"scene {name!r}: {exc}") from None
     check_ring_count(rings, mesh.vertex_count, f"rings of {name}")
     press = {k: spec.press.get(k, getattr(scene.press, k)) for k in ("depth", "ramp", "hold", "settle")}
     check_protocol(press["depth"], spec.dt, press["ramp"], press["hold"], press["settle"], 1, float(np.ptp(mesh.vertices, axis=0).max()))
@@ -319,7 +326,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     chunk = spec.chunk or (len(vertices) if cuda else 64)
     plan = SweepPlan(mesh, scene.tissue, None, None, int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
                      press["settle"], points, vertices, chunk, spec.integrator, probe_radius=scene.probe_radius,
-                     fixed_below=scene.fixed_below)
+                     fixed_below=scene.fixed_below, law=scene.law)
     return mesh, plan
 
 

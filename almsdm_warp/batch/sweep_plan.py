@@ -14,11 +14,13 @@ from ..errors import InputError
 from ..export.tables import TableLayout
 from .sampling import Sampling
 
-COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "stiffness_N_per_mm", "recovery_error_mm", "rings")
-"""The table's columns; `rings`: the ring count of each point's region (the same for all but at --rings auto)."""
+COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "hold_force_N", "stiffness_N_per_mm", "recovery_error_mm", "rings")
+"""The table's columns; `hold_force_N`: the force at the end of the hold (BatchResult.hold_force); `rings`: the
+ring count of each point's region (the same for all but at --rings auto)."""
 SWEEP_TABLE = TableLayout("sweep table", {c: "int64" if c in ("vertex", "rings") else "float64" for c in COLUMNS},
-                          optional=("rings",))
-"""The sweep's table and its parts' (export/tables.py: .csv or .npz); a table written before the rings column has none."""
+                          optional=("hold_force_N", "rings"))
+"""The sweep's table and its parts' (export/tables.py: .csv or .npz); a table written before the rings or the
+hold_force_N column has none."""
 
 
 def default_chunk(points: int, devices: list[str]) -> int:
@@ -62,6 +64,8 @@ class SweepPlan:
     sampling: "Sampling | None" = None
     """Where `points` and `vertices` are still being sampled (Sampling, filled block by block), or None;
     not part of the plan's numbers (the points are)."""
+    law: str = "springs"
+    """The tissue law (Model's law; a law without kernels for a batch is refused before the plan)."""
 
     def wait(self, end: int | None = None) -> None:
         """Return once the points up to `end` (all: None) are there (see `sampling`)."""
@@ -100,10 +104,12 @@ class SweepPlan:
     def key(self) -> str:
         self.wait()
         h = hashlib.sha256()
-        scalars = ["table v2 (rings column)", self.mesh.path, self.mesh.vertex_count, self.dt, self.depth]
+        scalars = ["table v3 (hold_force_N column)", self.mesh.path, self.mesh.vertex_count, self.dt, self.depth]
         scalars += [self.ramp, self.hold, self.settle, self.chunk, self.integrator, self.tol]
         if self.probe_radius or self.fixed_below is not None:
             scalars += [self.probe_radius, self.fixed_below]
+        if self.law != "springs":
+            scalars += [self.law]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
         for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings):
             if a is not None:
@@ -136,7 +142,7 @@ class SweepPlan:
             devices_started()  # a context the command line started (warp_init.start_devices)
 
         return Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale,
-                     fixed_below=self.fixed_below)
+                     fixed_below=self.fixed_below, law=self.law)
 
     def columns(self, begin: int, end: int, results) -> dict:
         """The output columns of points begin..end from [(indices in the chunk, BatchResult)], one per ring count."""
@@ -144,11 +150,12 @@ class SweepPlan:
         n = end - begin
         out = {"x_mm": p[:, 0], "y_mm": p[:, 1], "z_mm": p[:, 2], "vertex": np.empty(n, dtype=np.int64),
                "rings": self.point_rings[begin:end].copy()}
-        for c in ("peak_force_N", "stiffness_N_per_mm", "recovery_error_mm"):
+        for c in ("peak_force_N", "hold_force_N", "stiffness_N_per_mm", "recovery_error_mm"):
             out[c] = np.empty(n, dtype=np.float64)
         for idx, result in results:
             out["vertex"][idx] = result.vertex
             out["peak_force_N"][idx] = result.peak_force
+            out["hold_force_N"][idx] = result.hold_force
             out["stiffness_N_per_mm"][idx] = result.stiffness_N_per_mm
             out["recovery_error_mm"][idx] = result.recovery_error * 1e3
         return out

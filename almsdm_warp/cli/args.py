@@ -210,6 +210,50 @@ def add_integrator_arg(parser, batch: bool = False) -> None:
     parser.add_argument("--integrator", choices=integrators(batch), default="explicit", help="explicit (semi-implicit Euler, the paper's) or implicit (backward Euler); default explicit")
 
 
+def add_law_arg(parser, path: str) -> None:
+    """--law, a tissue law (tissue.laws.LAWS) with kernels for the protocol `path` ("palpation",
+    "batch", "stroke"): any other is a one-line error naming why."""
+    from ..tissue.laws import LAWS
+
+    def parse(text):
+        try:
+            return require_law(text, path, "--law")
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix("--law ")) from None
+
+    parse.__name__ = "law"
+    usable = [name for name, law in LAWS.items() if path in law.paths]
+    parser.add_argument("--law", type=parse, default=None, metavar="{" + ",".join(usable) + "}",
+                        help=f"tissue law: {' or '.join(usable)} (default: the scene's [tissue] law, else springs)")
+
+
+def require_law(law, path: str, what: str) -> str:
+    """`law` where it is a tissue law with kernels for the protocol `path`; else InputError starting with `what`."""
+    from ..tissue.laws import LAWS
+
+    if law not in LAWS:
+        raise InputError(f"{what} {law!r} is not a tissue law (allowed: {', '.join(LAWS)})")
+    try:
+        LAWS[law].require(path=path)
+    except ValueError as exc:
+        raise InputError(f"{what} {law}: {exc}") from None
+    return law
+
+
+def check_law(scene, mesh, integrator: str, path: str, why: str = "") -> None:
+    """InputError, one line (`why` first), where the scene's tissue law has no `integrator` step or no
+    kernels for the protocol `path`, or cannot model its mesh or tissue (before any work)."""
+    from ..tissue.laws import LAWS
+
+    law = LAWS[scene.law]
+    try:
+        law.require(integrator=integrator, path=path)
+        if law.check is not None:
+            law.check(law.name, mesh, scene.tissue)
+    except ValueError as exc:
+        raise InputError(f"{why}{exc}") from None
+
+
 def add_probe_radius_arg(parser) -> None:
     """--probe-radius-mm [mm] (palpate, trace)."""
     parser.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
@@ -254,10 +298,11 @@ def scene_with_tissue_args(args, scene, mesh):
         except (TypeError, ValueError) as exc:
             flag = next((f"{f}: " for f, attr, *_r in MATERIAL_FLAGS.values() if f"Material.{attr} " in str(exc)), "")
             raise InputError(f"{flag}{exc}") from None
+    law = scene.law if getattr(args, "law", None) is None else args.law
     flag_z = getattr(args, "fixed_below_mm", None)
     fixed_below = scene.fixed_below if flag_z is None else flag_z * 1e-3
     if fixed_below is not None and not (mesh.vertices[:, 2] >= fixed_below).any():
         where = f"--fixed-below-mm {flag_z:g}" if flag_z is not None else "the scene's [support] fixed_below_mm"
         raise InputError(f"{where} is above every vertex of {mesh.name} (highest z {mesh.vertices[:, 2].max() * 1e3:.4g} mm): "
                          f"nothing could move")
-    return replace(scene, tissue=tissue, fixed_below=fixed_below)
+    return replace(scene, tissue=tissue, fixed_below=fixed_below, law=law)

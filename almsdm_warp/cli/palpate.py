@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,10 +16,12 @@ from .args import (
     AUTO_TOL_MM,
     GLOBAL_RINGS,
     add_integrator_arg,
+    add_law_arg,
     add_probe_radius_arg,
     add_tissue_args,
     auto_tol,
     check_contact,
+    check_law,
     count_arg,
     finite,
     get_device,
@@ -51,6 +54,7 @@ def add_parser(sub) -> None:
     palpate.add_argument("--rings", type=rings_arg(), default=None, metavar="{N,auto,global,global-free}", help="rings of the local region (outermost fixed), auto (sized to --tol-mm), or a global model (default: the scene's)")
     palpate.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: grow the region until its fixed ring would move less than this [mm] (default 0.1)")
     add_integrator_arg(palpate)
+    add_law_arg(palpate, "palpation")
     palpate.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="frame [ms], at which the force is reported (default 1); the explicit integrator takes it in substeps under 0.9 x its critical step")
     palpate.add_argument("--depth-mm", "--depth", dest="depth_mm", type=number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
     palpate.add_argument("--ramp-s", type=number_arg(">= 0"), default=None, metavar="S", help="ramp time [s] (default: the scene's)")
@@ -182,6 +186,8 @@ def _resolve(args) -> _Run:
         raise InputError(f"the contact vertex {vertex} (z {mesh.vertices[vertex, 2] * 1e3:.4g} mm) is supported: it lies below "
                          f"the support plane z = {scene.fixed_below * 1e3:g} mm and cannot be pressed")
     tol = auto_tol(args, rings, scene)
+    check_law(scene, mesh, args.integrator, "adaptive" if tol is not None else "palpation",
+              "--rings auto (an adaptive region): " if tol is not None else "")
     radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
     return _Run(scene, mesh, device, rings, tol, depth, ramp, hold, settle, dt, vertex, point, contact_extra, radius)
 
@@ -194,7 +200,7 @@ def _build(args, run: _Run):
     mesh, scene = run.mesh, run.scene
     print(mesh.summary())
     support = f"; fixed below z = {scene.fixed_below * 1e3:g} mm" if scene.fixed_below is not None else ""
-    print(f"tissue: {scene.tissue_model} ({scene.tissue_text()}){support}")
+    print(f"tissue: {scene.tissue_model} ({scene.tissue_text()}), law {scene.law}{support}")
     if scene.lesion is not None:
         les = scene.lesion.as_dict()
         print(f"lesion: {les['stiffness_factor']:g}x stiffer within {les['radius_mm']:g} mm of {[round(c, 2) for c in les['center_mm']]} mm")
@@ -209,10 +215,10 @@ def _build(args, run: _Run):
             from ..protocol.adaptive import AdaptivePalpation
 
             pal = AdaptivePalpation(mesh, scene.tissue, tol=run.tol, integrator=args.integrator, dt=run.dt, device=run.device,
-                                    probe_radius=run.probe_radius, **lesion)
+                                    probe_radius=run.probe_radius, law=scene.law, **lesion)
         else:
             pal = Palpation(mesh, scene.tissue, rings=run.rings, integrator=args.integrator, dt=run.dt, device=run.device,
-                            probe_radius=run.probe_radius, **lesion)
+                            probe_radius=run.probe_radius, law=scene.law, **lesion)
         if run.probe_radius > 0:
             pal.touch(run.vertex, run.depth)  # the region grown from the patch the sphere covers at this depth
         else:
@@ -289,9 +295,12 @@ def _press(args, run: _Run, pal) -> list:
                 rt_text = f"{rt:.3f} s" if math.isfinite(rt) else f"not within the {settle:g} s settle window"
                 bar.close()
                 print(
-                    f"press {i + 1}: peak force {result.peak_force_N:.3f} N, "
+                    f"press {i + 1}: peak force {result.peak_force_N:.3f} N, hold force {result.hold_force_N:.3f} N, "
                     f"recovery error {result.recovery_error_mm:.3f} mm, recovery time {rt_text}{auto}"
                 )
+                if result.inverted_tets:
+                    print(f"warning: press {i + 1}: {result.inverted_tets} of {run.mesh.tet_count} tetrahedra inverted "
+                          f"(det F <= 0) at the end of the hold: the press is too deep for these tets", file=sys.stderr)
         finally:
             del pal.step  # back to the class's step, uncounted
         for line in recording.finish():
@@ -316,6 +325,7 @@ def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:
             "region_springs": int(pal.region_springs),
             "free_vertices": int(free_count),
             "integrator": pal.solver.integrator,
+            "law": pal.model.law,
             "probe_radius_mm": run.probe_radius * 1e3,
             "dt_s": run.dt,
             "substeps": int(pal.substeps),
@@ -324,6 +334,8 @@ def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:
         "presses": [
             {
                 "peak_force_N": finite(r.peak_force_N),
+                "hold_force_N": finite(r.hold_force_N),
+                "inverted_tets": r.inverted_tets,
                 "recovery_error_mm": finite(r.recovery_error_mm),
                 "recovery_time_s": finite(r.recovery_time_s),
                 **({"rings_chosen": log["rings"]} if tol is not None else {}),

@@ -12,8 +12,8 @@ import numpy as np
 from ..checks import LIMITS, check_limit, check_protocol, check_region_steps, check_ring_count
 from ..errors import InputError
 from .dataset import add_dataset_arg, cmd_dataset
-from .args import (auto_tol, add_integrator_arg, add_tissue_args, count_arg, get_device, number_arg, print_notes, quiet_warp, rings_arg,
-                   scene_with_tissue_args)
+from .args import (auto_tol, add_integrator_arg, add_law_arg, add_tissue_args, check_law, count_arg, get_device, number_arg, print_notes,
+                   quiet_warp, rings_arg, scene_with_tissue_args)
 
 
 def add_parser(sub) -> None:
@@ -22,7 +22,7 @@ def add_parser(sub) -> None:
         help="press N points spread over a scene or mesh at once (batched); write a force map (.csv/.npz)",
         description="Press N points spread evenly over the surface, all at once on the device (the local ALMSDM "
         "region of each; explicit or implicit integrator), and write per point: x_mm, y_mm, z_mm, vertex, peak_force_N, "
-        "stiffness_N_per_mm (force at full depth / depth), recovery_error_mm. An interrupted sweep resumes "
+        "hold_force_N (force at the end of the hold), stiffness_N_per_mm (hold_force_N / depth), recovery_error_mm, rings. An interrupted sweep resumes "
         "from the chunks it wrote (OUT.parts/) when run again with the same arguments.",
     )
     p.add_argument("scene", nargs="?", default=None, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
@@ -35,6 +35,7 @@ def add_parser(sub) -> None:
     p.add_argument("--hold-s", type=number_arg(">= 0"), default=None, metavar="S", help="hold time [s] (default: the scene's)")
     p.add_argument("--settle-s", type=number_arg(">= 0"), default=None, metavar="S", help="settle window [s] (default: the scene's)")
     add_integrator_arg(p, batch=True)
+    add_law_arg(p, "batch")
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=None, metavar="MS", help="frame [ms] (default 1); the explicit integrator takes it in substeps under 0.9 x the critical step")
     p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
@@ -152,6 +153,9 @@ def _plan(args, devices, times):
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings
     tol = auto_tol(args, rings, scene)
+    check_law(scene, mesh, args.integrator, "batch")
+    if tol is not None:
+        check_law(scene, mesh, args.integrator, "adaptive", "--rings auto (each region sized by an adaptive press): ")
     radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
     if radius > 0 and tol is not None:
         raise InputError("a spherical probe (--probe-radius-mm, [probe] radius_mm) needs a ring count: --rings auto sizes the paper's probe's regions")
@@ -175,7 +179,7 @@ def _plan(args, devices, times):
     cuda = devices[0] != "cpu"
     chunk = args.chunk or default_chunk(len(vertices), devices)
     plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, dt, depth, ramp, hold, settle, points,
-                     vertices, chunk, args.integrator, tol, radius, scene.fixed_below, sampling=sampling)
+                     vertices, chunk, args.integrator, tol, radius, scene.fixed_below, sampling=sampling, law=scene.law)
     times.mark("plan")
     models = None if args.ray or not args.pipeline else models_behind(plan, devices)
     print(mesh.summary())

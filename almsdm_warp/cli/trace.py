@@ -24,8 +24,8 @@ from ..checks import check_ring_count
 from ..errors import InputError
 from ..export.tables import TableLayout
 from ..mesh.validate import MAX_COORDINATE_M
-from .args import add_command, add_integrator_arg, add_probe_radius_arg, add_tissue_args, count_arg, get_device
-from .args import number_arg, path_arg, print_notes, quiet_warp, rings_arg, scene_with_tissue_args
+from .args import add_command, add_integrator_arg, add_law_arg, add_probe_radius_arg, add_tissue_args, check_law, count_arg
+from .args import get_device, number_arg, path_arg, print_notes, quiet_warp, rings_arg, scene_with_tissue_args
 
 PATH_COLUMNS = ("t_s", "x_mm", "y_mm", "z_mm")
 """The columns of a path file, in this order, after a header line that names them."""
@@ -56,6 +56,7 @@ def add_parser(sub) -> None:
     p.add_argument("--path", dest="path_csv", default=None, type=path_arg, metavar="CSV", help="the sphere centre's path: a header t_s,x_mm,y_mm,z_mm, then rows with t_s increasing (default: the built-in stroke on the scene)")
     p.add_argument("--rings", type=rings_arg(("global",)), default=None, metavar="{N,global}", help="rings of the local region, or the global model, anchored (default: the scene's)")
     add_integrator_arg(p)
+    add_law_arg(p, "stroke")
     add_probe_radius_arg(p)
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="step [ms] at which the path is sampled (default 1: haptic rate)")
     p.add_argument("--report-every", type=count_arg, default=1, metavar="N", help="a trace row every Nth step, and the last (default 1)")
@@ -215,11 +216,13 @@ def _make_stroke(args, scene, mesh, dt, device):
         raise InputError(f"the scene {scene.name!r} sizes its region automatically (rings = \"auto\"): almsdm trace "
                          f"takes a ring count or the global model (--rings N or global)")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
+    check_law(scene, mesh, args.integrator, "stroke")
     radius = _probe_radius(args, scene)
     scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
     try:
         return ProbeStroke(mesh, scene.tissue, probe_radius=radius, rings=rings, integrator=args.integrator, dt=dt,
-                           device=device, edge_scale=scales[0], anchor_scale=scales[1], fixed_below=scene.fixed_below)
+                           device=device, edge_scale=scales[0], anchor_scale=scales[1], fixed_below=scene.fixed_below,
+                           law=scene.law)
     except ValueError as exc:  # a parameter the stroke rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
 
@@ -322,7 +325,7 @@ def _finish(args, scene, mesh, stroke, columns, src) -> None:
             "scene": str(scene.path) if scene.path else None,
             "mesh": mesh_json(mesh),
             "path": str(src),
-            "model": {"rings": stroke.rings, "integrator": args.integrator, "dt_s": args.dt_ms * 1e-3,
+            "model": {"rings": stroke.rings, "integrator": args.integrator, "law": stroke.model.law, "dt_s": args.dt_ms * 1e-3,
                       "probe_radius_mm": stroke.radius * 1e3},
             "coupling": None if args.coupling_k is None else {
                 "stiffness_N_per_mm": args.coupling_k, "damping_Ns_per_m": args.coupling_b, "device_damping_Ns_per_m": args.device_b},

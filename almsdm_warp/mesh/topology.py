@@ -81,6 +81,26 @@ def tet_signed_volumes(vertices: np.ndarray, tetrahedra: np.ndarray) -> np.ndarr
     return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
 
 
+def tet_quality(vertices: np.ndarray, tetrahedra: np.ndarray) -> np.ndarray:
+    """Each tet's shape quality 6 sqrt(2) |V| / l_rms^3, shape [t]: 1 for the regular tet, 0 for a flat
+    one (l_rms: the root mean square of its six edges; a sliver has fair edges and almost no volume)."""
+    p = np.asarray(vertices, dtype=np.float64)[np.asarray(tetrahedra, dtype=np.int64)]
+    squares = sum(((p[:, a] - p[:, b]) ** 2).sum(axis=1) for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)))
+    rms3 = (squares / 6.0) ** 1.5
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = 6.0 * np.sqrt(2.0) * np.abs(tet_signed_volumes(vertices, tetrahedra)) / rms3
+    return np.where(rms3 > 0.0, q, 0.0)
+
+
+def inverted_tets(rest: np.ndarray, positions: np.ndarray, tetrahedra: np.ndarray) -> int:
+    """How many tets have det(F) <= 0 at `positions` (F = D_s D_m^-1 from their `rest` shape): the
+    signed volume now has the opposite sign of (or is zero against) the one at rest."""
+    if len(tetrahedra) == 0:
+        return 0
+    now = tet_signed_volumes(positions, tetrahedra)
+    return int(np.count_nonzero(now * np.sign(tet_signed_volumes(rest, tetrahedra)) <= 0.0))
+
+
 def triangle_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Area of each triangle, shape [m]."""
     p = np.asarray(vertices, dtype=np.float64)[np.asarray(triangles, dtype=np.int64)]

@@ -29,6 +29,10 @@ them, for tet volumes, would overflow float64)."""
 MIN_EDGE_M = 1.0e-8
 """Edges shorter than this [m] are an error: the force kernels treat springs under 1e-9 m as
 collapsed (no direction, no force), so such a spring would silently do nothing."""
+SLIVER_QUALITY = 0.02
+"""Tets of quality (topology.tet_quality: 1 regular, 0 flat) under this are slivers: a note counts them and
+names the worst. They are kept (only zero-volume tets are dropped), but they stiffen a volumetric law's
+step: the neo-Hookean law's critical step shrinks with its worst tet."""
 MIN_EDGE_RELATIVE = 2.0**-20
 """Edges shorter than this x the largest |coordinate| are an error: float32 on the device
 (24-bit mantissa) keeps no more than a few bits of their length."""
@@ -83,7 +87,7 @@ def repair_arrays(vertices, triangles=None, tetrahedra=None, *, scale: float = 1
 
     if volume:
         elements = _reorient_tets(v, elements, ids, notes)
-        _report_shared_faces(elements, notes)
+        _report_tet_findings(v, elements, ids, notes)
         surface = topo.tet_surface(elements)
     else:
         surface = elements
@@ -309,6 +313,23 @@ def _reorient_tets(v, tets, ids, notes):
         tets = tets.copy()
         tets[inverted] = tets[inverted][:, [0, 1, 3, 2]]
     return tets
+
+
+def _report_tet_findings(v, tets, ids, notes):
+    """Notes on the (oriented) tets: slivers, faces shared by more than two."""
+    _report_slivers(v, tets, ids, notes)
+    _report_shared_faces(tets, notes)
+
+
+def _report_slivers(v, tets, ids, notes):
+    q = topo.tet_quality(v, tets)
+    slivers = int(np.count_nonzero(q < SLIVER_QUALITY))
+    if slivers:
+        j = int(np.argmin(q))
+        notes.append(
+            f"{slivers} sliver {_plural(slivers, 'tetrahedron', 'tetrahedra')} of {len(tets)} (quality under {SLIVER_QUALITY:g}, "
+            f"1 a regular tet; worst: tetrahedron {ids[j]}, vertices {tuple(int(x) for x in tets[j])}, quality {q[j]:.3g})"
+        )
 
 
 def _orient_closed_surface(v, tri, notes):

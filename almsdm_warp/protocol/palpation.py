@@ -15,6 +15,7 @@ import warp as wp
 
 from ..kernels.probes.press import hold_probe
 from ..kernels.region.state import reset_vertices_left_behind
+from ..mesh.topology import inverted_tets
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE, Model
 from ..region.patch import sphere_patches
 from ..region.region import Region
@@ -54,6 +55,9 @@ class PressResult:
     step_peak: float | None = None
     """Largest |feedback force| [N] over every integrator step while pressed (a frame's substeps
     included); None: the largest of `force`."""
+    inverted_tets: int | None = None
+    """Tets inverted (det F <= 0) at the end of the hold, the deepest frame (mesh.topology.inverted_tets);
+    None on a surface mesh or where nothing was counted."""
 
     @property
     def peak_force_N(self) -> float:
@@ -61,6 +65,12 @@ class PressResult:
         if self.step_peak is not None:
             return float(self.step_peak)
         return float(self.force.max(initial=0.0))
+
+    @property
+    def hold_force_N(self) -> float:
+        """The force at the end of the hold [N]: the last pressed frame's (force[release_step - 1]),
+        as the batch's (BatchResult.hold_force); 0 for a press with no pressed frame."""
+        return float(self.force[self.release_step - 1]) if self.release_step > 0 else 0.0
 
     @property
     def recovery_error_mm(self) -> float:
@@ -453,7 +463,7 @@ class Palpation:
         total, release = schedule.total, schedule.release_step
         force = np.zeros(total)
         disp = np.zeros(total)
-        peak = 0.0
+        peak, inverted = 0.0, None
         # the largest reaction over a frame's substeps (the frame's own where it has one step)
         peak_view = self._peak[0] if self.substeps > 1 else self._force_view
         for s in range(total):
@@ -469,6 +479,8 @@ class Palpation:
                     self.check_finite(s + 1)
                 p = peak_view
                 peak = max(peak, math.sqrt(float(p[0]) ** 2 + float(p[1]) ** 2 + float(p[2]) ** 2))
+                if s == release - 1 and self.mesh.tet_count:  # the deepest frame: are tets turned inside out?
+                    inverted = inverted_tets(self.mesh.vertices, self.positions(), self.mesh.tetrahedra)
             if s >= release or s % check_every == 0:
                 pos = self.state.particle_q.numpy()[v] if self._cpu else self.state.particle_q[v : v + 1].numpy()[0]
                 disp[s] = float(np.linalg.norm(pos - rest))
@@ -480,7 +492,7 @@ class Palpation:
                 record(s + 1, total)
         self.check_finite(total)
         return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=release, force=force, displacement=disp,
-                           step_peak=peak)
+                           step_peak=peak, inverted_tets=inverted)
 
     def press_force(self, force=2.4, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Force-controlled press: push the touched vertex along the inward normal with a force

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 from ..errors import InputError
 from ..checks import AUTO, check_rings, check_value, describe
 from ..protocol.schedule import PressParams
+from ..tissue.laws import LAWS
 from ..tissue.material import Material, material_as_dict
 from ..tissue.params import TissueParams
 from .schema import DEFAULT_TISSUE_MODEL, SCHEMA, TISSUE_MODELS
@@ -34,6 +35,15 @@ if TYPE_CHECKING:
 
 DEFAULT_SCENE = "stomach"
 """The scene used when none is given."""
+DEFAULT_LAW = "springs"
+"""The tissue law of a scene that names none ([tissue] law): the paper's springs."""
+
+
+def check_law_name(law, what: str) -> str:
+    """`law` if it names a tissue law (a key of tissue.laws.LAWS), else InputError naming the allowed ones."""
+    if not isinstance(law, str) or law not in LAWS:
+        raise InputError(f"{what} = {law!r} is not a tissue law (allowed: {', '.join(map(repr, LAWS))})")
+    return law
 
 
 
@@ -65,6 +75,9 @@ class Scene:
     plate, pressed from above, +z up); None: no supports."""
     probe_radius: float = 0.0
     """Radius of the spherical probe [m]; 0: the paper's probe (the contact vertex driven)."""
+    law: str = DEFAULT_LAW
+    """The tissue law ([tissue] law, a key of tissue.laws.LAWS): "springs" (the paper's, every path) or
+    "neo-hookean" (stable neo-Hookean tets: a material on a tet mesh, one explicit region so far)."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
@@ -77,6 +90,7 @@ class Scene:
         if self.fixed_below is not None:
             object.__setattr__(self, "fixed_below", check_value(self.fixed_below, float, "number", "Scene.fixed_below"))
         object.__setattr__(self, "probe_radius", check_value(self.probe_radius, float, ">= 0", "Scene.probe_radius"))
+        check_law_name(self.law, "Scene.law")
         if self.tol is not None:
             object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
@@ -111,7 +125,7 @@ class Scene:
         for section, keys in SCHEMA.items():
             out[section] = {}
             if section == "tissue":
-                out[section] = {"model": self.tissue_model, **self._tissue_dict()}
+                out[section] = {"model": self.tissue_model, "law": self.law, **self._tissue_dict()}
                 continue
             for key, (attr, _kind, factor, _rule) in keys.items():
                 value = _get(self, section, attr)
@@ -177,6 +191,7 @@ def load_scene(path) -> Scene:
         rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
         raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
     mesh_path = _mesh_path(values["mesh"].get("path"), p, where)
+    law = check_law_name(values["tissue"].pop("law", DEFAULT_LAW), f"{where}: [tissue] law")
     tissue = _tissue(data.get("tissue", {}), values["tissue"], where)
 
     try:  # the SI values are checked again: say which file they came from
@@ -191,6 +206,7 @@ def load_scene(path) -> Scene:
             lesion=lesion,
             fixed_below=values["support"].get("fixed_below"),
             probe_radius=values["probe"].get("probe_radius", 0.0),
+            law=law,
         )
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None
@@ -203,10 +219,10 @@ def _tissue(table: dict, values: dict, where: str) -> TissueParams | Material:
         raise InputError(f"{where}: [tissue] model = {model!r} is not one of {', '.join(map(repr, TISSUE_MODELS))}")
     keys = TISSUE_MODELS[model]
     for key in table:
-        if key != "model" and key not in keys:
+        if key not in ("model", "law") and key not in keys:
             default = " (the default)" if "model" not in table else ""
             raise InputError(f"{where}: [tissue] {key} is a key of another tissue model, not of model = {model!r}{default}; "
-                             f"allowed with it: model, {', '.join(keys)}")
+                             f"allowed with it: model, law, {', '.join(keys)}")
     if model == "material" and "youngs_modulus" not in values:
         raise InputError(f"{where}: [tissue] model = 'material' needs youngs_modulus_kPa (Young's modulus [kPa])")
     try:

@@ -23,7 +23,8 @@ SCHEMA: dict[str, dict[str, tuple[str, type, float, str]]] = {
         "path": ("path", str, 1.0, "path"),
         "scale_mm": ("scale_mm", float, 1.0, "> 0"),
     },
-    "tissue": {"model": ("model", str, 1.0, "path"), **TISSUE_KEYS, **MATERIAL_KEYS},  # per model: TISSUE_MODELS
+    "tissue": {"model": ("model", str, 1.0, "path"), "law": ("law", str, 1.0, "path"),  # law: tissue.laws.LAWS
+               **TISSUE_KEYS, **MATERIAL_KEYS},  # per model: TISSUE_MODELS
     "region": {
         "rings": ("rings", int, 1.0, ">= 1"),  # or the string "auto"
         "tol_mm": ("tol", float, 1000.0, "> 0"),  # only with rings = "auto"
