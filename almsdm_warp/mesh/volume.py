@@ -54,7 +54,7 @@ def check_closed(surface: TissueMesh) -> None:
         raise InputError(f"{surface.name}: already a tetrahedral mesh ({surface.tet_count} tets); nothing to tetrahedralize")
     edges = np.sort(surface.triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     unique, counts = np.unique(edges, axis=0, return_counts=True)
-    for bad, what in ((counts == 1, "open: an edge on its border"), (counts > 2, "non-manifold: an edge of 3 or more triangles")):
+    for bad, what in ((counts > 2, "non-manifold: an edge of 3 or more triangles"), (counts == 1, "open: an edge on its border")):
         if bad.any():
             a, b = unique[np.argmax(bad)]
             raise InputError(f"{surface.name}: cannot tetrahedralize: the surface is {what} ({int(bad.sum())} such edges, "
