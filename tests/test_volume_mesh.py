@@ -107,3 +107,27 @@ def test_real_liver_surface_meshes():
     shell = trimesh.Trimesh(vol.vertices, vol.triangles, process=False)
     assert shell.is_watertight
     np.testing.assert_allclose(shell.volume, trimesh.Trimesh(surface.vertices, surface.triangles).volume, rtol=0.02)
+
+
+def test_volume_auto_makes_a_volume_only_for_a_volumetric_law(ball):
+    from almsdm_warp.cli.volume_arg import needs_volume, volume_for_press
+    from almsdm_warp.tissue.material import Material
+    from almsdm_warp.tissue.params import TissueParams
+
+    surface, top, vol = ball
+    material = Material(youngs_modulus=5e3)
+    assert needs_volume("auto", surface, material, "neo-hookean")
+    assert not needs_volume("off", surface, material, "neo-hookean")
+    assert not needs_volume("auto", surface, material, "springs")  # today's default law: as read
+    assert not needs_volume("auto", surface, TissueParams(), "neo-hookean")
+    assert not needs_volume("auto", vol, material, "neo-hookean")
+    pressed = volume_for_press(surface, top, probe_radius=0.05, depth=0.005)  # a = 15.8 mm, edge 7.1 mm
+    assert pressed.is_volume and any("7.12 mm near the probe" in n for n in pressed.notes)
+
+
+def test_bad_volume_choice_is_one_line_exit_2(capsys):
+    from almsdm_warp.cli.main import main
+
+    assert main(["palpate", "--volume", "always"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--volume" in err and "'auto'" in err
