@@ -40,7 +40,7 @@ def test_volume_matches_the_input_surface(ball):
 def test_tets_positive_and_of_good_quality(ball):
     _surface, _top, vol = ball
     q = tet_quality(vol.vertices, vol.tetrahedra)
-    assert q.min() > 0.2, q.min()  # a regular tet is 1; fTetWild's worst on the liver is 0.28 (docs/volume.md)
+    assert q.min() > 0.2, q.min()  # a regular tet is 1; fTetWild's worst on the liver is 0.38 (docs/volume.md)
     assert not any("reoriented" in n for n in vol.notes)
 
 

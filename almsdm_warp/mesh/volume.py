@@ -107,8 +107,8 @@ def tetrahedralize(surface: TissueMesh, *, edge: float | None = None, near=None,
       by GRADING beyond; without them the target edge is `edge` everywhere.
     epsilon: how far the new surface may lie from the input, as a fraction of the diagonal.
     threads: fTetWild's threads (1, the default, gives the same mesh on every run).
-    iterations: fTetWild's optimization passes at most (its default 80 takes four times as long for
-      a minimum mean ratio a few hundredths higher; docs/volume.md).
+    iterations: fTetWild's optimization passes at most (its default 80 took twice as long on an
+      icosphere for the same minimum mean ratio; docs/volume.md).
     Raises InputError for an open or non-manifold surface, or when fTetWild is not installed.
     """
     check_closed(surface)
