@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
+import tempfile
 
 import numpy as np
 
@@ -124,11 +126,16 @@ def tetrahedralize(surface: TissueMesh, *, edge: float | None = None, near=None,
         v, t, s = sizing_field(lo - pad, hi + pad, edge_mm, np.asarray(near) * 1e3, near_edge * 1e3 / SPLIT_RATIO,
                                radius * 1e3)
         background = {"bg_vertices": v, "bg_tets": t, "bg_values": s}
-    try:
-        points, tets = tetwild.tetrahedralize(x, surface.triangles, edge_length_abs=edge_mm, epsilon=epsilon,
-                                              num_threads=threads, num_opt_iter=iterations, quiet=True, **background)
-    except RuntimeError as exc:
-        raise InputError(f"{surface.name}: fTetWild could not tetrahedralize the surface: {exc}") from exc
+    cwd = os.getcwd()
+    with tempfile.TemporaryDirectory() as scratch:  # fTetWild writes __tracked_surface.stl into the cwd
+        try:
+            os.chdir(scratch)
+            points, tets = tetwild.tetrahedralize(x, surface.triangles, edge_length_abs=edge_mm, epsilon=epsilon,
+                                                  num_threads=threads, num_opt_iter=iterations, quiet=True, **background)
+        except RuntimeError as exc:
+            raise InputError(f"{surface.name}: fTetWild could not tetrahedralize the surface: {exc}") from exc
+        finally:
+            os.chdir(cwd)
     tets = np.asarray(tets, dtype=np.int64)
     if not len(tets):
         raise InputError(f"{surface.name}: fTetWild found no volume inside the surface (is it flat, or inside out?)")
