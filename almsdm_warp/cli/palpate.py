@@ -34,6 +34,7 @@ from .args import (
     rings_arg,
     scene_with_tissue_args,
 )
+from .volume_arg import add_volume_arg, needs_volume, volume_for_press
 
 __all__ = ["AUTO_TOL_MM", "GLOBAL_RINGS", "add_parser", "cmd_palpate"]
 
@@ -69,6 +70,7 @@ def add_parser(sub) -> None:
     palpate.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
     palpate.add_argument("--json", default=None, type=path_arg, metavar="PATH", help="write the result as JSON here")
     palpate.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal, for runs over ~2 s)")
+    add_volume_arg(palpate)
     add_tissue_args(palpate)
     add_record_args(palpate)
     palpate.set_defaults(func=cmd_palpate)
@@ -96,6 +98,18 @@ def _contact(args, mesh, device):
 
     v = top_vertex(mesh)
     return v, mesh.vertices[v], {}
+
+
+def _volume(args, scene, mesh, point, depth, device):
+    """--volume auto: the surface tetrahedralized, finest at the press, and the contact found again on it."""
+    radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
+    mesh = volume_for_press(mesh, point, radius, depth)
+    print_notes(mesh)
+    if args.vertex is None:
+        return (mesh, *_contact(args, mesh, device))
+    surface = mesh.surface_vertices  # the surface's vertex ids are gone: the nearest new surface vertex
+    vertex = int(surface[np.argmin(np.linalg.norm(mesh.vertices[surface] - point, axis=1))])
+    return mesh, vertex, mesh.vertices[vertex], {}
 
 
 @dataclass
@@ -182,6 +196,8 @@ def _resolve(args) -> _Run:
     dt = args.dt_ms * 1e-3
     check_protocol(depth, dt, ramp, hold, settle, args.presses, float(np.ptp(mesh.vertices, axis=0).max()))
     vertex, point, contact_extra = _contact(args, mesh, device)
+    if needs_volume(args.volume, mesh, scene.tissue, getattr(args, "law", "springs")):
+        mesh, vertex, point, contact_extra = _volume(args, scene, mesh, point, depth, device)
     if scene.fixed_below is not None and mesh.vertices[vertex, 2] < scene.fixed_below:
         raise InputError(f"the contact vertex {vertex} (z {mesh.vertices[vertex, 2] * 1e3:.4g} mm) is supported: it lies below "
                          f"the support plane z = {scene.fixed_below * 1e3:g} mm and cannot be pressed")
