@@ -131,3 +131,24 @@ def test_bad_volume_choice_is_one_line_exit_2(capsys):
     assert main(["palpate", "--volume", "always"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--volume" in err and "'auto'" in err
+
+
+def test_palpate_a_surface_as_a_volume_end_to_end(tmp_path, capsys):
+    """`palpate SURFACE --law neo-hookean --volume auto`: a closed surface with a material and no membrane
+    thickness is tetrahedralized and pressed (the thickness is a surface model's, not asked for here)."""
+    import json
+
+    from almsdm_warp.cli.main import main
+
+    s = trimesh.creation.icosphere(subdivisions=2, radius=15.0)
+    path = tmp_path / "ball.obj"
+    s.export(path)
+    out = tmp_path / "out.json"
+    args = ["palpate", str(path), "--law", "neo-hookean", "--volume", "auto", "--youngs-modulus-kpa", "5",
+            "--rayleigh-alpha-per-s", "100", "--fixed-below-mm", "-10", "--depth-mm", "1", "--ramp-s", "0.05",
+            "--hold-s", "0.1", "--settle-s", "0.02", "--integrator", "implicit", "--dt-ms", "2", "--rings", "3", "--json", str(out)]
+    assert main(args) == 0
+    data = json.loads(out.read_text())
+    captured = capsys.readouterr()
+    assert "tetrahedralized" in captured.err and " tets, " in captured.out.splitlines()[0]
+    assert data["model"]["law"] == "neo-hookean" and 0.0 < data["presses"][0]["hold_force_N"] < 1.0

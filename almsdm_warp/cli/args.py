@@ -291,7 +291,8 @@ def scene_with_tissue_args(args, scene, mesh):
         elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
             base.update(damping_ratio=0.0)
         base.update(given)
-        if not mesh.is_volume and not base.get("thickness", 0.0) > 0.0:
+        becomes_volume = getattr(args, "volume", "off") == "auto" and getattr(args, "law", "springs") != "springs"
+        if not mesh.is_volume and not becomes_volume and not base.get("thickness", 0.0) > 0.0:
             raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0")
         try:
             tissue = Material(**base)
