@@ -143,6 +143,18 @@ class BatchRegionArrays:
 
 
 @wp.struct
+class BatchElements:
+    """A volumetric law's tets of each palpation's free vertices (almsdm_warp.batch.batch_palpation.
+    BatchPalpation.elements): CSR offsets per free vertex [B, vertex capacity + 1], each local entry's
+    tet as local corner indices [B, entry capacity], and per free vertex the shift from a local entry
+    to the mesh's entry of the same tet (whose parameters the law keeps) [B, vertex capacity]."""
+
+    offsets: wp.array2d(dtype=wp.int32)
+    topology: wp.array2d(dtype=wp.vec4i)
+    shift: wp.array2d(dtype=wp.int32)
+
+
+@wp.struct
 class BatchPress:
     """One press of a batch: its schedule and each palpation's direction and force records."""
 

@@ -125,22 +125,31 @@ def test_palpate_refuses_a_surface_mesh(capsys):
     assert "it needs a tet mesh, and stomach.obj has no tetrahedra" in err and err.count("\n") == 1
 
 
-@pytest.mark.parametrize("command, message", [
-    (["sweep", "--out", "x.csv"], "--law: neo-hookean: the neo-hookean law has no kernels for a batch (only: palpation, stroke, multi, adaptive)"),
-])
-def test_a_batch_refuses_the_law_at_parse_time(command, message, tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    assert main([*command, "--law", "neo-hookean"]) == 2
-    err = capsys.readouterr().err
-    assert message in err and err.count("\n") == 1
-    assert list(tmp_path.iterdir()) == []
+def test_sweep_with_the_law_is_the_batchs_press(ball, tmp_path):
+    """`sweep --law neo-hookean`: each row's hold force is BatchPalpation's for its vertex (the same model and press)."""
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
+    from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
+    from almsdm_warp.sim.model import Model
+    from almsdm_warp.tissue.material import Material
+
+    out = tmp_path / "t.csv"
+    assert main(["sweep", str(ball), *NEO, "--points", "4", *PRESS, "--out", str(out)]) == 0
+    table = SWEEP_TABLE.read(out)
+    model = Model(load_mesh(ball), Material(youngs_modulus=10e3, rayleigh_alpha=200.0), "cpu", fixed_below=-5e-3, law="neo-hookean")
+    batch = BatchPalpation(model=model, rings=2, dt=1e-3).touch(table["vertex"])
+    res = batch.press(0.5e-3, 0.05, 0.05, 0.05)
+    assert np.all(table["hold_force_N"] > 0.0)
+    np.testing.assert_allclose(table["hold_force_N"], res.hold_force, rtol=1e-12)
 
 
-def test_sweep_refuses_a_scene_law_at_plan_time(tmp_path, ball, capsys):
-    path = scene_file(tmp_path, ball, 'law = "neo-hookean"')
+def test_sweep_refuses_a_scene_law_its_mesh_cannot_take(tmp_path, capsys):
+    from pathlib import Path
+
+    surface = Path(__file__).resolve().parents[1] / "scenes" / "stomach.obj"
+    path = scene_file(tmp_path, surface, 'thickness_mm = 3.0\nlaw = "neo-hookean"')
     assert main(["sweep", str(path), "--out", str(tmp_path / "t.csv"), "--points", "4"]) == 2
     err = capsys.readouterr().err
-    assert "no kernels for a batch" in err and err.count("\n") == 1
+    assert "needs a tet mesh" in err and err.count("\n") == 1
     assert not (tmp_path / "t.csv").exists() and not (tmp_path / "t.csv.parts").exists()
 
 

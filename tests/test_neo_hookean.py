@@ -192,12 +192,31 @@ def test_a_sphere_stroke_holds_the_same_force_with_either_integrator(device):
     np.testing.assert_allclose(held["implicit"], held["explicit"], rtol=1e-3)
 
 
-def test_paths_without_kernels_are_refused():
-    mesh = two_tets()
+@pytest.mark.parametrize("integrator", ["explicit", "implicit"])
+def test_a_batch_presses_as_each_palpation_bit_for_bit(device, integrator):
+    """BatchPalpation with the neo-Hookean law (the exact kernel, the regions' tets as local corners)
+    against Palpation at each contact: the same bits (at the same substeps) on the same device."""
     from almsdm_warp.batch.batch_palpation import BatchPalpation
 
-    with pytest.raises(ValueError, match="no kernels for a batch"):
-        BatchPalpation(model=Model(mesh, MATERIAL, "cpu", law="neo-hookean"))
+    mesh = tet_ball(15.0, 3.0)
+    surface = mesh.surface_vertices
+    contacts = surface[mesh.vertices[surface, 2] > 5e-3][:4]
+    steps = {"substeps": 6} if integrator == "explicit" else {}
+    dt = 1e-3 if integrator == "explicit" else 2e-3
+    model = Model(mesh, MATERIAL, device, law="neo-hookean", fixed_below=-8e-3)
+    batch = BatchPalpation(model=model, rings=2, dt=dt, integrator=integrator, **steps).touch(contacts)
+    assert batch.kernel == "exact"
+    got = batch.press(1e-3, ramp=0.05, hold=0.1, settle=0.05)
+    for b, v in enumerate(contacts):
+        pal = Palpation(mesh, MATERIAL, rings=2, law="neo-hookean", integrator=integrator, dt=dt, device=device, fixed_below=-8e-3, **steps)
+        pal.touch(int(v))
+        want = pal.press(1e-3, ramp=0.05, hold=0.1, settle=0.05)
+        assert want.peak_force_N > 0.02
+        assert got.peak_force[b] == want.peak_force_N and got.recovery_error[b] == want.displacement[-1]
+
+
+def test_paths_without_kernels_are_refused():
+    mesh = two_tets()
     with pytest.raises(ValueError, match="needs a material"):
         Model(mesh, TissueParams(), "cpu", law="neo-hookean")
     surface = TissueMesh.from_arrays(mesh.vertices[:4] * 1e3, triangles=np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]]))

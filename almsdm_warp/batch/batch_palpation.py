@@ -17,7 +17,7 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import check_vertex
-from ..kernels.arrays import BatchPress, BatchRegionArrays, BatchSphere, struct_from
+from ..kernels.arrays import BatchElements, BatchPress, BatchRegionArrays, BatchSphere, struct_from
 from ..kernels.explicit import batch as bk
 from ..kernels.explicit import batch_fast as bkf
 from ..kernels.region import batch_rings as br
@@ -337,6 +337,7 @@ class BatchPalpation:
     def plan(self) -> "BatchPalpation":
         """touch()'s second half, after build(): the kernel, substeps and states of those regions."""
         self._choose_kernel()
+        self._build_elements()
         self.plan_substeps()
         self._allocate_states()
         br.rest_states(self)
@@ -436,6 +437,8 @@ class BatchPalpation:
         self.entry_capacity = _pow2(entries, 16)
         self.fast_plan = self._fast_plan(int(counts.max()), int(free.max()), entries, springs)
         cuda = self.device.is_cuda
+        if self.model.law_entry.volumetric:  # the fast kernel is a layout of the springs law
+            self.fast_plan = None
         kernel = self._kernel or ("fast" if cuda and self.fast_plan is not None else "exact")
         if kernel == "fast" and self.fast_plan is None:
             raise ValueError(
@@ -452,6 +455,33 @@ class BatchPalpation:
             self.threads = int(self._threads)
         else:
             self.threads = min(max(_pow2(int(free.max()), 32), 32), 256)
+
+    def _build_elements(self) -> None:
+        # a volumetric law's tets of each region's free vertices, with local corners (element_*); a
+        # placeholder each for the springs law (its entries are the regions' CSR)
+        B, a = self.batch_size, self.buffers.array
+        if not self.model.law_entry.volumetric:
+            self.elements = BatchElements()
+            self.elements.offsets = a("element_offsets", (1, 1), wp.int32)
+            self.elements.topology = a("element_topology", (1, 1), wp.vec4i)
+            self.elements.shift = a("element_shift", (1, 1), wp.int32)
+            return
+        offsets = self.model.entry_offsets.numpy()
+        free = np.arange(self.regions.vertex_capacity)[None, :] < self.free_vertex_counts[:, None]
+        rv = np.where(free, host_copy(self.regions.region_vertex), 0)
+        first = np.where(free, offsets[rv], 0)
+        degree = np.where(free, offsets[rv + 1] - offsets[rv], 0)
+        local = np.concatenate([np.zeros((B, 1), dtype=np.int64), np.cumsum(degree, axis=1)], axis=1)
+        self.element_offsets = a("element_offsets", (B, rv.shape[1] + 1), wp.int32, zero=False)
+        """Each palpation's free vertices' tets (CSR, local entries), [B, vertex capacity + 1]."""
+        self.element_topology = a("element_topology", (B, _pow2(int(local[:, -1].max(initial=1)), 16)), wp.vec4i, zero=False)
+        """Each local entry's tet, its corners as local indices, [B, entry capacity]."""
+        self.element_shift = wp.array((first - local[:, :-1]).astype(np.int32), dtype=wp.int32, device=self.device)
+        """Per free vertex: its mesh entries' first index less its local entries' (the law's parameters are the mesh's)."""
+        br.build_elements(self, self.element_offsets, self.element_topology)
+        self.elements = struct_from(BatchElements, self, offsets=self.element_offsets, topology=self.element_topology,
+                                    shift=self.element_shift)
+        """The three above as one kernel argument (kernels/arrays.py)."""
 
     def _allocate_states(self) -> None:
         B, cv, a = self.batch_size, self.regions.vertex_capacity, self.buffers.array

@@ -50,14 +50,19 @@ def stable_step(mass, K, C, vertices=None, what: str = "") -> float:
     return float((-g + np.sqrt(g * g + 4.0 * lam)) / lam)
 
 
-def _sparse(n: int, rows, cols, vals):
+def block_matrix(n: int, rows, cols, blocks, diagonal=None):
+    """The 3n x 3n sparse matrix of 3x3 `blocks` [m, k, 3, 3] at block rows `rows` and columns `cols`
+    (vertex ids, [m, k]; repeated entries add up), plus `diagonal` [n] on the diagonal."""
     import scipy.sparse as sp
 
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
-
-
-def _vertex_diagonal(n: int, coef):
-    return [np.arange(3 * n)], [np.arange(3 * n)], [np.repeat(coef, 3)]
+    r = (3 * np.asarray(rows, dtype=np.int64))[..., None, None] + np.arange(3)[:, None]
+    c = (3 * np.asarray(cols, dtype=np.int64))[..., None, None] + np.arange(3)[None, :]
+    r, c = np.broadcast_to(r, blocks.shape).ravel(), np.broadcast_to(c, blocks.shape).ravel()
+    values = blocks.ravel()
+    if diagonal is not None:
+        r, c = np.concatenate([r, np.arange(3 * n)]), np.concatenate([c, np.arange(3 * n)])
+        values = np.concatenate([values, np.repeat(diagonal, 3)])
+    return sp.csr_matrix((values, (r, c)), shape=(3 * n, 3 * n))
 
 
 def springs_matrices(model, anchors: bool = True):
@@ -68,20 +73,11 @@ def springs_matrices(model, anchors: bool = True):
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
     ddt = d[:, :, None] * d[:, None, :]  # [e, 3, 3]
     scale = 1.0 if anchors else 0.0
-
-    def assemble(edge_coef, vertex_coef):
-        blocks = edge_coef[:, None, None] * ddt
-        rows, cols, vals = _vertex_diagonal(n, vertex_coef * scale)
-        for a, b, sign in ((0, 0, 1.0), (1, 1, 1.0), (0, 1, -1.0), (1, 0, -1.0)):
-            for r in range(3):
-                for c in range(3):
-                    rows.append(3 * e[:, a] + r)
-                    cols.append(3 * e[:, b] + c)
-                    vals.append(sign * blocks[:, r, c])
-        return _sparse(n, rows, cols, vals)
-
+    sign = np.array([1.0, 1.0, -1.0, -1.0])[None, :, None, None]  # blocks (i, i), (j, j), (i, j), (j, i)
+    rows, cols = e[:, [0, 1, 0, 1]], e[:, [0, 1, 1, 0]]
     with np.errstate(all="ignore"):
-        return assemble(model.spring_ke_host, model.anchor_ke_host), assemble(model.spring_kd_host, model.anchor_kd_host)
+        return tuple(block_matrix(n, rows, cols, sign * (edge[:, None, None] * ddt)[:, None], vertex * scale)
+                     for edge, vertex in ((model.spring_ke_host, model.anchor_ke_host), (model.spring_kd_host, model.anchor_kd_host)))
 
 
 def springs_critical_dt(model, vertices=None, anchors: bool = True) -> float:
@@ -180,27 +176,21 @@ def tet_stiffness(model):
     g = np.concatenate([-grads.sum(axis=1, keepdims=True), grads], axis=1)  # [m, 4, 3]
     # K_ab = V (mu (g_a . g_b) I + mu g_b g_a^T + lambda g_a g_b^T)
     dots = np.einsum("mai,mbi->mab", g, g)
-    rows, cols, vals = [], [], []
-    for a in range(4):
-        for b in range(4):
-            block = volume[:, None, None] * (mu * dots[:, a, b][:, None, None] * np.eye(3) + mu * np.einsum("mi,mj->mij", g[:, b], g[:, a])
-                                             + lam * np.einsum("mi,mj->mij", g[:, a], g[:, b]))
-            for r in range(3):
-                for c in range(3):
-                    rows.append(3 * tets[:, a] + r)
-                    cols.append(3 * tets[:, b] + c)
-                    vals.append(block[:, r, c])
-    return _sparse(model.particle_count, rows, cols, vals)
+    blocks = volume[:, None, None, None, None] * (mu * dots[..., None, None] * np.eye(3) + mu * np.einsum("mbi,maj->mabij", g, g)
+                                                  + lam * np.einsum("mai,mbj->mabij", g, g))  # [m, a, b, 3, 3]
+    rows, cols = np.broadcast_to(tets[:, :, None], (len(tets), 4, 4)), np.broadcast_to(tets[:, None, :], (len(tets), 4, 4))
+    return block_matrix(model.particle_count, rows, cols, blocks)
 
 
 def neo_hookean_critical_dt(model, vertices=None, anchors: bool = True) -> float:
     """Largest stable step [s] of semi-implicit Euler for the neo-Hookean law linearized at rest (its
     tets' linear elasticity, the anchors and the vertex dampers; stable_step). A deep press stiffens
     a compressed tet: Palpation takes its substeps under 0.9 of this."""
-    n = model.particle_count
+    import scipy.sparse as sp
+
     scale = 1.0 if anchors else 0.0
-    K = tet_stiffness(model) + _sparse(n, *_vertex_diagonal(n, model.anchor_ke_host * scale))
-    C = _sparse(n, *_vertex_diagonal(n, model.anchor_kd_host * scale))
+    K = tet_stiffness(model) + sp.diags(np.repeat(model.anchor_ke_host * scale, 3))
+    C = sp.diags(np.repeat(model.anchor_kd_host * scale, 3)).tocsr()
     return stable_step(model.particle_mass_host, K, C, vertices, f"E {model.tissue.youngs_modulus:.3g} Pa")
 
 
@@ -231,6 +221,8 @@ class Law:
     """The protocols with kernels for this law."""
     check: Callable | None = None
     """check(law, mesh, tissue): ValueError where the law cannot model this mesh or tissue (before any work)."""
+    volumetric: bool = False
+    """Its entries are a vertex's incident tets (a batch builds them for each region as local tets)."""
 
     def require(self, integrator: str | None = None, path: str | None = None) -> None:
         """ValueError where this law has no kernels for `integrator` or the protocol `path`."""
@@ -243,7 +235,8 @@ class Law:
 LAWS = {
     "springs": Law("springs", KERNEL_LAWS["springs"], springs_critical_dt, springs_stiffness_bound, springs_entries),
     "neo-hookean": Law("neo-hookean", KERNEL_LAWS["neo-hookean"], neo_hookean_critical_dt, neo_hookean_stiffness_bound,
-                       neo_hookean_entries, paths=("palpation", "stroke", "multi", "adaptive"), check=check_volumetric),
+                       neo_hookean_entries, paths=("palpation", "batch", "stroke", "multi", "adaptive"), check=check_volumetric,
+                       volumetric=True),
 }
 """Law name -> its entry."""
 

@@ -22,7 +22,7 @@ import functools
 
 import warp as wp
 
-from ..arrays import BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
+from ..arrays import BatchElements, BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
 from ..block_memory import SHARED_BYTES_MAX, block_sync, work_array
 from ..laws import LAWS
 from ..probes.press import drive_vertex, press_target, record_peak
@@ -44,7 +44,8 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
     runs none of it."""
     cv, ce = int(vertex_capacity), int(entry_capacity)
     SPHERE = bool(sphere)
-    vertex_force = LAWS[law].vertex_force
+    SPRINGS = law == "springs"  # its springs in the working arrays; a volumetric law's tets read from the batch's element arrays
+    vertex_force, Entries, PARAMS = LAWS[law].vertex_force, LAWS[law].Entries, LAWS[law].ENTRY_PARAMS
 
     @wp.func
     def substep(
@@ -53,14 +54,22 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
         anchor_ke: wp.array(dtype=wp.float32), anchor_kd: wp.array(dtype=wp.float32), anchor_scale: float,
         pressed: int, target: wp.vec3, dt: float,
         q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3), q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
+        element_offsets: wp.array(dtype=wp.int32), element_topology: wp.array(dtype=wp.vec4i), params: PARAMS,
+        shift: wp.array(dtype=wp.int32),
     ):
         # one step of the free vertices this lane owns; returns the reaction on local vertex 0 (the
-        # probe's), which lane 0 owns. Local indices: arrays are the region's, not the mesh's.
+        # probe's), which lane 0 owns. Local indices: arrays are the region's, not the mesh's (a
+        # volumetric law's entry parameters are the mesh's: `shift` takes a local entry there).
         reaction = wp.vec3(0.0)
         for i in range(lane, nf, threads):
             x = q_in[i]
             u = qd_in[i]
-            f = vertex_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale, off[i], off[i + 1], nbr, spring, 0, q_in, qd_in)
+            f = wp.vec3(0.0)
+            if wp.static(SPRINGS):
+                f = vertex_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale, off[i], off[i + 1], nbr, spring, 0, q_in, qd_in)
+            else:
+                f = vertex_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale, element_offsets[i], element_offsets[i + 1],
+                                 element_topology, params, shift[i], q_in, qd_in)
             if i == 0 and pressed != 0:
                 reaction = f  # the feedback force: the tissue's internal forces on the probe
                 xd, ud = drive_vertex(x, target, dt)  # displacement control
@@ -115,6 +124,8 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
         scratch_vec3: wp.array(dtype=wp.vec3),
         scratch_float: wp.array(dtype=wp.float32),
         scratch_int: wp.array(dtype=wp.int32),
+        entries: Entries,
+        elements: BatchElements,
         q_state: wp.array2d(dtype=wp.vec3),
         qd_state: wp.array2d(dtype=wp.vec3),
     ):
@@ -147,13 +158,17 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
             qd_a[i] = qd_state[b, i]
             q_b[i] = q_state[b, i]
             qd_b[i] = qd_state[b, i]
-        for i in range(lane, nf + 1, threads):
-            off[i] = regions.local_offsets[b, i]
-        for k in range(lane, ne, threads):
-            nbr[k] = regions.local_neighbour[b, k]
-            e = regions.local_edge[b, k]
-            spring[k] = wp.vec3(tissue.spring_ke[e], tissue.spring_kd[e], tissue.spring_rest_length[e])
+        if wp.static(SPRINGS):
+            for i in range(lane, nf + 1, threads):
+                off[i] = regions.local_offsets[b, i]
+            for k in range(lane, ne, threads):
+                nbr[k] = regions.local_neighbour[b, k]
+                e = regions.local_edge[b, k]
+                spring[k] = wp.vec3(tissue.spring_ke[e], tissue.spring_kd[e], tissue.spring_rest_length[e])
         block_sync()
+        eoff = elements.offsets[b]
+        etop = elements.topology[b]
+        eshift = elements.shift[b]
 
         dt = press.dt
         rest0 = wp.vec3d(rest[0])
@@ -173,9 +188,11 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
             if wp.static(SPHERE):
                 driven = 0
             if (s - step_begin) % 2 == 0:
-                f = substep(lane, threads, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_a, qd_a, q_b, qd_b)
+                f = substep(lane, threads, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_a, qd_a, q_b, qd_b,
+                            eoff, etop, entries.params, eshift)
             else:
-                f = substep(lane, threads, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_b, qd_b, q_a, qd_a)
+                f = substep(lane, threads, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_b, qd_b, q_a, qd_a,
+                            eoff, etop, entries.params, eshift)
             if wp.static(SPHERE):
                 if pressed != 0:
                     block_sync()
@@ -228,7 +245,8 @@ def press_batch(batch, step_begin, step_count):
         kernel,
         dim=p.batch_size * p.threads,
         block_dim=p.threads,
-        inputs=[p.threads, r.arrays, m.arrays, 1.0, p.press_arrays, p.sphere_arrays, int(step_begin), int(step_count), p.scratch_vec3, p.scratch_float, p.scratch_int],
+        inputs=[p.threads, r.arrays, m.arrays, 1.0, p.press_arrays, p.sphere_arrays, int(step_begin), int(step_count), p.scratch_vec3,
+                p.scratch_float, p.scratch_int, m.entries, p.elements],
         outputs=[p.q_state, p.qd_state],
         device=m.device,
     )

@@ -15,7 +15,7 @@ import functools
 
 import warp as wp
 
-from ..arrays import BatchCGArrays, BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
+from ..arrays import BatchCGArrays, BatchElements, BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
 from ..laws import LAWS
 from ..probes.press import drive_vertex, press_target, record_peak
 from ..probes.sphere import sphere_constrain
@@ -39,7 +39,8 @@ def record_force(press: BatchPress, b: int, step: int, f: wp.vec3):
 @functools.cache
 def batch_kernel(law: str):
     """The implicit batch step of tissue law `law` (a key of kernels.laws.LAWS)."""
-    implicit_row = LAWS[law].implicit_row
+    implicit_row, Entries = LAWS[law].implicit_row, LAWS[law].Entries
+    SPRINGS = law == "springs"  # its entries are the rows'; a volumetric law's tets are the batch's element arrays
 
     @wp.kernel(module="unique", enable_backward=False)
     def step_batch_implicit(
@@ -54,6 +55,8 @@ def batch_kernel(law: str):
         q_in: wp.array2d(dtype=wp.vec3),
         qd_in: wp.array2d(dtype=wp.vec3),
         cg: BatchCGArrays,
+        entries: Entries,
+        elements: BatchElements,
         q_out: wp.array2d(dtype=wp.vec3),
         qd_out: wp.array2d(dtype=wp.vec3),
     ):
@@ -86,13 +89,26 @@ def batch_kernel(law: str):
             x = q_in[b, i]
             u = qd_in[b, i]
             k0 = regions.local_offsets[b, i]
-            # the springs from the mesh's CSR table: a free vertex's local entries are its mesh entries in order
-            f, D, Kv, correction = implicit_row(
-                x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale, tissue.particle_mass[v], dt,
-                k0, regions.local_offsets[b, i + 1], neighbour, tissue.adj_spring, tissue.adj_offsets[v] - k0,
-                k0, regions.local_offsets[b, i + 1], neighbour, q_in[b], qd_in[b],
-                neighbour, 1, i, driven, dv_driven, free_n, cg.csr_block[b], cg.csr_local[b], 0,
-            )
+            f = wp.vec3(0.0)
+            D = wp.mat33(0.0)
+            Kv = wp.vec3(0.0)
+            correction = wp.vec3(0.0)
+            if wp.static(SPRINGS):
+                # the springs from the mesh's CSR table: a free vertex's local entries are its mesh entries in order
+                f, D, Kv, correction = implicit_row(
+                    x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale, tissue.particle_mass[v], dt,
+                    k0, regions.local_offsets[b, i + 1], neighbour, tissue.adj_spring, tissue.adj_offsets[v] - k0,
+                    k0, regions.local_offsets[b, i + 1], neighbour, q_in[b], qd_in[b],
+                    neighbour, 1, i, driven, dv_driven, free_n, cg.csr_block[b], cg.csr_local[b], 0,
+                )
+            else:
+                # the tets from the batch's element arrays (local corners), their rest data the mesh's
+                f, D, Kv, correction = implicit_row(
+                    x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale, tissue.particle_mass[v], dt,
+                    elements.offsets[b, i], elements.offsets[b, i + 1], elements.topology[b], entries.params, elements.shift[b, i],
+                    k0, regions.local_offsets[b, i + 1], neighbour, q_in[b], qd_in[b],
+                    neighbour, 1, i, driven, dv_driven, free_n, cg.csr_block[b], cg.csr_local[b], 0,
+                )
             if i == 0 and driven == 0:
                 record_force(press, b, step, f)  # the feedback force: internal forces on the probe's vertex
             cg.diag[b, i] = D
@@ -146,7 +162,7 @@ def step_batch(batch, step, state_in, state_out, scratch, max_iterations, tolera
         dim=p.batch_size,
         inputs=[
             r.arrays, m.arrays, 1.0, p.press_arrays, p.sphere_arrays, int(step), int(max_iterations), float(tolerance),
-            state_in[0], state_in[1], scratch.arrays,
+            state_in[0], state_in[1], scratch.arrays, m.entries, p.elements,
         ],
         outputs=[state_out[0], state_out[1]],
         device=m.device,
