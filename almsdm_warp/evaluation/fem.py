@@ -5,7 +5,9 @@ linear (P1, 4-node) or quadratic (P2, 10-node) tetrahedra, a clamped support and
 frictionless sphere pressed into the top. SI units throughout.
 
 P1 tets lock in bending and near incompressibility (at nu = 0.45 they are 15-45 % too stiff
-at practical sizes); P2 converges quickly and is the reference. Contact is node-to-rigid-sphere
+at practical sizes); P2 converges quickly and is the reference. Toward nu = 1/2 (0.49-0.499) P2
+stiffens too; `mixed=True` (P2 displacements, a pressure constant on each tet, condensed) does not
+lock. Large deformation (neo-Hookean): fem_nonlinear.py. Contact is node-to-rigid-sphere
 with the gap and its normal taken along z: for a shallow press (depth << sphere radius, contact
 radius a << R) the sphere's normal at the contact edge tilts by a/R only, and z is the direction
 Hertz's linear theory uses too.
@@ -70,9 +72,11 @@ def stiffness(nodes: np.ndarray, elements: np.ndarray, young: float, poisson: fl
     mixed (P2 only): the locking-free P2/P0 element for nearly incompressible bodies (nu -> 1/2):
     an independent pressure constant on each tet, p_e = lambda (1/V_e) int_e div u, condensed
     statically, so the volumetric term is lambda / V_e b_e b_e^T with b_e = int_e grad N (the tet's
-    divergence row) in place of lambda int div u div v. P2/P0 satisfies the inf-sup condition in 3D
-    (Boffi, Brezzi & Fortin 2013, sec. 8.6), so it does not lock; each tet keeps one volume
-    constraint instead of the four that make P2 stiffen (and P1 lock) as nu -> 1/2.
+    divergence row) in place of lambda int div u div v (the mean-dilatation form of the u-p
+    element). Each tet keeps one volume constraint, against about 4 displacement dofs a tet (P1:
+    about 0.5, which is why P1 locks); plain P2 keeps four (its quadrature points) and stiffens as
+    nu -> 1/2. P2/P0 is a standard Stokes pair (Boffi, Brezzi & Fortin 2013, Mixed Finite Element
+    Methods); tests/test_fem_nonlinear.py checks that it does not lock here (Hertz at nu = 0.499).
     """
     lam, mu = lame(young, poisson)
     order = {4: 1, 10: 2}[elements.shape[1]]

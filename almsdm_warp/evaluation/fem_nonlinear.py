@@ -1,7 +1,7 @@
 """An independent large-deformation reference: compressible neo-Hookean P1 tets (NumPy/SciPy).
 
 The classic compressible neo-Hookean energy (Ogden 1984; Bonet & Wood, Nonlinear Continuum
-Mechanics for Finite Element Analysis, 2nd ed. 2008, eq. 6.28):
+Mechanics for Finite Element Analysis, 2nd ed. 2008, ch. 6):
 
     Psi(F) = mu/2 (I_C - 3) - mu ln J + lambda/2 (ln J)^2,   I_C = tr F^T F,  J = det F,
 
@@ -16,7 +16,7 @@ The static solve minimises the total energy: Newton's method on the free dofs wi
 tangent (sparse, assembled from vectorised per-tet blocks) and a backtracking line search on the
 energy, the press depth and any prescribed displacements applied in load steps. A rigid
 frictionless sphere is an augmented Lagrangian on the surface nodes with the sphere's true
-(deformed, radial) gap |x - c| - R: per node (max(0, lambda_n - k g)^2 - lambda_n^2) / (2 k), a C1
+(deformed, radial) gap g = |x - c| - R: per node (max(0, lambda_n - k g)^2 - lambda_n^2) / (2 k), a C1
 energy that Newton and the line search treat like the elastic one, the multipliers updated
 lambda_n <- max(0, lambda_n - k g) until the largest penetration is under a tolerance. Unlike a
 plain penalty the converged answer does not depend on k (k only sets how many updates); unlike the
