@@ -15,20 +15,21 @@ def _nodes(order, vertices, tets):
     return (vertices, tets) if order == 1 else fem.p2_nodes(vertices, tets)
 
 
-@pytest.mark.parametrize("order", [1, 2])
-def test_rigid_motions_cost_no_energy(order):
+@pytest.mark.parametrize("order, mixed", [(1, False), (2, False), (2, True)])
+def test_rigid_motions_cost_no_energy(order, mixed):
     nodes, elements = _nodes(order, *primitives.tet_box_arrays(1.0, 2))
-    k = fem.stiffness(nodes, elements, E, NU)
+    k = fem.stiffness(nodes, elements, E, NU, mixed=mixed)
     for motion in (np.tile([1.0, -2.0, 0.5], (len(nodes), 1)), np.cross([0.3, 1.0, -0.2], nodes)):
         assert np.abs(k @ motion.ravel()).max() < 1e-9 * np.abs(k).max() * np.abs(motion).max()
 
 
-@pytest.mark.parametrize("order", [1, 2])
-def test_patch_uniaxial_stress_gives_young_and_poisson(order):
-    """A box on rollers stretched along z: u = strain (-nu x, -nu y, z) exactly, reaction = E strain A."""
+@pytest.mark.parametrize("order, mixed, nu", [(1, False, NU), (2, False, NU), (2, True, NU), (2, True, 0.499)])
+def test_patch_uniaxial_stress_gives_young_and_poisson(order, mixed, nu):
+    """A box on rollers stretched along z: u = strain (-nu x, -nu y, z) exactly, reaction = E strain A.
+    The mixed P2/P0 element too, nearly incompressible included."""
     size = np.array([2.0, 3.0, 4.0]) * 1e-3
     nodes, elements = _nodes(order, *primitives.tet_box_arrays((2.0, 3.0, 4.0), (2, 2, 3)))
-    k = fem.stiffness(nodes, elements, E, NU)
+    k = fem.stiffness(nodes, elements, E, nu, mixed=mixed)
     strain = 0.01
     on = lambda axis, value: np.abs(nodes[:, axis] - value) < 1e-12  # noqa: E731
     fixed = np.zeros((len(nodes), 3), dtype=bool)
@@ -38,7 +39,7 @@ def test_patch_uniaxial_stress_gives_young_and_poisson(order):
     values = np.zeros((len(nodes), 3))
     values[top, 2] = strain * size[2]
     u, reactions = fem.solve_dirichlet(k, fixed, values)
-    exact = strain * nodes * [-NU, -NU, 1.0]
+    exact = strain * nodes * [-nu, -nu, 1.0]
     np.testing.assert_allclose(u.reshape(-1, 3), exact, atol=1e-12 * size.max())
     force = reactions.reshape(-1, 3)[top, 2].sum()
     np.testing.assert_allclose(force / (size[0] * size[1]) / strain, E, rtol=1e-9)

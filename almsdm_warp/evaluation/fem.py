@@ -5,7 +5,9 @@ linear (P1, 4-node) or quadratic (P2, 10-node) tetrahedra, a clamped support and
 frictionless sphere pressed into the top. SI units throughout.
 
 P1 tets lock in bending and near incompressibility (at nu = 0.45 they are 15-45 % too stiff
-at practical sizes); P2 converges quickly and is the reference. Contact is node-to-rigid-sphere
+at practical sizes); P2 converges quickly and is the reference. Toward nu = 1/2 (0.49-0.499) P2
+stiffens too; `mixed=True` (P2 displacements, a pressure constant on each tet, condensed) does not
+lock. Large deformation (neo-Hookean): fem_nonlinear.py. Contact is node-to-rigid-sphere
 with the gap and its normal taken along z: for a shallow press (depth << sphere radius, contact
 radius a << R) the sphere's normal at the contact edge tilts by a/R only, and z is the direction
 Hertz's linear theory uses too.
@@ -42,7 +44,7 @@ def p2_nodes(vertices: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.nda
     return np.vstack([vertices, mid]), elements
 
 
-def _barycentric_gradients(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def barycentric_gradients(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Gradients of the 4 barycentric coordinates [t, 4, 3] and the volumes [t] of tets [t, 4, 3]."""
     jac = np.transpose(corners[:, 1:] - corners[:, :1], (0, 2, 1))  # columns x_k - x_0
     inv = np.linalg.inv(jac)  # rows: gradients of L_1..L_3
@@ -63,27 +65,56 @@ def _shape_gradients(grad_l: np.ndarray, order: int) -> list[tuple[float, np.nda
     return points
 
 
-def stiffness(nodes: np.ndarray, elements: np.ndarray, young: float, poisson: float) -> sp.csr_matrix:
-    """Global stiffness [N/m], shape [3n, 3n] (dof 3 i + c), of P1 ([t, 4]) or P2 ([t, 10]) tets."""
+def stiffness(nodes: np.ndarray, elements: np.ndarray, young: float, poisson: float, *,
+              mixed: bool = False) -> sp.csr_matrix:
+    """Global stiffness [N/m], shape [3n, 3n] (dof 3 i + c), of P1 ([t, 4]) or P2 ([t, 10]) tets.
+
+    mixed (P2 only): the locking-free P2/P0 element for nearly incompressible bodies (nu -> 1/2):
+    an independent pressure constant on each tet, p_e = lambda (1/V_e) int_e div u, condensed
+    statically, so the volumetric term is lambda / V_e b_e b_e^T with b_e = int_e grad N (the tet's
+    divergence row) in place of lambda int div u div v (the mean-dilatation form of the u-p
+    element). Each tet keeps one volume constraint, against about 4 displacement dofs a tet (P1:
+    about 0.5, which is why P1 locks); plain P2 keeps four (its quadrature points) and stiffens as
+    nu -> 1/2. P2/P0 is a standard Stokes pair (Boffi, Brezzi & Fortin 2013, Mixed Finite Element
+    Methods); tests/test_fem_nonlinear.py checks that it does not lock here (Hertz at nu = 0.499).
+    """
     lam, mu = lame(young, poisson)
     order = {4: 1, 10: 2}[elements.shape[1]]
-    grad_l, volume = _barycentric_gradients(nodes[elements[:, :4]])
+    if mixed and order != 2:
+        raise ValueError("the mixed (P2/P0) element needs P2 elements [t, 10]; P1/P0 locks like P1")
+    grad_l, volume = barycentric_gradients(nodes[elements[:, :4]])
     if (volume <= 0).any():
         raise ValueError(f"tet {int(np.argmin(volume))} has volume {volume.min():.3g} m^3 (needs > 0)")
     k = elements.shape[1]
     ke = np.zeros((len(elements), k, 3, k, 3))
+    divergence = np.zeros((len(elements), k, 3))
     eye = np.eye(3)
     for weight, g in _shape_gradients(grad_l, order):
         w = (weight * volume)[:, None, None, None, None]
         # K_aibj = int lambda dN_a/dx_i dN_b/dx_j + mu (dN_a . dN_b delta_ij + dN_a/dx_j dN_b/dx_i)
-        ke += w * lam * np.einsum("tai,tbj->taibj", g, g)
+        if not mixed:
+            ke += w * lam * np.einsum("tai,tbj->taibj", g, g)
         ke += w * mu * np.einsum("tak,tbk,ij->taibj", g, g, eye)
         ke += w * mu * np.einsum("taj,tbi->taibj", g, g)
+        divergence += (weight * volume)[:, None, None] * g
+    if mixed:
+        ke += (lam / volume)[:, None, None, None, None] * np.einsum("tai,tbj->taibj", divergence, divergence)
     dofs = (3 * elements[:, :, None] + np.arange(3)).reshape(len(elements), -1)
     rows = np.repeat(dofs, 3 * k, axis=1).ravel()
     cols = np.tile(dofs, (1, 3 * k)).ravel()
     n = 3 * len(nodes)
     return sp.csr_matrix((ke.reshape(-1), (rows, cols)), shape=(n, n))
+
+
+def factor_spd(matrix: sp.spmatrix):
+    """Sparse LU of a symmetric positive definite matrix, pivoting on the diagonal only.
+
+    SPD needs no row pivoting; SuperLU's default partial pivoting swaps rows once lambda >> mu
+    (nu near 1/2: the volumetric terms dwarf the rest) and then fills in about 6 x more and
+    takes 50-70 x longer (P2, 9030 dofs at nu = 0.499: 60-90 s against 1.2 s).
+    """
+    return spla.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                     options=dict(SymmetricMode=True))
 
 
 def solve_dirichlet(stiff: sp.spmatrix, fixed: np.ndarray, values: np.ndarray, load=None):
@@ -94,7 +125,7 @@ def solve_dirichlet(stiff: sp.spmatrix, fixed: np.ndarray, values: np.ndarray, l
     free = ~fixed
     stiff = sp.csr_matrix(stiff)
     rhs = f[free] - stiff[free][:, fixed] @ u[fixed]
-    u[free] = spla.spsolve(sp.csc_matrix(stiff[free][:, free]), rhs)
+    u[free] = factor_spd(stiff[free][:, free]).solve(rhs)
     reactions = stiff @ u - f
     reactions[free] = 0.0
     return u, reactions
@@ -208,7 +239,7 @@ def solve_contact(stiff, fixed_dofs, surface, gap, *, tol, load=None, first=None
     position = np.full(3 * n, -1)
     position[free] = np.arange(len(free))
     stiff = sp.csr_matrix(stiff)
-    lu = spla.splu(sp.csc_matrix(stiff[free][:, free]), permc_spec="MMD_AT_PLUS_A")
+    lu = factor_spd(stiff[free][:, free])
     preload = np.zeros(3 * n)
     if load is not None:
         preload[free] = lu.solve(np.asarray(load, dtype=np.float64).ravel()[free])
@@ -236,18 +267,19 @@ def solve_contact(stiff, fixed_dofs, surface, gap, *, tol, load=None, first=None
 
 
 def sphere_press(vertices, tets, *, young, poisson, sphere_radius, depth, fixed, order=2, centre_xy=(0.0, 0.0),
-                 copies=1) -> PressResult:
+                 copies=1, mixed=False) -> PressResult:
     """A rigid frictionless sphere pressed `depth` [m] (from first touch) into the top, along -z.
 
     vertices [m], tets [t, 4]; `fixed`: a function of the node positions [n, 3] that returns the
     fixed-dof mask [n, 3] (for example ``lambda x: clamped_below(x, -0.04)``); `copies`: how many
-    copies of this part the whole body is (4 for a quarter model with two symmetry planes).
+    copies of this part the whole body is (4 for a quarter model with two symmetry planes); mixed:
+    the locking-free P2/P0 element (order 2; see `stiffness`) for nu near 1/2.
     Contact nodes: surface nodes, constrained along z only (frictionless, shallow press).
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     tets = np.asarray(tets, dtype=np.int64)
     nodes, elements = (vertices, tets) if order == 1 else p2_nodes(vertices, tets)
-    stiff = stiffness(nodes, elements, young, poisson)
+    stiff = stiffness(nodes, elements, young, poisson, mixed=mixed)
     fixed_dofs = np.asarray(fixed(nodes), dtype=bool).ravel()
     gap = sphere_gap(nodes, sphere_radius, depth, centre_xy)
     surface = surface_nodes(elements)
