@@ -195,7 +195,8 @@ def test_a_sphere_stroke_holds_the_same_force_with_either_integrator(device):
 @pytest.mark.parametrize("integrator", ["explicit", "implicit"])
 def test_a_batch_presses_as_each_palpation_bit_for_bit(device, integrator):
     """BatchPalpation with the neo-Hookean law (the exact kernel, the regions' tets as local corners)
-    against Palpation at each contact: the same bits (at the same substeps) on the same device."""
+    against Palpation at each contact: the same bits (at the same substeps) on the CPU; on CUDA, where
+    the two kernels are compiled apart (their multiply-adds fused differently), within float32's rounding."""
     from almsdm_warp.batch.batch_palpation import BatchPalpation
 
     mesh = tet_ball(15.0, 3.0)
@@ -212,7 +213,11 @@ def test_a_batch_presses_as_each_palpation_bit_for_bit(device, integrator):
         pal.touch(int(v))
         want = pal.press(1e-3, ramp=0.05, hold=0.1, settle=0.05)
         assert want.peak_force_N > 0.02
-        assert got.peak_force[b] == want.peak_force_N and got.recovery_error[b] == want.displacement[-1]
+        if device == "cpu":
+            assert got.peak_force[b] == want.peak_force_N and got.recovery_error[b] == want.displacement[-1]
+        else:
+            np.testing.assert_allclose(got.peak_force[b], want.peak_force_N, rtol=1e-5)
+            np.testing.assert_allclose(got.recovery_error[b], want.displacement[-1], atol=1e-8)
 
 
 def test_paths_without_kernels_are_refused():
