@@ -167,7 +167,7 @@ def test_probe_reaction_includes_the_dampers(device, integrator):
 @pytest.mark.parametrize("integrator", INTEGRATORS)
 def test_probe_on_a_fixed_neighbour_gives_no_nan(device, integrator):
     """The probe drives vertex 0 exactly onto vertex 1's rest position: spring 0-1 has length 0, so
-    it adds nothing (forces.py guards l < 1e-9); the reaction is spring 0-2 plus the anchor."""
+    it adds nothing (kernels/laws/springs.py guards l < 1e-9); the reaction is spring 0-2 plus the anchor."""
     tissue = TissueParams(edge_stiffness=62.0, edge_damping=0.02, anchor_stiffness=124.0, anchor_damping=0.1)
     tri = Triangle(tissue, device, integrator)
     dt = 1.0e-3

@@ -1,7 +1,7 @@
 """Implicit (backward) Euler on the region's free vertices, with a matrix-free CG solve.
 
 Linearized once per step (Baraff & Witkin): (M + dt C + dt^2 K) dv = dt (f0 - dt K v0), with
-K = -df/dx (spring blocks made positive semi-definite where a spring is compressed) and
+K = -df/dx (the tissue law's blocks, kernels/laws: positive semi-definite) and
 C = -df/dv. Block-Jacobi preconditioned conjugate gradients, warm-started from the previous
 step's dv. One thread per region does the whole solve in one launch: its sums run in a fixed
 order, so a rerun gives the same bits on any device, and on the CPU a step is a single call.
