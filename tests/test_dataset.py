@@ -142,7 +142,7 @@ def test_a_changed_spec_is_not_resumed_into_the_old_folder(whole, tmp_path, caps
 @pytest.mark.parametrize("edit, words", [
     (("points = 6", "points = 6\npoint_count = 3"), "unknown key 'point_count' in [dataset]"),
     (("radii_mm = [15.0]", "radii_mm = [-2.0]"), "radii_mm value must be > 0"),
-    (("radii_mm = [15.0]", "radii_mm = [1.0]"), "holds no vertex and no spring"),  # 1 mm at 5 mm under a shell
+    (("radii_mm = [15.0]", "radii_mm = [1.0]"), "holds no vertex, spring or tet"),  # 1 mm at 5 mm under a shell
     (("[lesions]", "[lesion]"), "unknown section 'lesion'"),
 ])
 def test_a_bad_spec_exits_2_with_one_line(tmp_path, capsys, edit, words):

@@ -220,6 +220,36 @@ def test_a_batch_presses_as_each_palpation_bit_for_bit(device, integrator):
             np.testing.assert_allclose(got.recovery_error[b], want.displacement[-1], atol=1e-8)
 
 
+def test_a_lesion_scales_its_tets_moduli(device):
+    """A lesion under the neo-Hookean law scales each tet's moduli (Model's element_scale, from
+    Lesion.model_scales): the whole ball twice as stiff holds twice the force; a lesion outside the
+    region changes no bit; a stiff one under the probe raises the force."""
+    from almsdm_warp.tissue.lesion import Lesion
+
+    mesh = tet_ball(15.0, 3.0)
+    top = int(np.argmax(mesh.vertices[:, 2]))
+
+    def hold(**scales):
+        pal = Palpation(mesh, MATERIAL, rings=3, law="neo-hookean", integrator="implicit", dt=2e-3, device=device,
+                        fixed_below=-8e-3, **scales)
+        pal.touch(top)
+        result = pal.press(1e-3, ramp=0.05, hold=0.6, settle=0.02)
+        return result.force[result.release_step - 1]
+
+    plain = hold()
+    assert plain > 0.02
+    np.testing.assert_allclose(hold(element_scale=np.full(mesh.tet_count, 2.0)), 2.0 * plain, rtol=2e-3)
+    far = Lesion((0.0, 0.0, -12e-3), 2e-3, 5.0).model_scales(mesh, MATERIAL, "neo-hookean")
+    assert (far["element_scale"] != 1.0).any()
+    assert hold(**far) == plain
+    under = Lesion(tuple(mesh.vertices[top] - np.array([0.0, 0.0, 4e-3])), 4e-3, 5.0).model_scales(mesh, MATERIAL, "neo-hookean")
+    assert hold(**under) > 1.2 * plain
+    with pytest.raises(ValueError, match="per-tet scales"):
+        Model(mesh, MATERIAL, device, law="neo-hookean", edge_scale=np.ones(mesh.edge_count))
+    with pytest.raises(ValueError, match="element_scale must be"):
+        Model(mesh, MATERIAL, device, law="neo-hookean", element_scale=np.zeros(mesh.tet_count))
+
+
 def test_paths_without_kernels_are_refused():
     mesh = two_tets()
     with pytest.raises(ValueError, match="needs a material"):

@@ -296,12 +296,12 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
         grid = [(c, r, f) for c in centers for r in spec.radii for f in spec.factors]
         for k, (c, r, f) in enumerate(grid, start=1):
             lesion = Lesion(tuple(float(x) for x in c), r, f)
-            edge_scale, anchor_scale = lesion.scales(mesh, scene.tissue)
-            if not (edge_scale != 1.0).any() and not (anchor_scale != 1.0).any():
+            scales = lesion.model_scales(mesh, scene.tissue, scene.law)
+            if not any((s != 1.0).any() for s in scales.values()):
                 raise InputError(f"lesion {k} of {name}: radius {r * 1e3:g} mm around {np.round(c * 1e3, 2).tolist()} mm "
-                                 f"holds no vertex and no spring of the mesh (a lesion there changes nothing): "
+                                 f"holds no vertex, spring or tet of the mesh (a lesion there changes nothing): "
                                  f"give a larger radius or a smaller [lesions] depth_mm")
-            items.append(DatasetItem(name, k, lesion, replace(base, edge_scale=edge_scale, anchor_scale=anchor_scale), scene))
+            items.append(DatasetItem(name, k, lesion, replace(base, **scales), scene))
     return items
 
 

@@ -66,6 +66,8 @@ class SweepPlan:
     not part of the plan's numbers (the points are)."""
     law: str = "springs"
     """The tissue law (Model's law; a law without kernels for a batch is refused before the plan)."""
+    element_scale: np.ndarray | None = None
+    """A volumetric law's lesion: each tet's modulus factor (Model's element_scale), or None."""
 
     def wait(self, end: int | None = None) -> None:
         """Return once the points up to `end` (all: None) are there (see `sampling`)."""
@@ -111,7 +113,8 @@ class SweepPlan:
         if self.law != "springs":
             scalars += [self.law]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
-        for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings):
+        for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings,
+                  *(() if self.element_scale is None else (self.element_scale,))):
             if a is not None:
                 h.update(np.ascontiguousarray(a).tobytes())
         return h.hexdigest()[:16]
@@ -142,7 +145,7 @@ class SweepPlan:
             devices_started()  # a context the command line started (warp_init.start_devices)
 
         return Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale,
-                     fixed_below=self.fixed_below, law=self.law)
+                     fixed_below=self.fixed_below, law=self.law, element_scale=self.element_scale)
 
     def columns(self, begin: int, end: int, results) -> dict:
         """The output columns of points begin..end from [(indices in the chunk, BatchResult)], one per ring count."""

@@ -224,8 +224,8 @@ def _build(args, run: _Run):
         f"contact: vertex {run.vertex} at {np.round(run.point * 1e3, 2).tolist()} mm; press {run.depth * 1e3:g} mm "
         f"(ramp {run.ramp:g} s, hold {run.hold:g} s, settle {run.settle:g} s) x {args.presses}"
     )
-    scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
-    lesion = dict(zip(("edge_scale", "anchor_scale"), scales), fixed_below=scene.fixed_below)
+    scales = scene.lesion.model_scales(mesh, scene.tissue, scene.law) if scene.lesion is not None else {}
+    lesion = dict(scales, fixed_below=scene.fixed_below)
     try:
         if run.tol is not None:
             from ..protocol.adaptive import AdaptivePalpation

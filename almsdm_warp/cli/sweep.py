@@ -168,7 +168,7 @@ def _plan(args, devices, times):
     check_sphere_travel(radius, depth, dt, ramp)
     check_limit(args.points, "points", "--points")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
-    scales = scene.lesion.scales(mesh, scene.tissue) if scene.lesion is not None else (None, None)
+    scales = scene.lesion.model_scales(mesh, scene.tissue, scene.law) if scene.lesion is not None else {}
     t0, sampling = time.perf_counter(), None
     if tol is None:  # (--rings auto sizes each point's region first: every point is needed at once)
         points, vertices, sampling = start_sampling(mesh, args.points, scene.fixed_below)
@@ -178,8 +178,9 @@ def _plan(args, devices, times):
         times.add("sampling", time.perf_counter() - t0)
     cuda = devices[0] != "cpu"
     chunk = args.chunk or default_chunk(len(vertices), devices)
-    plan = SweepPlan(mesh, scene.tissue, scales[0], scales[1], 1 if tol else rings, dt, depth, ramp, hold, settle, points,
-                     vertices, chunk, args.integrator, tol, radius, scene.fixed_below, sampling=sampling, law=scene.law)
+    plan = SweepPlan(mesh, scene.tissue, scales.get("edge_scale"), scales.get("anchor_scale"), 1 if tol else rings, dt, depth,
+                     ramp, hold, settle, points, vertices, chunk, args.integrator, tol, radius, scene.fixed_below,
+                     sampling=sampling, law=scene.law, element_scale=scales.get("element_scale"))
     times.mark("plan")
     models = None if args.ray or not args.pipeline else models_behind(plan, devices)
     print(mesh.summary())
@@ -254,8 +255,8 @@ def _size(plan, scene, scales, tol, progress):
     try:
         with Progress(distinct, enabled=progress, label="sizing regions") as bar:
             rings = size_regions(plan.mesh, scene.tissue, plan.vertices, tol, depth=plan.depth, ramp=plan.ramp, hold=plan.hold,
-                                 integrator=plan.integrator, dt=plan.dt, edge_scale=scales[0], anchor_scale=scales[1],
-                                 on_point=bar.advance)
+                                 integrator=plan.integrator, dt=plan.dt, edge_scale=scales.get("edge_scale"),
+                                 anchor_scale=scales.get("anchor_scale"), on_point=bar.advance)
     except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
         raise InputError(str(exc)) from exc
     print(f"auto rings: {distinct} contacts sized to {tol * 1e3:g} mm in {time.perf_counter() - t0:.2f} s "

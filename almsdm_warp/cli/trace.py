@@ -218,11 +218,10 @@ def _make_stroke(args, scene, mesh, dt, device):
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     check_law(scene, mesh, args.integrator, "stroke")
     radius = _probe_radius(args, scene)
-    scales = scene.lesion.scales(mesh) if scene.lesion is not None else (None, None)
+    scales = scene.lesion.model_scales(mesh, None, scene.law) if scene.lesion is not None else {}
     try:
         return ProbeStroke(mesh, scene.tissue, probe_radius=radius, rings=rings, integrator=args.integrator, dt=dt,
-                           device=device, edge_scale=scales[0], anchor_scale=scales[1], fixed_below=scene.fixed_below,
-                           law=scene.law)
+                           device=device, fixed_below=scene.fixed_below, law=scene.law, **scales)
     except ValueError as exc:  # a parameter the stroke rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
 

@@ -104,7 +104,8 @@ class Palpation:
     "global" (every vertex free, anchored: the accuracy reference) or "global-free" (every vertex
     free, no anchors: the paper's global surface model). dt [s]. edge_scale [edge_count] and
     anchor_scale [vertex_count]: per-spring and per-anchor multipliers of stiffness and damping
-    (a scene's lesion, `Lesion.scales`), fixed for the model's life.
+    (a scene's lesion, `Lesion.scales`), fixed for the model's life; element_scale [tet_count] a
+    volumetric law's per-tet multiplier of its moduli (`Lesion.model_scales` gives either).
 
     dt is the frame: step() advances the model by dt and reports the force at its end. The explicit
     integrator takes `substeps` steps of dt / substeps in each frame, as many as keep each under 0.9 x
@@ -125,7 +126,7 @@ class Palpation:
 
     def __init__(self, mesh, tissue=None, *, rings=4, integrator="explicit", dt=1e-3, device=None, capture=True,
                  edge_scale=None, anchor_scale=None, fixed_below=None, substeps="auto", probe_radius=0.0, law="springs",
-                 **solver_kw):
+                 element_scale=None, **solver_kw):
         if not (isinstance(rings, (int, np.integer)) and not isinstance(rings, bool)) and rings not in GLOBAL_MODELS:
             raise ValueError(f"rings must be an int >= 1 or one of {GLOBAL_MODELS}, got {rings!r}")
         if isinstance(rings, (int, np.integer)) and rings < 1:
@@ -133,7 +134,8 @@ class Palpation:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
         self.probe_radius = check_probe_radius(probe_radius)
-        self.model = Model(mesh, tissue, device, edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below, law=law)
+        self.model = Model(mesh, tissue, device, edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below, law=law,
+                           element_scale=element_scale)
         self.model.law_entry.require(path=self.protocol)
         self.device = self.model.device
         self.mesh = self.model.mesh

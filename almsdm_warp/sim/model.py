@@ -45,7 +45,7 @@ class Model:
     """The static tissue model on one device: rest shape, topology, masses, springs, anchors."""
 
     def __init__(self, mesh, tissue=None, device=None, *, edge_scale=None, anchor_scale=None, fixed_below=None,
-                 support=None, anchors=None, law: str = "springs"):
+                 support=None, anchors=None, law: str = "springs", element_scale=None):
         """mesh: TissueMesh or DeviceMesh. tissue: TissueParams (the paper's per-spring constants, SI;
         default: the stomach scene's) or Material (every spring, anchor, damper and mass derived per
         edge and vertex by tissue.material.springs_for_mesh).
@@ -58,6 +58,8 @@ class Model:
         supported tet mesh (the support holds it), kept otherwise; the vertex dampers d_i stay (with
         a material they hold the mass-proportional Rayleigh damping). law: the tissue law, a key of
         almsdm_warp.tissue.laws.LAWS (its kernels' functions, critical step and stiffness bound).
+        element_scale [tet_count]: a volumetric law's multiplier of each tet's moduli (a lesion,
+        `Lesion.model_scales`); edge_scale and anchor_scale are the springs law's.
         """
         self.law_entry = law_entry(law)
         self.law = self.law_entry.name
@@ -117,11 +119,21 @@ class Model:
         """The arrays above as one kernel argument (kernels/arrays.py)."""
         self.spring_ke_host, self.spring_kd_host, self.anchor_ke_host, self.anchor_kd_host = ke, kd, ka, da
         """The constants above in float64 (host), as derived: the law's critical step reads them."""
-        self._set_entries(edge_scale is not None or anchor_scale is not None)
+        self._set_entries(edge_scale is not None or anchor_scale is not None, element_scale)
 
-    def _set_entries(self, scaled: bool) -> None:
-        if self.law != "springs" and scaled:
-            raise ValueError(f"the {self.law} law takes no per-spring or per-anchor scales (a lesion): they scale springs")
+    def _set_entries(self, scaled: bool, element_scale) -> None:
+        volumetric = self.law_entry.volumetric
+        if volumetric and scaled:
+            raise ValueError(f"the {self.law} law takes a lesion as per-tet scales (element_scale), not per-spring or per-anchor ones")
+        if element_scale is not None:
+            if not volumetric:
+                raise ValueError(f"element_scale scales a volumetric law's tets; the {self.law} law takes edge_scale and anchor_scale")
+            element_scale = np.asarray(element_scale, dtype=np.float64).reshape(-1)
+            if len(element_scale) != self.mesh.tet_count or not np.all(np.isfinite(element_scale) & (element_scale > 0)):
+                raise ValueError(f"element_scale must be {self.mesh.tet_count} finite factors > 0 (one a tet), "
+                                 f"got {len(element_scale)} (smallest {element_scale.min(initial=np.inf):.3g})")
+        self.element_scale = element_scale
+        """Each tet's modulus factor (a volumetric law's lesion), or None."""
         self.entry_offsets, self.entry_topology, self.entry_params = self.law_entry.entries(self)
         """Each vertex's entries that its law's vertex_force gathers (kernels/laws): CSR offsets
         [particle_count + 1], and per entry its topology and parameters, typed by the law (the springs

@@ -138,7 +138,9 @@ def _tet_material(model):
     if np.any(det <= 0):
         bad = int(np.flatnonzero(det <= 0)[0])
         raise ValueError(f"tet {bad} of {mesh.name} has no volume: the {model.law} law cannot hold it")
-    return tets, dm, det / 6.0, lame(tissue.youngs_modulus, tissue.poisson_ratio)
+    mu, lam = lame(tissue.youngs_modulus, tissue.poisson_ratio)
+    scale = np.ones(len(tets)) if getattr(model, "element_scale", None) is None else model.element_scale
+    return tets, dm, det / 6.0, (mu * scale, lam * scale)  # per tet (a lesion scales both)
 
 
 def neo_hookean_entries(model):
@@ -158,8 +160,8 @@ def neo_hookean_entries(model):
     params = np.zeros(len(order), dtype=TetEntry.numpy_dtype())
     params["dm_inv"] = dm_inv[tet_of]
     params["volume"] = volume[tet_of]
-    params["mu"] = mu
-    params["lam"] = lam0 + mu
+    params["mu"] = mu[tet_of]
+    params["lam"] = (lam0 + mu)[tet_of]
     params["corner"] = corner
     grads = np.concatenate([-dm_inv.sum(axis=1, keepdims=True), dm_inv], axis=1)  # [m, 4, 3]: b_0..b_3
     params["gradient"] = grads[tet_of, corner]
@@ -176,6 +178,7 @@ def tet_stiffness(model):
     g = np.concatenate([-grads.sum(axis=1, keepdims=True), grads], axis=1)  # [m, 4, 3]
     # K_ab = V (mu (g_a . g_b) I + mu g_b g_a^T + lambda g_a g_b^T)
     dots = np.einsum("mai,mbi->mab", g, g)
+    mu, lam = mu[:, None, None, None, None], lam[:, None, None, None, None]
     blocks = volume[:, None, None, None, None] * (mu * dots[..., None, None] * np.eye(3) + mu * np.einsum("mbi,maj->mabij", g, g)
                                                   + lam * np.einsum("mai,mbj->mabij", g, g))  # [m, a, b, 3, 3]
     rows, cols = np.broadcast_to(tets[:, :, None], (len(tets), 4, 4)), np.broadcast_to(tets[:, None, :], (len(tets), 4, 4))

@@ -71,6 +71,16 @@ class Lesion:
         anchor_scale = np.where(self.vertex_inside(v), self.stiffness_factor, 1.0)
         return edge_scale, anchor_scale
 
+    def model_scales(self, mesh, tissue=None, law: str = "springs") -> dict:
+        """Model's keywords for this lesion under tissue law `law`: a volumetric law's per-tet modulus
+        factor (element_scale: element_factor of each tet), else the springs' (edge_scale, anchor_scale: scales)."""
+        from .laws import law_entry
+
+        if law_entry(law).volumetric:
+            return {"element_scale": self.element_factor(mesh.vertices, mesh.tetrahedra)}
+        edge_scale, anchor_scale = self.scales(mesh, tissue)
+        return {"edge_scale": edge_scale, "anchor_scale": anchor_scale}
+
     def as_dict(self) -> dict:
         return {
             "center_mm": [c * 1e3 for c in self.center],
