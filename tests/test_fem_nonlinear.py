@@ -143,3 +143,19 @@ def test_mixed_element_does_not_lock():
     assert abs(forces["P2/P0"] / expected - 1.0) < 0.03
     assert forces["P2"] > 1.03 * forces["P2/P0"]
     assert forces["P1"] > 2.0 * forces["P2/P0"]
+
+
+def test_a_modulus_per_tet_is_the_uniform_one_where_all_are_equal_and_scales_the_stress():
+    """young as one value a tet: the same forces as the scalar where every tet has it; twice it in
+    every tet doubles the internal force of a given displacement (the energy is linear in E)."""
+    from almsdm_warp.evaluation.fem_nonlinear import NeoHookeanBody
+    from almsdm_warp.mesh.primitives import tet_box_arrays
+
+    x, tets = tet_box_arrays(10.0, 2)
+    u = np.random.default_rng(4).normal(0.0, 2e-4, x.shape).ravel()
+    one = NeoHookeanBody(x, tets, 10e3, 0.45)
+    each = NeoHookeanBody(x, tets, np.full(len(tets), 10e3), 0.45)
+    twice = NeoHookeanBody(x, tets, np.full(len(tets), 20e3), 0.45)
+    np.testing.assert_allclose(each.force(u), one.force(u), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(twice.force(u), 2.0 * one.force(u), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose((twice.tangent(u) - 2.0 * one.tangent(u)).toarray(), 0.0, atol=1e-9)

@@ -53,11 +53,18 @@ def neo_hookean_energy(f: np.ndarray, lam: float, mu: float) -> np.ndarray:
     return np.where(ok, psi, np.inf)
 
 
-def neo_hookean_stress(f: np.ndarray, lam: float, mu: float) -> np.ndarray:
-    """First Piola-Kirchhoff stress P = dPsi/dF = mu (F - F^-T) + lambda ln J F^-T [Pa], [t, 3, 3]."""
+def _per_tet(value, ndim: int):
+    # a modulus [Pa], one for every tet or one each ([t]), shaped to broadcast against [t, ...] of `ndim` axes
+    value = np.asarray(value, dtype=np.float64)
+    return value.reshape((-1,) + (1,) * (ndim - 1)) if value.ndim else value
+
+
+def neo_hookean_stress(f: np.ndarray, lam, mu) -> np.ndarray:
+    """First Piola-Kirchhoff stress P = dPsi/dF = mu (F - F^-T) + lambda ln J F^-T [Pa], [t, 3, 3]
+    (lam, mu: one for every tet, or one each)."""
     f_inv_t = np.transpose(np.linalg.inv(f), (0, 2, 1))
     log_j = np.log(np.linalg.det(f))
-    return mu * (f - f_inv_t) + (lam * log_j)[:, None, None] * f_inv_t
+    return _per_tet(mu, 3) * (f - f_inv_t) + (lam * log_j)[:, None, None] * f_inv_t
 
 
 def neo_hookean_moduli(f: np.ndarray, lam: float, mu: float) -> np.ndarray:
@@ -66,18 +73,20 @@ def neo_hookean_moduli(f: np.ndarray, lam: float, mu: float) -> np.ndarray:
     f_inv = np.linalg.inv(f)
     log_j = np.log(np.linalg.det(f))
     eye = np.eye(3)
-    a = mu * np.einsum("ik,JL->iJkL", eye, eye)[None]
+    a = _per_tet(mu, 5) * np.einsum("ik,JL->iJkL", eye, eye)[None]
     a = a + (mu - lam * log_j)[:, None, None, None, None] * np.einsum("tJk,tLi->tiJkL", f_inv, f_inv)
-    return a + lam * np.einsum("tJi,tLk->tiJkL", f_inv, f_inv)
+    return a + _per_tet(lam, 5) * np.einsum("tJi,tLk->tiJkL", f_inv, f_inv)
 
 
 class NeoHookeanBody:
     """P1 tets of a neo-Hookean material: total energy, internal force and tangent of displacements u [3n]."""
 
-    def __init__(self, vertices, tets, young: float, poisson: float):
+    def __init__(self, vertices, tets, young, poisson: float):
+        # young [Pa]: one for every tet, or one each ([t]: a lesion)
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.tets = np.asarray(tets, dtype=np.int64)
-        self.lam, self.mu = fem.lame(young, poisson)
+        lam, mu = fem.lame(1.0, poisson)
+        self.lam, self.mu = lam * np.asarray(young, dtype=np.float64), mu * np.asarray(young, dtype=np.float64)
         self.grads, self.volume = fem.barycentric_gradients(self.vertices[self.tets])
         if (self.volume <= 0).any():
             raise ValueError(f"tet {int(np.argmin(self.volume))} has volume {self.volume.min():.3g} m^3 (needs > 0)")
@@ -272,7 +281,7 @@ def solve(vertices, tets, *, young, poisson, fixed, values=None, sphere: Sphere 
           copies: int = 1, rtol: float = 1e-9, penalty: float = 100.0, gap_rtol: float = 1e-6) -> NeoHookeanResult:
     """The static equilibrium of a neo-Hookean body of P1 tets, loaded in `steps` equal steps.
 
-    vertices [m], tets [t, 4]; fixed: the fixed-dof mask [n, 3] or a function of the vertices that
+    vertices [m], tets [t, 4]; young [Pa]: one E, or one a tet (a lesion); fixed: the fixed-dof mask [n, 3] or a function of the vertices that
     returns it (fem.clamped_below, fem.symmetry_planes); values: the fixed dofs' final displacements
     [m], [n, 3] (default zero; a driven vertex or face); sphere: a rigid frictionless sphere pressed
     into the top (its depth applied in steps too) on the surface nodes not fixed along z; copies: how
@@ -287,6 +296,7 @@ def solve(vertices, tets, *, young, poisson, fixed, values=None, sphere: Sphere 
     fixed = np.asarray(fixed(x) if callable(fixed) else fixed, dtype=bool).reshape(-1)
     values = np.zeros(body.size) if values is None else np.asarray(values, dtype=np.float64).reshape(-1)
     diagonal = float(np.linalg.norm(x.max(axis=0) - x.min(axis=0)))
+    young = float(np.max(young))  # the stiffest tet's scales the tolerances and the contact's penalty
     tols = (rtol, 1e-15 * young * diagonal**2)
     contact = None
     if sphere is not None:
