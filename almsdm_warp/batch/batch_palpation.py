@@ -234,7 +234,6 @@ class BatchPalpation:
     ):
         self.probe_radius = check_probe_radius(probe_radius)
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
-        self.model.law_entry.require(integrator=integrator, path="batch")
         self.device = self.model.device
         held = self.model.support_mask if self.model.support_count else np.zeros(1, dtype=bool)
         self.support = wp.array(held.astype(np.int32), dtype=wp.int32, device=self.device)
@@ -257,6 +256,7 @@ class BatchPalpation:
         if integrator not in integrators(batch=True):
             solver_class(integrator)  # an unknown name: the registry's error
             raise ValueError(f"the {integrator} integrator has no batch press (those that have: {', '.join(integrators(batch=True))})")
+        self.model.law_entry.require(integrator=integrator, path="batch")
         self.integrator = self.requested_integrator = integrator
         self._fixed_substeps = fixed_substeps(substeps)
         # substeps (explicit steps a frame), critical_dt [s] of the batch's free vertices and notes (what

@@ -222,7 +222,7 @@ def add_law_arg(parser, path: str) -> None:
             raise argparse.ArgumentTypeError(str(exc).removeprefix("--law ")) from None
 
     parse.__name__ = "law"
-    usable = [name for name, law in LAWS.items() if path in law.paths]
+    usable = [name for name, law in LAWS.items() if law.has(path=path)]
     parser.add_argument("--law", type=parse, default=None, metavar="{" + ",".join(usable) + "}",
                         help=f"tissue law: {' or '.join(usable)} (default: the scene's [tissue] law, else springs)")
 

@@ -118,7 +118,7 @@ class Palpation:
     paper's probe (the contact vertex is driven); > 0, a rigid sphere in frictionless one-sided
     contact with every free surface vertex it would contain, its region grown from the patch it
     covers at full depth. law: the tissue law (almsdm_warp.tissue.laws.LAWS: "springs", the paper's;
-    "neo-hookean", stable neo-Hookean tets of a material on a tet mesh: no batch yet).
+    "neo-hookean", stable neo-Hookean tets of a material on a tet mesh).
     """
 
     protocol = "palpation"

@@ -170,12 +170,22 @@ def neo_hookean_entries(model):
             wp.array(params, dtype=TetEntry, device=d))
 
 
-def tet_stiffness(model):
-    """Linear elasticity's stiffness at rest of the model's tets [N/m], 3n x 3n: the neo-Hookean law
-    linearized at rest (P1 tets, Lame parameters mu_0, lambda_0)."""
+def _tet_gradients(model, vertices=None):
+    # the tets (those with a corner among `vertices`, default all), their corners' barycentric
+    # gradients at rest [m, 4, 3], volumes and (mu_0, lambda_0) each
     tets, dm, volume, (mu, lam) = _tet_material(model)
+    if vertices is not None:
+        keep = np.isin(tets, np.asarray(vertices, dtype=np.int64)).any(axis=1)
+        tets, dm, volume, mu, lam = tets[keep], dm[keep], volume[keep], mu[keep], lam[keep]
     grads = np.linalg.inv(dm)  # rows: gradients of the barycentric coordinates of corners 1..3
-    g = np.concatenate([-grads.sum(axis=1, keepdims=True), grads], axis=1)  # [m, 4, 3]
+    return tets, np.concatenate([-grads.sum(axis=1, keepdims=True), grads], axis=1), volume, mu, lam
+
+
+def tet_stiffness(model, vertices=None):
+    """Linear elasticity's stiffness at rest of the model's tets [N/m], 3n x 3n: the neo-Hookean law
+    linearized at rest (P1 tets, Lame parameters mu_0, lambda_0); with `vertices`, of the tets
+    touching them only (every block between two of them, the rest left out)."""
+    tets, g, volume, mu, lam = _tet_gradients(model, vertices)
     # K_ab = V (mu (g_a . g_b) I + mu g_b g_a^T + lambda g_a g_b^T)
     dots = np.einsum("mai,mbi->mab", g, g)
     mu, lam = mu[:, None, None, None, None], lam[:, None, None, None, None]
@@ -192,15 +202,20 @@ def neo_hookean_critical_dt(model, vertices=None, anchors: bool = True) -> float
     import scipy.sparse as sp
 
     scale = 1.0 if anchors else 0.0
-    K = tet_stiffness(model) + sp.diags(np.repeat(model.anchor_ke_host * scale, 3))
+    K = tet_stiffness(model, vertices) + sp.diags(np.repeat(model.anchor_ke_host * scale, 3))
     C = sp.diags(np.repeat(model.anchor_kd_host * scale, 3)).tocsr()
     return stable_step(model.particle_mass_host, K, C, vertices, f"E {model.tissue.youngs_modulus:.3g} Pa")
 
 
 def neo_hookean_stiffness_bound(model) -> float:
-    """The largest row sum of |K| of the tets at rest plus the stiffest anchor [N/m]."""
-    K = tet_stiffness(model)
-    return float(abs(K).sum(axis=1).max()) + float(model.anchor_ke_host.max(initial=0.0))
+    """An upper bound of the largest row sum of |K| of the tets at rest, plus the stiffest anchor [N/m]:
+    each block |K_ab| <= V (2 mu + lambda) |b_a| |b_b| (at most 3x that a row), summed over a vertex's
+    tets, without assembling K (O(tets) memory: a mesh of 1e5 tets costs no start-up)."""
+    tets, g, volume, mu, lam = _tet_gradients(model)
+    norm = np.linalg.norm(g, axis=2)  # [m, 4]
+    per = 3.0 * (volume * (2.0 * mu + lam))[:, None] * norm * norm.sum(axis=1, keepdims=True)
+    k = np.bincount(tets.ravel(), weights=per.ravel(), minlength=model.particle_count)
+    return float(k.max(initial=0.0)) + float(model.anchor_ke_host.max(initial=0.0))
 
 
 @dataclass(frozen=True)
@@ -218,10 +233,11 @@ class Law:
     entries: Callable
     """entries(model): (offsets, topology, params), the device arrays of each vertex's entries that the
     law's vertex_force gathers (Model.entry_offsets, entry_topology, entry_params)."""
-    integrators: tuple = ("explicit", "implicit")
-    """The integrators with kernels for this law."""
-    paths: tuple = ("palpation", "batch", "stroke", "multi", "adaptive")
-    """The protocols with kernels for this law."""
+    integrators: tuple | None = None
+    """The integrators with kernels for this law; None: every one of solvers.INTEGRATORS."""
+    paths: tuple | None = None
+    """The protocols with kernels for this law ("palpation", "batch", "stroke", "multi", "adaptive");
+    None: every one."""
     check: Callable | None = None
     """check(law, mesh, tissue): ValueError where the law cannot model this mesh or tissue (before any work)."""
     volumetric: bool = False
@@ -229,17 +245,21 @@ class Law:
 
     def require(self, integrator: str | None = None, path: str | None = None) -> None:
         """ValueError where this law has no kernels for `integrator` or the protocol `path`."""
-        if integrator is not None and integrator not in self.integrators:
+        if integrator is not None and not self.has(integrator=integrator):
             raise ValueError(f"the {self.name} law has no {integrator} step (it has: {', '.join(self.integrators)})")
-        if path is not None and path not in self.paths:
+        if path is not None and not self.has(path=path):
             raise ValueError(f"the {self.name} law has no kernels for a {path} (only: {', '.join(self.paths)})")
+
+    def has(self, integrator: str | None = None, path: str | None = None) -> bool:
+        """Whether this law has kernels for `integrator` and the protocol `path` (None: not asked)."""
+        return ((integrator is None or self.integrators is None or integrator in self.integrators)
+                and (path is None or self.paths is None or path in self.paths))
 
 
 LAWS = {
     "springs": Law("springs", KERNEL_LAWS["springs"], springs_critical_dt, springs_stiffness_bound, springs_entries),
     "neo-hookean": Law("neo-hookean", KERNEL_LAWS["neo-hookean"], neo_hookean_critical_dt, neo_hookean_stiffness_bound,
-                       neo_hookean_entries, paths=("palpation", "batch", "stroke", "multi", "adaptive"), check=check_volumetric,
-                       volumetric=True),
+                       neo_hookean_entries, check=check_volumetric, volumetric=True),
 }
 """Law name -> its entry."""
 
