@@ -291,7 +291,10 @@ def scene_with_tissue_args(args, scene, mesh):
         elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
             base.update(damping_ratio=0.0)
         base.update(given)
-        becomes_volume = getattr(args, "volume", "off") == "auto" and getattr(args, "law", "springs") != "springs"
+        from ..tissue.laws import LAWS
+
+        law = getattr(args, "law", None) or "springs"
+        becomes_volume = getattr(args, "volume", "off") == "auto" and law in LAWS and LAWS[law].volumetric
         if not mesh.is_volume and not becomes_volume and not base.get("thickness", 0.0) > 0.0:
             raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0")
         try:

@@ -17,12 +17,12 @@ def add_volume_arg(parser) -> None:
 
 def needs_volume(choice: str, mesh, tissue, law: str = "springs") -> bool:
     """Whether --volume `choice` makes `mesh` a volume: auto, a surface mesh, a Material and a
-    volumetric law (one whose check is the tet check, tissue/laws.py)."""
-    from ..tissue.laws import LAWS, check_volumetric
+    volumetric law (tissue/laws.py)."""
+    from ..tissue.laws import LAWS
     from ..tissue.material import Material
 
     return (choice == "auto" and not mesh.is_volume and isinstance(tissue, Material)
-            and law in LAWS and LAWS[law].check is check_volumetric)
+            and law in LAWS and LAWS[law].volumetric)
 
 
 def volume_for_press(mesh, point, probe_radius: float, depth: float):

@@ -240,8 +240,6 @@ class Law:
     None: every one."""
     check: Callable | None = None
     """check(law, mesh, tissue): ValueError where the law cannot model this mesh or tissue (before any work)."""
-    volumetric: bool = False
-    """Its entries are a vertex's incident tets (a batch builds them for each region as local tets)."""
 
     def require(self, integrator: str | None = None, path: str | None = None) -> None:
         """ValueError where this law has no kernels for `integrator` or the protocol `path`."""
@@ -249,6 +247,11 @@ class Law:
             raise ValueError(f"the {self.name} law has no {integrator} step (it has: {', '.join(self.integrators)})")
         if path is not None and not self.has(path=path):
             raise ValueError(f"the {self.name} law has no kernels for a {path} (only: {', '.join(self.paths)})")
+
+    @property
+    def volumetric(self) -> bool:
+        """Its entries are a vertex's incident tets (its kernels' VOLUMETRIC: a batch builds them as local tets)."""
+        return bool(self.kernels.VOLUMETRIC)
 
     def has(self, integrator: str | None = None, path: str | None = None) -> bool:
         """Whether this law has kernels for `integrator` and the protocol `path` (None: not asked)."""
@@ -259,7 +262,7 @@ class Law:
 LAWS = {
     "springs": Law("springs", KERNEL_LAWS["springs"], springs_critical_dt, springs_stiffness_bound, springs_entries),
     "neo-hookean": Law("neo-hookean", KERNEL_LAWS["neo-hookean"], neo_hookean_critical_dt, neo_hookean_stiffness_bound,
-                       neo_hookean_entries, check=check_volumetric, volumetric=True),
+                       neo_hookean_entries, check=check_volumetric),
 }
 """Law name -> its entry."""
 

@@ -44,7 +44,7 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
     runs none of it."""
     cv, ce = int(vertex_capacity), int(entry_capacity)
     SPHERE = bool(sphere)
-    SPRINGS = law == "springs"  # its springs in the working arrays; a volumetric law's tets read from the batch's element arrays
+    SPRINGS = not LAWS[law].VOLUMETRIC  # its springs in the working arrays; a volumetric law's tets read from the batch's element arrays
     vertex_force, Entries, PARAMS = LAWS[law].vertex_force, LAWS[law].Entries, LAWS[law].ENTRY_PARAMS
 
     @wp.func

@@ -40,7 +40,7 @@ def record_force(press: BatchPress, b: int, step: int, f: wp.vec3):
 def batch_kernel(law: str):
     """The implicit batch step of tissue law `law` (a key of kernels.laws.LAWS)."""
     implicit_row, Entries = LAWS[law].implicit_row, LAWS[law].Entries
-    SPRINGS = law == "springs"  # its entries are the rows'; a volumetric law's tets are the batch's element arrays
+    SPRINGS = not LAWS[law].VOLUMETRIC  # its entries are the rows'; a volumetric law's tets are the batch's element arrays
 
     @wp.kernel(module="unique", enable_backward=False)
     def step_batch_implicit(

@@ -54,6 +54,9 @@ class TetEntry:
     minus their sum), so that the tet's force on the corner is -V_0 P b."""
 
 
+VOLUMETRIC = True
+"""The law's entries are a vertex's incident tets (a batch builds them as local tets)."""
+
 ENTRY_TOPOLOGY = wp.array(dtype=wp.vec4i)
 """Entry k: the four vertex ids of its tet."""
 ENTRY_PARAMS = wp.array(dtype=TetEntry)

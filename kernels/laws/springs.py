@@ -22,6 +22,9 @@ import warp as wp
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
+VOLUMETRIC = False
+"""Whether the law's entries are a vertex's incident tets (a batch then builds them as local tets)."""
+
 ENTRY_TOPOLOGY = wp.array(dtype=wp.int32)
 """Entry k of a vertex (its CSR adjacency): the neighbour at the spring's other end."""
 ENTRY_PARAMS = wp.array(dtype=wp.vec3)
