@@ -144,14 +144,17 @@ class BatchRegionArrays:
 
 @wp.struct
 class BatchElements:
-    """A volumetric law's tets of each palpation's free vertices (almsdm_warp.batch.batch_palpation.
-    BatchPalpation.elements): CSR offsets per free vertex [B, vertex capacity + 1], each local entry's
-    tet as local corner indices [B, entry capacity], and per free vertex the shift from a local entry
-    to the mesh's entry of the same tet (whose parameters the law keeps) [B, vertex capacity]."""
+    """A volumetric law's tets of each palpation's region vertices, free and fixed ring (almsdm_warp.
+    batch.batch_palpation.BatchPalpation.elements): CSR offsets per vertex [B, vertex capacity + 1],
+    each local entry's tet as local corner indices (-(id + 1) for a mesh vertex outside the region)
+    [B, entry capacity], per vertex the shift from a local entry to the mesh's entry of the same tet
+    (whose parameters the law keeps) [B, vertex capacity], and the nodal pressures."""
 
     offsets: wp.array2d(dtype=wp.int32)
     topology: wp.array2d(dtype=wp.vec4i)
     shift: wp.array2d(dtype=wp.int32)
+    pressure: wp.array2d(dtype=wp.float32)
+    """Each region vertex's nodal pressure [Pa], [B, vertex capacity] (the implicit batch's)."""
 
 
 @wp.struct

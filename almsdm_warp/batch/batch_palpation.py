@@ -446,7 +446,8 @@ class BatchPalpation:
                 f"at most 16 springs a thread of 1024, and {bk.SHARED_BYTES_MAX // 1024} KiB of shared memory); use kernel='exact'"
             )
         self.kernel = kernel
-        self.shared = bool(cuda and bk.shared_bytes(self.vertex_capacity, self.entry_capacity) <= bk.SHARED_BYTES_MAX)
+        self.shared = bool(cuda and bk.shared_bytes(self.vertex_capacity, self.entry_capacity, self.model.law_entry.volumetric)
+                           <= bk.SHARED_BYTES_MAX)
         if kernel == "fast":
             self.threads = self.fast_plan[0]
         elif not cuda:
@@ -457,36 +458,41 @@ class BatchPalpation:
             self.threads = min(max(_pow2(int(free.max()), 32), 32), 256)
 
     def _build_elements(self) -> None:
-        # a volumetric law's tets of each region's free vertices, with local corners (element_*); a
-        # placeholder each for the springs law (its entries are the regions' CSR)
+        # a volumetric law's tets of each region's vertices (free and fixed ring), with local corners
+        # (element_*), and its nodal pressures; a placeholder each for the springs law (its entries are
+        # the regions' CSR)
         B, a = self.batch_size, self.buffers.array
         if not self.model.law_entry.volumetric:
             self.elements = BatchElements()
             self.elements.offsets = a("element_offsets", (1, 1), wp.int32)
             self.elements.topology = a("element_topology", (1, 1), wp.vec4i)
             self.elements.shift = a("element_shift", (1, 1), wp.int32)
+            self.elements.pressure = a("element_pressure", (1, 1), wp.float32)
             return
         offsets = self.model.entry_offsets.numpy()
-        free = np.arange(self.regions.vertex_capacity)[None, :] < self.free_vertex_counts[:, None]
-        rv = np.where(free, host_copy(self.regions.region_vertex), 0)
-        first = np.where(free, offsets[rv], 0)
-        degree = np.where(free, offsets[rv + 1] - offsets[rv], 0)
+        member = np.arange(self.regions.vertex_capacity)[None, :] < self.region_vertex_counts[:, None]
+        rv = np.where(member, host_copy(self.regions.region_vertex), 0)
+        first = np.where(member, offsets[rv], 0)
+        degree = np.where(member, offsets[rv + 1] - offsets[rv], 0)
         local = np.concatenate([np.zeros((B, 1), dtype=np.int64), np.cumsum(degree, axis=1)], axis=1)
         self.element_offsets = a("element_offsets", (B, rv.shape[1] + 1), wp.int32, zero=False)
-        """Each palpation's free vertices' tets (CSR, local entries), [B, vertex capacity + 1]."""
+        """Each palpation's region vertices' tets (CSR, local entries), [B, vertex capacity + 1]."""
         self.element_topology = a("element_topology", (B, _pow2(int(local[:, -1].max(initial=1)), 16)), wp.vec4i, zero=False)
         """Each local entry's tet, its corners as local indices, [B, entry capacity]."""
         self.element_shift = wp.array((first - local[:, :-1]).astype(np.int32), dtype=wp.int32, device=self.device)
-        """Per free vertex: its mesh entries' first index less its local entries' (the law's parameters are the mesh's)."""
+        """Per region vertex: its mesh entries' first index less its local entries' (the law's parameters are the mesh's)."""
+        self.element_pressure = a("element_pressure", (B, rv.shape[1]), wp.float32)
+        """Each region vertex's nodal pressure [Pa] (the implicit batch's; the explicit one keeps its own working array)."""
         br.build_elements(self, self.element_offsets, self.element_topology)
         self.elements = struct_from(BatchElements, self, offsets=self.element_offsets, topology=self.element_topology,
-                                    shift=self.element_shift)
-        """The three above as one kernel argument (kernels/arrays.py)."""
+                                    shift=self.element_shift, pressure=self.element_pressure)
+        """The four above as one kernel argument (kernels/arrays.py)."""
 
     def _allocate_states(self) -> None:
         B, cv, a = self.batch_size, self.regions.vertex_capacity, self.buffers.array
         # global working arrays of the exact kernel where its regions do not fit in shared memory
-        nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared or self.kernel != "exact")
+        nv, nf, ni = bk.scratch_sizes(B, self.vertex_capacity, self.entry_capacity, self.shared or self.kernel != "exact",
+                                      self.model.law_entry.volumetric)
         self.scratch_vec3 = a("scratch_vec3", nv, wp.vec3)
         self.scratch_float = a("scratch_float", nf, wp.float32)
         self.scratch_int = a("scratch_int", ni, wp.int32)

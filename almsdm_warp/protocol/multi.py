@@ -98,6 +98,7 @@ class Patch:
             region_vertex=wp.array(order, dtype=wp.int32, device=d),
             free_count=len(free),
             vertex_local=wp.array(local, dtype=wp.int32, device=d),
+            vertex_count=len(order),
         )
         self.solver.set_region(self.view)
 

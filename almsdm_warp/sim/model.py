@@ -139,9 +139,13 @@ class Model:
         [particle_count + 1], and per entry its topology and parameters, typed by the law (the springs
         law: the CSR adjacency, each neighbour and its spring's constants; the neo-Hookean law: the
         incident tets)."""
+        self.nodal_pressure = wp.zeros(self.particle_count if volumetric else 1, dtype=wp.float32, device=self.device)
+        """Each vertex's nodal pressure [Pa] (a volumetric law's, kernels/laws/neo_hookean.py), as the last
+        step's pressure pass left it over its region's vertices (0 elsewhere: at rest); one zero for springs."""
         self.entries = self.law_entry.kernels.Entries()
-        """The three above as one kernel argument (the law's Entries struct)."""
+        """The four above as one kernel argument (the law's Entries struct)."""
         self.entries.offsets, self.entries.topology, self.entries.params = self.entry_offsets, self.entry_topology, self.entry_params
+        self.entries.pressure = self.nodal_pressure
 
     def _tissue_constants(self, t):
         """(k_ij, d_ij per edge; k_i, d_i, m_i per vertex), float64 host arrays, from either tissue."""

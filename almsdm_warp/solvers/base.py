@@ -28,44 +28,51 @@ class SolverBase:
         self.free_vertex = None
         self.free_count = 0
         self.vertex_local = None
-        self.counts = wp.zeros(1, dtype=wp.int32, device=model.device)
-        """The free count on the device ([free_count], int32), as the explicit step reads it."""
+        self.vertex_count = 0
+        self.counts = wp.zeros(2, dtype=wp.int32, device=model.device)
+        """[free_count, vertex_count] on the device (int32), as the explicit step reads them."""
         self.anchor_scale = 1.0
 
     def set_region(self, region) -> None:
         """Integrate the region's vertices but its fixed outer ring (local order: ring after ring)."""
-        self.set_free(*self.without_supports(region.region_vertex, region.free_count, region.vertex_local), 1.0)
+        self.set_free(*self.without_supports(region.region_vertex, region.free_count, region.vertex_local, region.vertex_count), 1.0,
+                      region.vertex_count)
 
     def set_global(self, anchors: bool = True) -> None:
         """Integrate every vertex: the global anchored model, or without anchors the paper's free surface."""
-        self.set_free(*self.without_supports(self._identity, self.model.particle_count, self._identity), 1.0 if anchors else 0.0)
+        n = self.model.particle_count
+        self.set_free(*self.without_supports(self._identity, n, self._identity, n), 1.0 if anchors else 0.0, n)
 
-    def set_free(self, free_vertex, free_count: int, vertex_local, anchor_scale: float) -> None:
+    def set_free(self, free_vertex, free_count: int, vertex_local, anchor_scale: float, vertex_count: int | None = None) -> None:
         """Step the first `free_count` vertices of `free_vertex` (`vertex_local`: each mesh vertex's
-        index in it), anchors scaled by `anchor_scale`."""
+        index in it), anchors scaled by `anchor_scale`; its first `vertex_count` (default: the free
+        ones) are the region's, free and fixed ring, whose nodal pressures a volumetric law takes."""
         self.free_vertex, self.free_count, self.vertex_local = free_vertex, int(free_count), vertex_local
-        self.counts.fill_(self.free_count)
+        self.vertex_count = self.free_count if vertex_count is None else int(vertex_count)
+        self.counts.assign([self.free_count, self.vertex_count])
         self.anchor_scale = anchor_scale
         self.reset_warm_start()
 
-    def without_supports(self, free_vertex, free_count: int, vertex_local):
+    def without_supports(self, free_vertex, free_count: int, vertex_local, vertex_count: int):
         """(free_vertex, free_count, vertex_local) with the supported vertices moved from the free set to
-        just after it (the others keep their order); unchanged, with no copy, where none is free.
+        just after it (the others keep their order, the region's first `vertex_count` too); unchanged,
+        with no copy, where none is free.
 
         Host work once per region (a copy of the region's arrays), never per step.
         """
         mask = getattr(self.model, "support_mask", None)
         if mask is None or not self.model.support_count or free_count == 0:
             return free_vertex, free_count, vertex_local
-        verts = free_vertex.numpy()[:free_count]
+        region = free_vertex.numpy()[:vertex_count]
+        verts = region[:free_count]
         held = mask[verts]
         if not held.any():
             return free_vertex, free_count, vertex_local
-        order = np.concatenate([verts[~held], verts[held]]).astype(np.int32)
+        order = np.concatenate([verts[~held], verts[held], region[free_count:]]).astype(np.int32)
         local = vertex_local.numpy().copy()
         local[order] = np.arange(len(order), dtype=np.int32)
         d = self.model.device
-        return wp.array(order, dtype=wp.int32, device=d), int(len(order) - held.sum()), wp.array(local, dtype=wp.int32, device=d)
+        return wp.array(order, dtype=wp.int32, device=d), int(free_count - held.sum()), wp.array(local, dtype=wp.int32, device=d)
 
     def reset_warm_start(self) -> None:
         """Forget what the last steps left to start the next from (the free set changed)."""

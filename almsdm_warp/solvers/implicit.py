@@ -35,7 +35,7 @@ class SolverImplicit(SolverBase):
     def integrate(self, state_in, state_out, control, dt: float) -> None:
         integrate_implicit(
             self.model,
-            (self.free_vertex, self.free_count, self.vertex_local),
+            (self.free_vertex, self.free_count, self.vertex_local, self.vertex_count),
             self.anchor_scale,
             state_in,
             state_out,

@@ -145,7 +145,7 @@ def _tet_material(model):
 
 def neo_hookean_entries(model):
     """The neo-Hookean law's entries: each vertex's incident tets (vertex-to-tet CSR), each with the
-    tet's four vertex ids and its rest data (D_m^-1, V_0, mu, lambda = lambda_0 + mu_0, the corner)."""
+    tet's four vertex ids and its rest data (D_m^-1, V_0, mu_0, lambda_0, the corner)."""
     import warp as wp
 
     from ..kernels.laws.neo_hookean import TetEntry
@@ -161,7 +161,7 @@ def neo_hookean_entries(model):
     params["dm_inv"] = dm_inv[tet_of]
     params["volume"] = volume[tet_of]
     params["mu"] = mu[tet_of]
-    params["lam"] = (lam0 + mu)[tet_of]
+    params["bulk"] = lam0[tet_of]
     params["corner"] = corner
     grads = np.concatenate([-dm_inv.sum(axis=1, keepdims=True), dm_inv], axis=1)  # [m, 4, 3]: b_0..b_3
     params["gradient"] = grads[tet_of, corner]
@@ -172,27 +172,42 @@ def neo_hookean_entries(model):
 
 def _tet_gradients(model, vertices=None):
     # the tets (those with a corner among `vertices`, default all), their corners' barycentric
-    # gradients at rest [m, 4, 3], volumes and (mu_0, lambda_0) each
+    # gradients at rest [m, 4, 3], volumes and (mu_0, lambda_0) each, and each vertex's nodal
+    # volume sum_t V_t and bulk modulus kappa_a over all its tets (kernels/laws/neo_hookean.py)
     tets, dm, volume, (mu, lam) = _tet_material(model)
+    n = model.particle_count
+    nodal_volume = np.bincount(tets.ravel(), weights=np.repeat(volume, 4), minlength=n)
+    kappa = np.bincount(tets.ravel(), weights=np.repeat(volume * lam, 4), minlength=n) / np.maximum(nodal_volume, 1e-300)
     if vertices is not None:
         keep = np.isin(tets, np.asarray(vertices, dtype=np.int64)).any(axis=1)
         tets, dm, volume, mu, lam = tets[keep], dm[keep], volume[keep], mu[keep], lam[keep]
     grads = np.linalg.inv(dm)  # rows: gradients of the barycentric coordinates of corners 1..3
-    return tets, np.concatenate([-grads.sum(axis=1, keepdims=True), grads], axis=1), volume, mu, lam
+    return tets, np.concatenate([-grads.sum(axis=1, keepdims=True), grads], axis=1), volume, mu, (nodal_volume, kappa)
 
 
 def tet_stiffness(model, vertices=None):
-    """Linear elasticity's stiffness at rest of the model's tets [N/m], 3n x 3n: the neo-Hookean law
-    linearized at rest (P1 tets, Lame parameters mu_0, lambda_0); with `vertices`, of the tets
-    touching them only (every block between two of them, the rest left out)."""
-    tets, g, volume, mu, lam = _tet_gradients(model, vertices)
-    # K_ab = V (mu (g_a . g_b) I + mu g_b g_a^T + lambda g_a g_b^T)
+    """The neo-Hookean law linearized at rest [N/m], 3n x 3n: its tets' linear elasticity of Lame
+    parameters (mu_0, 0) plus the nodal volumetric term, B^T diag(S_a kappa_a / 4) B with B the nodal
+    volume change per displacement, B[a, c] = sum over a's tets t holding c of V_t b_c / S_a (S_a =
+    sum of a's tets' V_t): together linear elasticity of (mu_0, lambda_0) with the volume change
+    averaged over each vertex's tets (average nodal pressure). With `vertices`, of the tets touching
+    them only (every block between two of them exact, the rest left out)."""
+    import scipy.sparse as sp
+
+    tets, g, volume, mu, (nodal_volume, kappa) = _tet_gradients(model, vertices)
+    n = model.particle_count
+    # the tets' part: K_ab = V mu ((g_a . g_b) I + g_b g_a^T)
     dots = np.einsum("mai,mbi->mab", g, g)
-    mu, lam = mu[:, None, None, None, None], lam[:, None, None, None, None]
-    blocks = volume[:, None, None, None, None] * (mu * dots[..., None, None] * np.eye(3) + mu * np.einsum("mbi,maj->mabij", g, g)
-                                                  + lam * np.einsum("mai,mbj->mabij", g, g))  # [m, a, b, 3, 3]
+    mu = mu[:, None, None, None, None]
+    blocks = volume[:, None, None, None, None] * mu * (dots[..., None, None] * np.eye(3) + np.einsum("mbi,maj->mabij", g, g))
     rows, cols = np.broadcast_to(tets[:, :, None], (len(tets), 4, 4)), np.broadcast_to(tets[:, None, :], (len(tets), 4, 4))
-    return block_matrix(model.particle_count, rows, cols, blocks)
+    K = block_matrix(n, rows, cols, blocks)
+    # the nodal part: row a of B gets V_t b_c / S_a at corner c's columns, for each corner a of each tet t
+    a = np.broadcast_to(tets[:, :, None, None], (len(tets), 4, 4, 3))
+    col = 3 * np.broadcast_to(tets[:, None, :, None], (len(tets), 4, 4, 3)) + np.arange(3)
+    val = (volume[:, None, None, None] * np.broadcast_to(g[:, None, :, :], (len(tets), 4, 4, 3))) / nodal_volume[a]
+    B = sp.csr_matrix((val.ravel(), (a.ravel(), col.ravel())), shape=(n, 3 * n))
+    return (K + B.T @ sp.diags(nodal_volume * kappa / 4.0) @ B).tocsr()
 
 
 def neo_hookean_critical_dt(model, vertices=None, anchors: bool = True) -> float:
@@ -211,8 +226,9 @@ def neo_hookean_stiffness_bound(model) -> float:
     """An upper bound of the largest row sum of |K| of the tets at rest, plus the stiffest anchor [N/m]:
     each block |K_ab| <= V (2 mu + lambda) |b_a| |b_b| (at most 3x that a row), summed over a vertex's
     tets, without assembling K (O(tets) memory: a mesh of 1e5 tets costs no start-up)."""
-    tets, g, volume, mu, lam = _tet_gradients(model)
+    tets, g, volume, mu, (_, kappa) = _tet_gradients(model)
     norm = np.linalg.norm(g, axis=2)  # [m, 4]
+    lam = kappa[tets].max(axis=1)  # the nodal term at most as stiff as the tet's own volume change with its stiffest corner's
     per = 3.0 * (volume * (2.0 * mu + lam))[:, None] * norm * norm.sum(axis=1, keepdims=True)
     k = np.bincount(tets.ravel(), weights=per.ravel(), minlength=model.particle_count)
     return float(k.max(initial=0.0)) + float(model.anchor_ke_host.max(initial=0.0))

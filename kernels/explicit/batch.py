@@ -42,34 +42,43 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
     shared memory on CUDA when `shared`. `sphere`: the probe is a sphere (BatchSphere; no vertex
     driven, a contact pass after each pressed step), a variant of its own so that the paper's probe
     runs none of it."""
-    cv, ce = int(vertex_capacity), int(entry_capacity)
     SPHERE = bool(sphere)
-    SPRINGS = not LAWS[law].VOLUMETRIC  # its springs in the working arrays; a volumetric law's tets read from the batch's element arrays
-    vertex_force, Entries, PARAMS = LAWS[law].vertex_force, LAWS[law].Entries, LAWS[law].ENTRY_PARAMS
+    VOLUMETRIC = LAWS[law].VOLUMETRIC
+    SPRINGS = not VOLUMETRIC  # its springs in the working arrays; a volumetric law's tets read from the batch's element arrays
+    cv, ce, cp = work_sizes(vertex_capacity, entry_capacity, VOLUMETRIC)
+    vertex_force, nodal_pressure, Entries, PARAMS = (LAWS[law].vertex_force, LAWS[law].nodal_pressure, LAWS[law].Entries,
+                                                     LAWS[law].ENTRY_PARAMS)
 
     @wp.func
     def substep(
-        lane: int, threads: int, nf: int, off: wp.array(dtype=wp.int32), nbr: wp.array(dtype=wp.int32),
+        lane: int, threads: int, n: int, nf: int, off: wp.array(dtype=wp.int32), nbr: wp.array(dtype=wp.int32),
         spring: wp.array(dtype=wp.vec3), q_rest: wp.array(dtype=wp.vec3), particle_mass: wp.array(dtype=wp.float32),
         anchor_ke: wp.array(dtype=wp.float32), anchor_kd: wp.array(dtype=wp.float32), anchor_scale: float,
         pressed: int, target: wp.vec3, dt: float,
         q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3), q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
         element_offsets: wp.array(dtype=wp.int32), element_topology: wp.array(dtype=wp.vec4i), params: PARAMS,
-        shift: wp.array(dtype=wp.int32),
+        shift: wp.array(dtype=wp.int32), pressure: wp.array(dtype=wp.float32), mesh_rest: wp.array(dtype=wp.vec3),
     ):
         # one step of the free vertices this lane owns; returns the reaction on local vertex 0 (the
         # probe's), which lane 0 owns. Local indices: arrays are the region's, not the mesh's (a
-        # volumetric law's entry parameters are the mesh's: `shift` takes a local entry there).
+        # volumetric law's entry parameters are the mesh's: `shift` takes a local entry there). A
+        # volumetric law's nodal pressures first, over all n region vertices (a fixed-ring vertex's
+        # tets outside the region have negative corners: mesh vertices at rest, mesh_rest).
+        if wp.static(VOLUMETRIC):
+            for i in range(lane, n, threads):
+                pressure[i] = nodal_pressure(element_offsets[i], element_offsets[i + 1], element_topology, params, shift[i], q_in, mesh_rest)
+            block_sync()
         reaction = wp.vec3(0.0)
         for i in range(lane, nf, threads):
             x = q_in[i]
             u = qd_in[i]
             f = wp.vec3(0.0)
             if wp.static(SPRINGS):
-                f = vertex_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale, off[i], off[i + 1], nbr, spring, 0, q_in, qd_in)
+                f = vertex_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale, off[i], off[i + 1], nbr, spring, 0, q_in, qd_in,
+                                 pressure)
             else:
                 f = vertex_force(x, u, q_rest[i], anchor_ke[i], anchor_kd[i], anchor_scale, element_offsets[i], element_offsets[i + 1],
-                                 element_topology, params, shift[i], q_in, qd_in)
+                                 element_topology, params, shift[i], q_in, qd_in, pressure)
             if i == 0 and pressed != 0:
                 reaction = f  # the feedback force: the tissue's internal forces on the probe
                 xd, ud = drive_vertex(x, target, dt)  # displacement control
@@ -107,6 +116,7 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
     w_mass = work_array("mass", wp.float32, cv, shared)
     w_ka = work_array("ka", wp.float32, cv, shared)
     w_kda = work_array("kda", wp.float32, cv, shared)
+    w_pressure = work_array("pressure", wp.float32, cp, shared)
     w_spring = work_array("spring", wp.vec3, ce, shared)
     w_off = work_array("off", wp.int32, cv + 1, shared)
     w_nbr = work_array("nbr", wp.int32, ce, shared)
@@ -142,9 +152,10 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
         qd_b = w_qd_b(scratch_vec3, b * (5 * cv + ce) + 3 * cv)
         rest = w_rest(scratch_vec3, b * (5 * cv + ce) + 4 * cv)
         spring = w_spring(scratch_vec3, b * (5 * cv + ce) + 5 * cv)
-        mass = w_mass(scratch_float, b * 3 * cv)
-        ka = w_ka(scratch_float, b * 3 * cv + cv)
-        kda = w_kda(scratch_float, b * 3 * cv + 2 * cv)
+        mass = w_mass(scratch_float, b * (3 * cv + cp))
+        ka = w_ka(scratch_float, b * (3 * cv + cp) + cv)
+        kda = w_kda(scratch_float, b * (3 * cv + cp) + 2 * cv)
+        pressure = w_pressure(scratch_float, b * (3 * cv + cp) + 3 * cv)
         off = w_off(scratch_int, b * (cv + 1 + ce))
         nbr = w_nbr(scratch_int, b * (cv + 1 + ce) + cv + 1)
         # load the region once: state, per-vertex parameters, local topology with spring parameters
@@ -188,11 +199,11 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
             if wp.static(SPHERE):
                 driven = 0
             if (s - step_begin) % 2 == 0:
-                f = substep(lane, threads, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_a, qd_a, q_b, qd_b,
-                            eoff, etop, entries.params, eshift)
+                f = substep(lane, threads, n, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_a, qd_a, q_b, qd_b,
+                            eoff, etop, entries.params, eshift, pressure, tissue.q_rest)
             else:
-                f = substep(lane, threads, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_b, qd_b, q_a, qd_a,
-                            eoff, etop, entries.params, eshift)
+                f = substep(lane, threads, n, nf, off, nbr, spring, rest, mass, ka, kda, anchor_scale, driven, target, dt, q_b, qd_b, q_a, qd_a,
+                            eoff, etop, entries.params, eshift, pressure, tissue.q_rest)
             if wp.static(SPHERE):
                 if pressed != 0:
                     block_sync()
@@ -223,18 +234,25 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
     return press_batch_explicit
 
 
-def scratch_sizes(batch: int, vertex_capacity: int, entry_capacity: int, shared: bool):
+def work_sizes(vertex_capacity: int, entry_capacity: int, volumetric: bool):
+    """(vertices, spring entries, pressures) of a block's working arrays: a volumetric law keeps no
+    springs (its tets are the batch's element arrays) and a nodal pressure a vertex; springs none."""
+    cv = int(vertex_capacity)
+    return (cv, 1, cv) if volumetric else (cv, int(entry_capacity), 1)
+
+
+def scratch_sizes(batch: int, vertex_capacity: int, entry_capacity: int, shared: bool, volumetric: bool = False):
     """Element counts of the global scratch arrays (vec3, float32, int32); 1 each when in shared memory."""
     if shared:
         return 1, 1, 1
-    cv, ce = vertex_capacity, entry_capacity
-    return batch * (5 * cv + ce), batch * 3 * cv, batch * (cv + 1 + ce)
+    cv, ce, cp = work_sizes(vertex_capacity, entry_capacity, volumetric)
+    return batch * (5 * cv + ce), batch * (3 * cv + cp), batch * (cv + 1 + ce)
 
 
-def shared_bytes(vertex_capacity: int, entry_capacity: int) -> int:
+def shared_bytes(vertex_capacity: int, entry_capacity: int, volumetric: bool = False) -> int:
     """Shared memory a block of the press kernel takes [bytes]."""
-    cv, ce = vertex_capacity, entry_capacity
-    return (5 * cv + ce) * 12 + 3 * cv * 4 + (cv + 1 + ce) * 4
+    cv, ce, cp = work_sizes(vertex_capacity, entry_capacity, volumetric)
+    return (5 * cv + ce) * 12 + (3 * cv + cp) * 4 + (cv + 1 + ce) * 4
 
 
 def press_batch(batch, step_begin, step_count):

@@ -4,7 +4,9 @@
 batch_fast.py) and for the implicit ones (kernels/implicit): velocity first, then position.
 
 The one-region step is one launch: gather each free vertex's force from `state_in` (its law's
-`vertex_force`, kernels/laws), integrate, write `state_out`. A grid-stride loop over the free
+`vertex_force`, kernels/laws), integrate, write `state_out`; a volumetric law's nodal pressures are
+a launch before it (`pressure_kernel`: over the region's vertices, counts[1] of them, free and
+fixed ring, whose pressures the free vertices' tets read). A grid-stride loop over the free
 vertices: one thread per vertex on CUDA, a single thread on the CPU, where each thread's prologue
 (copying every array descriptor) would otherwise cost more than the vertex's physics. The free
 count is read from a device array (`counts[0]`), so that a graph captured once serves every region
@@ -42,6 +44,35 @@ def advance(x: wp.vec3, u: wp.vec3, dv: wp.vec3, dt: float):
 
 
 @functools.cache
+def pressure_kernel(law: str):
+    """The nodal pressure pass of volumetric law `law` (its `nodal_pressure`, kernels/laws) over the
+    first counts[1] vertices of a region (free and fixed ring), grid-stride as the step."""
+    nodal_pressure = LAWS[law].nodal_pressure
+    TOPOLOGY, PARAMS = LAWS[law].ENTRY_TOPOLOGY, LAWS[law].ENTRY_PARAMS
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def eval_nodal_pressure(
+        region_vertex: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), stride: int,
+        entry_offsets: wp.array(dtype=wp.int32), entry_topology: TOPOLOGY, entry_params: PARAMS,
+        q: wp.array(dtype=wp.vec3), pressure: wp.array(dtype=wp.float32),
+    ):
+        for i in range(wp.tid(), counts[1], stride):
+            v = region_vertex[i]
+            pressure[v] = nodal_pressure(entry_offsets[v], entry_offsets[v + 1], entry_topology, entry_params, 0, q, q)
+
+    return eval_nodal_pressure
+
+
+def update_pressure(model, region_vertex, counts, threads, q) -> None:
+    """A volumetric law's nodal pressures (model.nodal_pressure) of the first counts[1] vertices of
+    `region_vertex` at positions `q` (nothing for springs)."""
+    if model.law_entry.volumetric:
+        wp.launch(pressure_kernel(model.law), dim=threads,
+                  inputs=[region_vertex, counts, threads, model.entry_offsets, model.entry_topology, model.entry_params, q],
+                  outputs=[model.nodal_pressure], device=model.device)
+
+
+@functools.cache
 def region_kernel(law: str):
     """The explicit one-region step of tissue law `law` (a key of kernels.laws.LAWS): its entries'
     arrays are typed by the law (ENTRY_TOPOLOGY, ENTRY_PARAMS)."""
@@ -56,6 +87,7 @@ def region_kernel(law: str):
         entry_offsets: wp.array(dtype=wp.int32),
         entry_topology: TOPOLOGY,
         entry_params: PARAMS,
+        pressure: wp.array(dtype=wp.float32),
         q_rest: wp.array(dtype=wp.vec3),
         particle_mass: wp.array(dtype=wp.float32),
         anchor_ke: wp.array(dtype=wp.float32),
@@ -79,7 +111,7 @@ def region_kernel(law: str):
             x = q_in[v]
             u = qd_in[v]
             f = vertex_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale,
-                             entry_offsets[v], entry_offsets[v + 1], entry_topology, entry_params, 0, q_in, qd_in)
+                             entry_offsets[v], entry_offsets[v + 1], entry_topology, entry_params, 0, q_in, qd_in, pressure)
             if v == pv and mode != 0:
                 probe_reaction[0] = f  # the feedback force: the tissue's internal forces on the probe
             if v == pv and mode == 1:
@@ -132,14 +164,17 @@ def constrain_sphere_explicit(
 
 def integrate_explicit(model, free_vertex, counts, threads, anchor_scale, state_in, state_out, control, dt):
     """Advance the free vertices (the first counts[0] of `free_vertex`; counts: a device int32 array,
-    read when the launch runs) by one semi-implicit Euler step of `dt` [s], on `threads` threads (1 on
-    the CPU; on CUDA at least the free count); a Control with a sphere adds the sphere's contact (a
-    second, one-thread launch)."""
+    read when the launch runs, counts[1] the region's vertices, free and fixed ring) by one
+    semi-implicit Euler step of `dt` [s], on `threads` threads (1 on the CPU; on CUDA at least the
+    region's vertex count); a volumetric law's nodal pressures first (update_pressure), a Control
+    with a sphere adds the sphere's contact (a one-thread launch after)."""
+    update_pressure(model, free_vertex, counts, threads, state_in.particle_q)
     wp.launch(
         region_kernel(model.law),
         dim=threads,
         inputs=[
-            free_vertex, counts, threads, model.entry_offsets, model.entry_topology, model.entry_params, model.particle_q_rest,
+            free_vertex, counts, threads, model.entry_offsets, model.entry_topology, model.entry_params, model.nodal_pressure,
+            model.particle_q_rest,
             model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale,
             control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force, dt,
             state_in.particle_q, state_in.particle_qd,

@@ -39,7 +39,7 @@ def record_force(press: BatchPress, b: int, step: int, f: wp.vec3):
 @functools.cache
 def batch_kernel(law: str):
     """The implicit batch step of tissue law `law` (a key of kernels.laws.LAWS)."""
-    implicit_row, Entries = LAWS[law].implicit_row, LAWS[law].Entries
+    implicit_row, nodal_pressure, Entries = LAWS[law].implicit_row, LAWS[law].nodal_pressure, LAWS[law].Entries
     SPRINGS = not LAWS[law].VOLUMETRIC  # its entries are the rows'; a volumetric law's tets are the batch's element arrays
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -81,6 +81,13 @@ def batch_kernel(law: str):
                 driven = 0
                 dv_driven = (target - q_in[b, 0]) / dt - qd_in[b, 0]
 
+        # 0) a volumetric law's nodal pressures over the region's vertices (free and fixed ring)
+        pressure = elements.pressure[b]
+        if wp.static(not SPRINGS):
+            for i in range(regions.region_count[b]):
+                pressure[i] = nodal_pressure(elements.offsets[b, i], elements.offsets[b, i + 1], elements.topology[b], entries.params,
+                                             elements.shift[b, i], q_in[b], tissue.q_rest)
+
         # 1) forces, diagonal blocks and right-hand side b = dt (f0 - dt K v0) - A_ic dv_c
         neighbour = regions.local_neighbour[b]
         b_norm2 = float(0.0)
@@ -99,7 +106,7 @@ def batch_kernel(law: str):
                     x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale, tissue.particle_mass[v], dt,
                     k0, regions.local_offsets[b, i + 1], neighbour, tissue.adj_spring, tissue.adj_offsets[v] - k0,
                     k0, regions.local_offsets[b, i + 1], neighbour, q_in[b], qd_in[b],
-                    neighbour, 1, i, driven, dv_driven, free_n, cg.csr_block[b], cg.csr_local[b], 0,
+                    neighbour, 1, i, driven, dv_driven, free_n, cg.csr_block[b], cg.csr_local[b], 0, pressure,
                 )
             else:
                 # the tets from the batch's element arrays (local corners), their rest data the mesh's
@@ -107,7 +114,7 @@ def batch_kernel(law: str):
                     x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale, tissue.particle_mass[v], dt,
                     elements.offsets[b, i], elements.offsets[b, i + 1], elements.topology[b], entries.params, elements.shift[b, i],
                     k0, regions.local_offsets[b, i + 1], neighbour, q_in[b], qd_in[b],
-                    neighbour, 1, i, driven, dv_driven, free_n, cg.csr_block[b], cg.csr_local[b], 0,
+                    neighbour, 1, i, driven, dv_driven, free_n, cg.csr_block[b], cg.csr_local[b], 0, pressure,
                 )
             if i == 0 and driven == 0:
                 record_force(press, b, step, f)  # the feedback force: internal forces on the probe's vertex

@@ -52,18 +52,21 @@ def implicit_update(x: wp.vec3, u: wp.vec3, dv: wp.vec3, held_normal: wp.vec3, c
 def region_kernel(law: str):
     """The implicit one-region step of tissue law `law` (a key of kernels.laws.LAWS): its entries'
     arrays typed by the law; the linear system's rows are the mesh's CSR adjacency (TissueArrays)."""
-    implicit_row = LAWS[law].implicit_row
+    implicit_row, nodal_pressure = LAWS[law].implicit_row, LAWS[law].nodal_pressure
     TOPOLOGY, PARAMS = LAWS[law].ENTRY_TOPOLOGY, LAWS[law].ENTRY_PARAMS
+    VOLUMETRIC = LAWS[law].VOLUMETRIC
 
     @wp.kernel(module="unique", enable_backward=False)
     def integrate_region_implicit(
         free_vertex: wp.array(dtype=wp.int32),
         free_count: int,
+        vertex_count: int,
         vertex_local: wp.array(dtype=wp.int32),
         tissue: TissueArrays,
         entry_offsets: wp.array(dtype=wp.int32),
         entry_topology: TOPOLOGY,
         entry_params: PARAMS,
+        pressure: wp.array(dtype=wp.float32),
         anchor_scale: float,
         probe: ProbeArrays,
         sphere: ProbeSphereArrays,
@@ -91,6 +94,12 @@ def region_kernel(law: str):
             radius = sphere.probe_radius[0]
         reaction = wp.vec3(0.0)
 
+        # 0) a volumetric law's nodal pressures over the region's vertices (free and fixed ring)
+        if wp.static(VOLUMETRIC):
+            for i in range(vertex_count):
+                v = free_vertex[i]
+                pressure[v] = nodal_pressure(entry_offsets[v], entry_offsets[v + 1], entry_topology, entry_params, 0, q_in, q_in)
+
         # 1) forces, diagonal blocks and right-hand side b = dt (f0 - dt K v0) - A_ic dv_c
         b_norm2 = float(0.0)
         for i in range(free_count):
@@ -101,7 +110,7 @@ def region_kernel(law: str):
                 x, u, tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], anchor_scale, tissue.particle_mass[v], dt,
                 entry_offsets[v], entry_offsets[v + 1], entry_topology, entry_params, 0,
                 tissue.adj_offsets[v], tissue.adj_offsets[v + 1], tissue.adj_vertex, q_in, qd_in,
-                vertex_local, 0, v, driven, dv_driven, free_count, cg.csr_block, cg.csr_local, 0,
+                vertex_local, 0, v, driven, dv_driven, free_count, cg.csr_block, cg.csr_local, 0, pressure,
             )
             if v == pv and (mode == 1 or mode == 2):
                 probe.probe_reaction[0] = f  # the feedback force: internal forces on the probe's vertex
@@ -159,14 +168,15 @@ def region_kernel(law: str):
 
 
 def integrate_implicit(model, region_arrays, anchor_scale, state_in, state_out, control, dt, scratch, max_iterations, tolerance):
-    """Advance the free vertices by one backward-Euler step of `dt` [s] (one launch)."""
-    free_vertex, free_count, vertex_local = region_arrays
+    """Advance the free vertices by one backward-Euler step of `dt` [s] (one launch; region_arrays:
+    free_vertex, free_count, vertex_local and the region's vertex count, free and fixed ring)."""
+    free_vertex, free_count, vertex_local, vertex_count = region_arrays
     wp.launch(
         region_kernel(model.law),
         dim=1,
         inputs=[
-            free_vertex, free_count, vertex_local, model.arrays, model.entry_offsets, model.entry_topology, model.entry_params,
-            anchor_scale, control.arrays, control.sphere_arrays, dt, max_iterations, tolerance,
+            free_vertex, free_count, vertex_count, vertex_local, model.arrays, model.entry_offsets, model.entry_topology,
+            model.entry_params, model.nodal_pressure, anchor_scale, control.arrays, control.sphere_arrays, dt, max_iterations, tolerance,
             state_in.particle_q, state_in.particle_qd, scratch.arrays,
         ],
         outputs=[state_out.particle_q, state_out.particle_qd],

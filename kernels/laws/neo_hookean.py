@@ -1,28 +1,45 @@
-"""Stable neo-Hookean linear tetrahedra: a volumetric law for tet meshes (Smith, de Goes & Kim 2018).
+"""Stable neo-Hookean linear tetrahedra with average nodal pressure: a volumetric law for tet meshes
+that does not lock as tissue nears incompressibility (Smith, de Goes & Kim 2018; Bonet & Burton 1998).
 
-Energy density of a tet with deformation gradient F = D_s D_m^-1 (D_s, D_m: its edge vectors from
-corner 0, deformed and at rest):
+The energy is a sum over tets and a sum over vertices:
 
-    Psi(F) = mu / 2 (tr(F^T F) - 3) + lambda / 2 (J - alpha)^2,    J = det F,   alpha = 1 + mu / lambda
+    E = sum_t V_t Psi_e(F_t) + sum_a V_a kappa_a / 2 (J_a - 1)^2
 
-defined through inversion (J <= 0: no log, no division), at rest stress-free. Linearized at rest it
-is linear elasticity of Lame parameters (mu, lambda - mu), so the model stores lambda = lambda_0 +
-mu_0 for a material's (mu_0, lambda_0) (almsdm_warp.tissue.laws). First Piola stress
-P = mu F + lambda (J - alpha) dJ/dF, dJ/dF = [f1 x f2, f2 x f0, f0 x f1] (f_i the columns of F); the
-tet's force on corner c is -V_0 P b_c, b_c the gradient of c's barycentric coordinate at rest (the
-rows of D_m^-1 for corners 1..3, minus their sum for corner 0), which each entry keeps.
+- per tet, of deformation gradient F = D_s D_m^-1 (D_s, D_m: its edge vectors from corner 0, deformed
+  and at rest), a stable neo-Hookean energy with its own Lame parameters (mu, mu):
+  Psi_e = mu / 2 (tr(F^T F) - 3) + mu / 2 (J - 2)^2, J = det F: defined through inversion (no log,
+  no division), stress-free at rest, and at rest linear elasticity of Lame parameters (mu, 0): the
+  shear, and a bulk modulus of only 2 mu / 3, so that a linear tet has nothing to lock with;
+- per vertex a, the volumetric energy of the material's lambda_0 on its nodal volume change
+  J_a = sum_t v_t / sum_t V_t over its incident tets (v_t = V_t J_t the deformed volume), with
+  kappa_a the volume-weighted mean of their lambda_0 (a lesion's tets are stiffer). Averaging the
+  volume change over a vertex's tets is Bonet & Burton's average nodal pressure tet, the locking-free
+  linear tet Joldes et al. (2009) use for surgical simulation: a tet mesh has about five times as
+  many tets as vertices, so one volume constraint a tet over-constrains it (volumetric locking) and
+  one a vertex does not.
+At rest the two together are linear elasticity of Lame parameters (mu_0, lambda_0) (bulk modulus
+lambda_0 + 2 mu_0 / 3). The nodal pressure p_a = kappa_a (J_a - 1) is a pass of its own before the
+forces (`nodal_pressure`, over the region's vertices: free and fixed ring, whose tets outside the
+region are at rest); a tet's force on corner c is then
+
+    f_c = -V_t (mu F b_c + (mu (J - 2) + p_t) dJ/dF b_c),   p_t = (p_0 + p_1 + p_2 + p_3) / 4,
+
+dJ/dF = [f1 x f2, f2 x f0, f0 x f1] (f_i the columns of F), b_c the gradient of c's barycentric
+coordinate at rest (the rows of D_m^-1 for corners 1..3, minus their sum for corner 0): the exact
+gradient of E, so that a held press settles to E's minimum.
 
 The law's entries are a vertex's incident tets (vertex-to-tet incidence, CSR): entry k holds the
 tet's four vertex ids (`ENTRY_TOPOLOGY`) and its rest data with the vertex's corner (`TetEntry`).
 `vertex_force` gathers them as the springs law gathers its springs: each tet's force is computed
 by each of its free corners (no atomics: the same bits on every run).
 
-`implicit_row` assembles a vertex's row of the implicit step with the Gauss-Newton part of each
-tet's Hessian, K_ab = V_0 (mu (b_a . b_b) I + lambda (dJ b_a)(dJ b_b)^T) (b_c: the gradient of
-corner c's barycentric coordinate at rest): positive semi-definite in every state, inverted tets
-included. It leaves out lambda (J - alpha) times J's curvature, which is indefinite (at rest it is
-mu (b_b b_a^T - b_a b_b^T), the rotation-free part of linear elasticity's shear block); the forces
-are exact, so a held press settles to the same static state.
+`implicit_row` assembles a vertex's row of the implicit step with a positive semi-definite part of
+each tet's Hessian, K_ab = V_0 (mu (b_a . b_b) I + (mu + lambda_0) (dJ b_a)(dJ b_b)^T) (Gauss-Newton):
+it leaves out (mu (J - 2) + p_t) times J's curvature, which is indefinite, and puts the nodal
+volumetric term on each tet as if its volume change were its own, an upper bound of the nodal
+term's stiffness (by Jensen's inequality: sum_a V_a (dJ_a)^2 <= sum_t V_t dJ_t^2), so the step
+over-damps the volumetric modes rather than under-damping them. The forces are exact: a held press
+settles to the same static state as the explicit step's.
 """
 
 from typing import Any
@@ -45,8 +62,8 @@ class TetEntry:
     """Rest volume V_0 [m^3]."""
     mu: float
     """mu [Pa]."""
-    lam: float
-    """lambda [Pa] (the material's lambda_0 + mu_0: see the module's docstring)."""
+    bulk: float
+    """lambda_0 [Pa], the material's first Lame parameter, which the nodal volumetric term carries."""
     corner: int
     """The vertex's corner in the tet, 0..3."""
     gradient: wp.vec3
@@ -55,7 +72,8 @@ class TetEntry:
 
 
 VOLUMETRIC = True
-"""The law's entries are a vertex's incident tets (a batch builds them as local tets)."""
+"""The law's entries are a vertex's incident tets (a batch builds them as local tets) and it has a
+nodal pressure pass (`nodal_pressure`) before its forces."""
 
 ENTRY_TOPOLOGY = wp.array(dtype=wp.vec4i)
 """Entry k: the four vertex ids of its tet."""
@@ -70,6 +88,8 @@ class Entries:
     offsets: wp.array(dtype=wp.int32)
     topology: ENTRY_TOPOLOGY
     params: ENTRY_PARAMS
+    pressure: wp.array(dtype=float)
+    """Each vertex's nodal pressure [Pa] as the last pressure pass left it (a volumetric law's; else one zero)."""
 
 
 @wp.func
@@ -89,11 +109,46 @@ def tet_state(q: Any, t: wp.vec4i, p: TetEntry):
 
 
 @wp.func
-def tet_corner_force(F: wp.mat33, dJ: wp.mat33, p: TetEntry):
-    # the tet's elastic force on its corner: -dE/dx = -V_0 P b with E = V_0 Psi(F), P = mu F + lambda (J - alpha) dJ
+def tet_corner_force(F: wp.mat33, dJ: wp.mat33, p: TetEntry, pressure: float):
+    # the tet's elastic force on its corner, -V_0 P b, P = mu F + (mu (J - 2) + p_t) dJ (the module's
+    # docstring), p_t the mean of its corners' nodal pressures
     J = wp.dot(column(F, 0), column(dJ, 0))
-    alpha = 1.0 + p.mu / p.lam
-    return (-p.volume) * (p.mu * (F * p.gradient) + (p.lam * (J - alpha)) * (dJ * p.gradient))
+    return (-p.volume) * (p.mu * (F * p.gradient) + (p.mu * (J - 2.0) + pressure) * (dJ * p.gradient))
+
+
+@wp.func
+def tet_pressure(t: wp.vec4i, pressure: Any):
+    # p_t: the mean of the tet's corners' nodal pressures
+    return 0.25 * ((pressure[t[0]] + pressure[t[1]]) + (pressure[t[2]] + pressure[t[3]]))
+
+
+@wp.func
+def corner_position(q: Any, rest: Any, c: int):
+    # corner c's position: q[c], or for c < 0 (a batch's corner outside its region) rest[-c - 1], at rest
+    if c < 0:
+        return rest[-c - 1]
+    return q[c]
+
+
+@wp.func
+def nodal_pressure(begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, rest: Any):
+    # p_a = kappa_a (J_a - 1) of a vertex from its incident tets, entries begin..end (corner positions
+    # from q, or `rest` for a negative corner: corner_position): J_a = sum v_t / sum V_t, kappa_a =
+    # sum V_t lambda_0 / sum V_t, v_t the deformed volume (the module's docstring)
+    rest_volume = float(0.0)
+    volume = float(0.0)
+    bulk = float(0.0)
+    for k in range(begin, end):
+        t = topology[k]
+        p = params[k + shift]
+        x0 = corner_position(q, rest, t[0])
+        v6 = wp.dot(wp.cross(corner_position(q, rest, t[1]) - x0, corner_position(q, rest, t[2]) - x0), corner_position(q, rest, t[3]) - x0)
+        rest_volume += p.volume
+        volume += v6 * (1.0 / 6.0)
+        bulk += p.volume * p.bulk
+    if rest_volume <= 0.0:
+        return 0.0
+    return (bulk / rest_volume) * (volume / rest_volume - 1.0)
 
 
 @wp.func
@@ -108,16 +163,17 @@ def corner_gradient(dm_inv: wp.mat33, c: int):
 @wp.func
 def vertex_force(
     x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float,
-    begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, qd: Any,
+    begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, qd: Any, pressure: Any,
 ):
     # the internal force on a vertex at x with velocity u: its anchor and damper (scaled by `scale`),
     # eq. (3), then the elastic forces of its incident tets, entries begin..end (tet topology[k], rest
-    # data params[k + shift]; corner positions from q)
+    # data params[k + shift]; corner positions from q, nodal pressures from `pressure`, indexed as q)
     f = anchor_force(x, u, x_rest, ka, kda, scale)
     for k in range(begin, end):
+        t = topology[k]
         p = params[k + shift]
-        F, dJ = tet_state(q, topology[k], p)
-        f += tet_corner_force(F, dJ, p)
+        F, dJ = tet_state(q, t, p)
+        f += tet_corner_force(F, dJ, p, tet_pressure(t, pressure))
     return f
 
 
@@ -126,7 +182,7 @@ def implicit_row(
     x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float, m: float, dt: float,
     begin: int, end: int, topology: Any, params: Any, shift: int, row_begin: int, row_end: int, row_neighbour: Any,
     q: Any, qd: Any, local_of: Any, by_local: int, self_id: int, driven: int, dv_driven: wp.vec3, free_count: int,
-    csr_block: Any, csr_local: Any, out_shift: int,
+    csr_block: Any, csr_local: Any, out_shift: int, pressure: Any,
 ):
     # one vertex's row of (M + dt C + dt^2 K) dv = dt (f0 - dt K v0) - A_ic dv_c (the springs law's
     # implicit_row says what each argument is): the anchor's terms, then each incident tet's force
@@ -141,12 +197,13 @@ def implicit_row(
         t = topology[k]
         p = params[k + shift]
         F, dJ = tet_state(q, t, p)
-        f += tet_corner_force(F, dJ, p)
+        f += tet_corner_force(F, dJ, p, tet_pressure(t, pressure))
         b_a = p.gradient
         g_a = dJ * b_a
+        volumetric = p.mu + p.bulk
         for c in range(4):
             b_c = corner_gradient(p.dm_inv, c)
-            K = p.volume * (p.mu * wp.dot(b_a, b_c) * wp.identity(n=3, dtype=float) + p.lam * wp.outer(g_a, dJ * b_c))
+            K = p.volume * (p.mu * wp.dot(b_a, b_c) * wp.identity(n=3, dtype=float) + volumetric * wp.outer(g_a, dJ * b_c))
             vc = t[c]
             Kv += K * qd[vc]
             if c == p.corner:
@@ -161,7 +218,8 @@ def implicit_row(
 
 
 @wp.func
-def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, topology: Any, params: Any, shift: int, q: Any):
+def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, topology: Any, params: Any, shift: int, q: Any,
+               pressure: Any):
     # the static equilibrium at a vertex whose neighbours are held where they are (velocities zero):
     # its force (anchor and incident tets) and its diagonal stiffness block (the anchor's and the
     # tets' Gauss-Newton blocks, as implicit_row's)
@@ -169,10 +227,11 @@ def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, top
     f = anchor_force(x, zero, x_rest, ka, 0.0, 1.0)
     D = ka * wp.identity(n=3, dtype=float)
     for k in range(begin, end):
+        t = topology[k]
         p = params[k + shift]
-        F, dJ = tet_state(q, topology[k], p)
-        f += tet_corner_force(F, dJ, p)
+        F, dJ = tet_state(q, t, p)
+        f += tet_corner_force(F, dJ, p, tet_pressure(t, pressure))
         b_a = p.gradient
         g_a = dJ * b_a
-        D += p.volume * (p.mu * wp.dot(b_a, b_a) * wp.identity(n=3, dtype=float) + p.lam * wp.outer(g_a, g_a))
+        D += p.volume * (p.mu * wp.dot(b_a, b_a) * wp.identity(n=3, dtype=float) + (p.mu + p.bulk) * wp.outer(g_a, g_a))
     return f, D

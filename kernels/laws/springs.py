@@ -23,7 +23,9 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 VOLUMETRIC = False
-"""Whether the law's entries are a vertex's incident tets (a batch then builds them as local tets)."""
+"""Whether the law's entries are a vertex's incident tets (a batch then builds them as local tets, the
+region's fixed ring's too) and it has a nodal pressure pass before its forces (`nodal_pressure`,
+kernels/laws/neo_hookean.py): the kernels run that pass only for such a law."""
 
 ENTRY_TOPOLOGY = wp.array(dtype=wp.int32)
 """Entry k of a vertex (its CSR adjacency): the neighbour at the spring's other end."""
@@ -38,6 +40,8 @@ class Entries:
     offsets: wp.array(dtype=wp.int32)
     topology: ENTRY_TOPOLOGY
     params: ENTRY_PARAMS
+    pressure: wp.array(dtype=float)
+    """Each vertex's nodal pressure [Pa] as the last pressure pass left it (a volumetric law's; else one zero)."""
 
 EPS_LENGTH = 1.0e-9
 """Shorter springs than this [m] have no direction: their force is zero (no 1/0, no NaN)."""
@@ -102,13 +106,20 @@ def spring_block(ke: float, kd: float, L0: float, r: wp.vec3, dt: float):
 
 
 @wp.func
+def nodal_pressure(begin: int, end: int, neighbour: Any, spring: Any, shift: int, q: Any, rest: Any):
+    # springs have no volume and no nodal pressure (VOLUMETRIC: the kernels never run this pass for them)
+    return 0.0
+
+
+@wp.func
 def vertex_force(
     x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float,
-    begin: int, end: int, neighbour: Any, spring: Any, shift: int, q: Any, qd: Any,
+    begin: int, end: int, neighbour: Any, spring: Any, shift: int, q: Any, qd: Any, pressure: Any,
 ):
     # the internal force on a vertex at x with velocity u: its anchor (scaled by `scale`), eq. (3),
     # then the springs of its CSR entries begin..end, eqs. (4)-(6): entry k's neighbour is
     # neighbour[k] (an index of q, qd) and its spring (k_ij, d_ij, rest length) spring[k + shift]
+    # (`pressure`: a volumetric law's nodal pressures, which springs have none of)
     f = anchor_force(x, u, x_rest, ka, kda, scale)
     for k in range(begin, end):
         j = neighbour[k]
@@ -118,7 +129,8 @@ def vertex_force(
 
 
 @wp.func
-def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, neighbour: Any, spring: Any, shift: int, q: Any):
+def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, neighbour: Any, spring: Any, shift: int, q: Any,
+               pressure: Any):
     # the static equilibrium K u = f at a vertex whose neighbours are held where they are, linearized
     # at x (velocities zero: the dampers add nothing): its force and the stiffness's diagonal block
     # (anchor and springs along their edges, eqs. (3)-(5)), over the same entries as vertex_force
@@ -160,7 +172,7 @@ def implicit_row(
     x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float, m: float, dt: float,
     begin: int, end: int, neighbour: Any, spring: Any, shift: int, row_begin: int, row_end: int, row_neighbour: Any,
     q: Any, qd: Any, local_of: Any, by_local: int, self_id: int, driven: int, dv_driven: wp.vec3, free_count: int,
-    csr_block: Any, csr_local: Any, out_shift: int,
+    csr_block: Any, csr_local: Any, out_shift: int, pressure: Any,
 ):
     # one vertex's row of (M + dt C + dt^2 K) dv = dt (f0 - dt K v0) - A_ic dv_c (Baraff & Witkin),
     # over the same entries as vertex_force. The system's row (the vertex's CSR adjacency,

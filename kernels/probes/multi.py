@@ -39,10 +39,12 @@ def drive_kernel(law: str):
         if mode == PROBE_OFF:
             probes.probe_reaction[p] = wp.vec3(0.0)
             return
-        # the feedback force: the tissue's internal forces on the held vertex, eqs. (3)-(6)
+        # the feedback force: the tissue's internal forces on the held vertex, eqs. (3)-(6) (a volumetric
+        # law's nodal pressures as its region's step just left them, at q_in)
         x = q_in[v]
         probes.probe_reaction[p] = vertex_force(x, qd_in[v], tissue.q_rest[v], tissue.anchor_ke[v], tissue.anchor_kd[v], 1.0,
-                                                entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0, q_in, qd_in)
+                                                entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0, q_in, qd_in,
+                                                entries.pressure)
         # displacement control: the vertex is where the probe puts it
         xd, ud = drive_vertex(x, probes.probe_target[p], dt)
         q_out[v] = xd

@@ -61,7 +61,8 @@ def held_centre(spheres: StrokeSpheres, p: int, alpha: float):
 @functools.cache
 def reactions_kernel(law: str):
     """The stroke's contact reactions at the end of an implicit step, of tissue law `law` (kernels.laws.LAWS)."""
-    vertex_force, Entries = LAWS[law].vertex_force, LAWS[law].Entries
+    vertex_force, nodal_pressure, Entries = LAWS[law].vertex_force, LAWS[law].nodal_pressure, LAWS[law].Entries
+    VOLUMETRIC = LAWS[law].VOLUMETRIC
 
     @wp.kernel(module="unique", enable_backward=False)
     def sum_stroke_reactions(
@@ -70,8 +71,14 @@ def reactions_kernel(law: str):
         anchor_ke: _FLOAT, anchor_kd: _FLOAT, anchor_scale: float, q_out: _VEC, qd_out: _VEC,
     ):
         # one thread, after constrain_stroke_spheres (the implicit step): each contact's reaction from the
-        # internal force at the end of the step, eqs. (3)-(6), summed in local order
+        # internal force at the end of the step, eqs. (3)-(6), summed in local order (a volumetric
+        # law's nodal pressures first, at the end of the step)
         free_count = counts[0]
+        if wp.static(VOLUMETRIC):
+            for i in range(counts[1]):
+                v = region_vertex[i]
+                entries.pressure[v] = nodal_pressure(entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0,
+                                                     q_out, q_out)
         for i in range(counts[1]):
             v = region_vertex[i]
             if surface[v] == 0 or vertex_local[v] >= free_count:
@@ -82,7 +89,8 @@ def reactions_kernel(law: str):
                 n, l = sphere_normal(x, spheres.centre[p])
                 if l < radius * (1.0 + HELD_SLACK):
                     f = vertex_force(x, u, q_rest[v], anchor_ke[v], anchor_kd[v], anchor_scale,
-                                     entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0, q_out, qd_out)
+                                     entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0, q_out, qd_out,
+                                     entries.pressure)
                     spheres.reaction[p] = spheres.reaction[p] + sphere_contact_reaction(f, n)
 
     return sum_stroke_reactions

@@ -136,34 +136,45 @@ def build_batch_regions(
     regions.status[b] = flags
 
 
+@wp.func
+def corner_local(region_vertex: wp.array2d(dtype=wp.int32), b: int, count: int, u: int):
+    # a tet corner's local index in palpation b's region, or -(u + 1) for a mesh vertex outside it
+    i = find_local(region_vertex, b, count, u)
+    if i < 0:
+        return -(u + 1)
+    return i
+
+
 @wp.kernel
 def build_batch_elements(
-    region_vertex: wp.array2d(dtype=wp.int32), region_count: wp.array(dtype=wp.int32), free_count: wp.array(dtype=wp.int32),
+    region_vertex: wp.array2d(dtype=wp.int32), region_count: wp.array(dtype=wp.int32),
     entry_offsets: wp.array(dtype=wp.int32), entry_topology: wp.array(dtype=wp.vec4i),
     local_offsets: wp.array2d(dtype=wp.int32), local_topology: wp.array2d(dtype=wp.vec4i),
 ):
-    # each free vertex's element entries (a volumetric law's incident tets, in the mesh's entry order),
-    # their corners as local indices: every corner of a free vertex's tet is in its region (one ring out)
+    # each region vertex's element entries (a volumetric law's incident tets, in the mesh's entry
+    # order), their corners as local indices: every corner of a free vertex's tet is in its region
+    # (one ring out); a fixed-ring vertex's tets outside it have corners outside, written -(id + 1)
+    # (mesh vertex id: at rest), which only its nodal pressure reads
     b = wp.tid()
     count = region_count[b]
     slot = int(0)
     local_offsets[b, 0] = 0
-    for i in range(free_count[b]):
+    for i in range(count):
         v = region_vertex[b, i]
         for k in range(entry_offsets[v], entry_offsets[v + 1]):
             t = entry_topology[k]
-            local_topology[b, slot] = wp.vec4i(find_local(region_vertex, b, count, t[0]), find_local(region_vertex, b, count, t[1]),
-                                               find_local(region_vertex, b, count, t[2]), find_local(region_vertex, b, count, t[3]))
+            local_topology[b, slot] = wp.vec4i(corner_local(region_vertex, b, count, t[0]), corner_local(region_vertex, b, count, t[1]),
+                                               corner_local(region_vertex, b, count, t[2]), corner_local(region_vertex, b, count, t[3]))
             slot += 1
         local_offsets[b, i + 1] = slot
 
 
 def build_elements(batch, local_offsets, local_topology):
-    """Each palpation's free vertices' element entries of `batch`'s volumetric law, as local tets
+    """Each palpation's region vertices' element entries of `batch`'s volumetric law, as local tets
     (local_offsets [B, vertex capacity + 1], local_topology [B, entry capacity]: sized by the caller)."""
     r, m = batch.regions, batch.model
     wp.launch(build_batch_elements, dim=batch.batch_size,
-              inputs=[r.region_vertex, r.region_count, r.free_count, m.entry_offsets, m.entry_topology],
+              inputs=[r.region_vertex, r.region_count, m.entry_offsets, m.entry_topology],
               outputs=[local_offsets, local_topology], device=batch.device)
 
 

@@ -19,7 +19,8 @@ wp.set_module_options({"enable_backward": False})
 @functools.cache
 def motion_kernel(law: str):
     """The ring-motion check of tissue law `law` (a key of kernels.laws.LAWS)."""
-    static_row, Entries = LAWS[law].static_row, LAWS[law].Entries
+    static_row, nodal_pressure, Entries = LAWS[law].static_row, LAWS[law].nodal_pressure, LAWS[law].Entries
+    VOLUMETRIC = LAWS[law].VOLUMETRIC
 
     @wp.kernel(module="unique", enable_backward=False)
     def eval_ring_motion(
@@ -33,6 +34,10 @@ def motion_kernel(law: str):
         for s in range(slots):
             motion[s] = 0.0
         energy = float(0.0)
+        if wp.static(VOLUMETRIC):  # the nodal pressures at q (outside the region 0: at rest)
+            for i in range(count):
+                v = region.region_vertex[i]
+                entries.pressure[v] = nodal_pressure(entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0, q, q)
         for i in range(count):
             v = region.region_vertex[i]
             x = q[v]
@@ -44,7 +49,7 @@ def motion_kernel(law: str):
                 # linearized at the current state, with v's neighbours held where they are
                 # (a static equilibrium: velocities zero, so the dampers add nothing)
                 f, D = static_row(x, tissue.q_rest[v], tissue.anchor_ke[v], entries.offsets[v], entries.offsets[v + 1],
-                                  entries.topology, entries.params, 0, q)
+                                  entries.topology, entries.params, 0, q, entries.pressure)
                 if wp.determinant(D) > 0.0:
                     u_J = wp.inverse(D) * f
                     motion[0] = wp.max(motion[0], wp.length(u_J))

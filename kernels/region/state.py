@@ -11,14 +11,17 @@ wp.set_module_options({"enable_backward": False})
 @wp.kernel
 def reset_left_behind(
     old_vertex: wp.array(dtype=wp.int32), region: RegionArrays, free_count: int, tissue: TissueArrays,
-    q: wp.array(dtype=wp.vec3), qd: wp.array(dtype=wp.vec3),
+    q: wp.array(dtype=wp.vec3), qd: wp.array(dtype=wp.vec3), pressure: wp.array(dtype=wp.float32), volumetric: int,
 ):
-    # a vertex of the old region that the new one does not integrate: at rest
+    # a vertex of the old region that the new one does not integrate: at rest (a volumetric law's
+    # nodal pressure 0, at rest too, until a pass of the new region's computes it)
     v = old_vertex[wp.tid()]
     lv = region.vertex_local[v]
     if lv < 0 or lv >= free_count:
         q[v] = tissue.q_rest[v]
         qd[v] = wp.vec3(0.0)
+        if volumetric != 0:
+            pressure[v] = 0.0
 
 
 def reset_vertices_left_behind(model, old_vertex, old_count, region, states):
@@ -29,7 +32,8 @@ def reset_vertices_left_behind(model, old_vertex, old_count, region, states):
         wp.launch(
             reset_left_behind,
             dim=old_count,
-            inputs=[old_vertex, region.arrays, region.free_count, model.arrays, state.particle_q, state.particle_qd],
+            inputs=[old_vertex, region.arrays, region.free_count, model.arrays, state.particle_q, state.particle_qd,
+                    model.nodal_pressure, int(model.law_entry.volumetric)],
             device=model.device,
         )
 
