@@ -39,11 +39,24 @@ def scene_file(folder, ball, law_line):
 def test_scene_law_key(tmp_path, ball):
     scene = load_scene(scene_file(tmp_path, ball, 'law = "neo-hookean"'))
     assert scene.law == "neo-hookean" and scene.as_dict()["tissue"]["law"] == "neo-hookean"
-    assert load_scene(scene_file(tmp_path, ball, "")).law == "springs"  # the default
-    path = scene_file(tmp_path, ball, 'law = "corotational"')
-    with pytest.raises(InputError, match=r"\[tissue\] law = 'corotational' is not a tissue law \(allowed: 'springs', 'neo-hookean'\)$") as exc:
+    assert load_scene(scene_file(tmp_path, ball, "")).law is None  # the default: the model's for its mesh and tissue
+    assert load_scene(scene_file(tmp_path, ball, 'law = "corotational"')).law == "corotational"
+    path = scene_file(tmp_path, ball, 'law = "hooke"')
+    with pytest.raises(InputError, match=r"\[tissue\] law = 'hooke' is not a tissue law \(allowed: 'springs', 'neo-hookean', 'corotational'\)$") as exc:
         load_scene(path)
     assert str(exc.value).startswith(str(path)) and "\n" not in str(exc.value)
+
+
+def test_default_law_is_the_tets_for_a_material_on_a_volume(ball):
+    from almsdm_warp.mesh.primitives import icosphere
+    from almsdm_warp.sim.model import Model
+    from almsdm_warp.tissue.material import Material
+    from almsdm_warp.tissue.params import TissueParams
+
+    tets = load_mesh(ball)
+    assert Model(tets, Material(youngs_modulus=10e3), "cpu").law == "neo-hookean"
+    assert Model(tets, TissueParams(), "cpu").law == "springs"  # the paper's per-spring constants
+    assert Model(icosphere(20.0, 2), Material(youngs_modulus=10e3, thickness=2e-3), "cpu").law == "springs"  # a surface
 
 
 def test_scene_law_in_a_paper_scene(tmp_path, ball):

@@ -2,12 +2,14 @@
 gradient of its energy by finite differences, linear elasticity at small strain (evaluation/fem.py's
 P1 tets, which share no code with the product), and the refusals of paths it has no kernels for yet."""
 
+import functools
+
 import numpy as np
 import pytest
 import warp as wp
 
 from almsdm_warp.evaluation import fem
-from almsdm_warp.kernels.laws import neo_hookean
+from almsdm_warp.kernels.laws import LAWS as KERNEL_LAWS
 from almsdm_warp.mesh.primitives import tet_ball
 from almsdm_warp.mesh.tissue_mesh import TissueMesh
 from almsdm_warp.protocol.adaptive import AdaptivePalpation
@@ -23,19 +25,25 @@ E, NU = 10e3, 0.3
 MATERIAL = Material(youngs_modulus=E, poisson_ratio=NU, density=1000.0, rayleigh_alpha=200.0)
 
 
-@wp.kernel
-def law_pressures(offsets: wp.array(dtype=wp.int32), topology: neo_hookean.ENTRY_TOPOLOGY, params: neo_hookean.ENTRY_PARAMS,
-                  q: wp.array(dtype=wp.vec3), pressure: wp.array(dtype=float)):
-    v = wp.tid()
-    pressure[v] = neo_hookean.nodal_pressure(offsets[v], offsets[v + 1], topology, params, 0, q, q)
+@functools.cache
+def law_kernels(law):
+    """(nodal pressures, forces) kernels of tet law `law`: its nodal_pressure and vertex_force, one thread a vertex."""
+    module = KERNEL_LAWS[law]
 
+    @wp.kernel(module="unique")
+    def law_pressures(offsets: wp.array(dtype=wp.int32), topology: module.ENTRY_TOPOLOGY, params: module.ENTRY_PARAMS,
+                      q: wp.array(dtype=wp.vec3), pressure: wp.array(dtype=float)):
+        v = wp.tid()
+        pressure[v] = module.nodal_pressure(offsets[v], offsets[v + 1], topology, params, 0, q, q)
 
-@wp.kernel
-def law_forces(offsets: wp.array(dtype=wp.int32), topology: neo_hookean.ENTRY_TOPOLOGY, params: neo_hookean.ENTRY_PARAMS,
-               q: wp.array(dtype=wp.vec3), pressure: wp.array(dtype=float), out: wp.array(dtype=wp.vec3)):
-    v = wp.tid()
-    zero = wp.vec3(0.0)
-    out[v] = neo_hookean.vertex_force(q[v], zero, zero, 0.0, 0.0, 0.0, offsets[v], offsets[v + 1], topology, params, 0, q, q, pressure)
+    @wp.kernel(module="unique")
+    def law_forces(offsets: wp.array(dtype=wp.int32), topology: module.ENTRY_TOPOLOGY, params: module.ENTRY_PARAMS,
+                   q: wp.array(dtype=wp.vec3), pressure: wp.array(dtype=float), out: wp.array(dtype=wp.vec3)):
+        v = wp.tid()
+        zero = wp.vec3(0.0)
+        out[v] = module.vertex_force(q[v], zero, zero, 0.0, 0.0, 0.0, offsets[v], offsets[v + 1], topology, params, 0, q, q, pressure)
+
+    return law_pressures, law_forces
 
 
 def energy(x, tets, rest, mu0, lam0):
@@ -60,6 +68,33 @@ def energy(x, tets, rest, mu0, lam0):
     return total + np.sum(S[held] / 4 * lam0 / 2 * (v[held] / S[held] - 1) ** 2)
 
 
+def corotational_energy(x, tets, rest, mu0, lam0):
+    """The corotational law's energy in NumPy: over tets V_0 mu |F - R|^2 (R: scipy's polar
+    decomposition, a rotation), plus the same nodal volumetric term as energy()."""
+    from scipy.linalg import polar
+
+    n = len(rest)
+    total = 0.0
+    S, v = np.zeros(n), np.zeros(n)
+    for t in tets:
+        Dm = np.stack([rest[t[c]] - rest[t[0]] for c in (1, 2, 3)], axis=1)
+        F = np.stack([x[t[c]] - x[t[0]] for c in (1, 2, 3)], axis=1) @ np.linalg.inv(Dm)
+        R, Sym = polar(F)
+        if np.linalg.det(R) < 0:  # inverted: the nearest rotation, the smallest singular direction flipped
+            U, sig, Vt = np.linalg.svd(F)
+            U[:, np.argmin(sig)] *= -1
+            R = U @ Vt
+        V0 = abs(np.linalg.det(Dm)) / 6
+        total += V0 * mu0 * np.sum((F - R) ** 2)
+        S[t] += V0
+        v[t] += V0 * np.linalg.det(F)
+    held = S > 0
+    return total + np.sum(S[held] / 4 * lam0 / 2 * (v[held] / S[held] - 1) ** 2)
+
+
+ENERGIES = {"neo-hookean": energy, "corotational": corotational_energy}
+
+
 def two_tets():
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], dtype=np.float64) * 1e-2
     return TissueMesh.from_arrays(v * 1e3, tetrahedra=np.array([[0, 1, 2, 3], [1, 2, 3, 4]]), scale=1.0)
@@ -70,15 +105,18 @@ def forces_at(model, x):
     out = wp.zeros(model.particle_count, dtype=wp.vec3, device=model.device)
     pressure = wp.zeros(model.particle_count, dtype=float, device=model.device)
     entries = (model.entry_offsets, model.entry_topology, model.entry_params, q)
+    law_pressures, law_forces = law_kernels(model.law)
     wp.launch(law_pressures, dim=model.particle_count, inputs=entries, outputs=[pressure], device=model.device)
     wp.launch(law_forces, dim=model.particle_count, inputs=[*entries, pressure], outputs=[out], device=model.device)
     return out.numpy().astype(np.float64)
 
 
+@pytest.mark.parametrize("law", list(ENERGIES))
 @pytest.mark.parametrize("deformation", ["stretch", "shear and twist", "inverted"])
-def test_tet_forces_are_minus_the_energy_gradient(device, deformation):
+def test_tet_forces_are_minus_the_energy_gradient(device, deformation, law):
     mesh = two_tets()  # one tet in each orientation: the model orients them
-    model = Model(mesh, MATERIAL, device, law="neo-hookean")
+    model = Model(mesh, MATERIAL, device, law=law)
+    energy = ENERGIES[law]
     rest = mesh.vertices
     rng = np.random.default_rng(3)
     if deformation == "stretch":
@@ -103,9 +141,10 @@ def test_tet_forces_are_minus_the_energy_gradient(device, deformation):
     assert np.abs(got).max() > 0.05  # a real deformation (E x area x strain ~ 0.1 N), not rounding
 
 
-def test_rest_and_rigid_motions_are_force_free(device):
+@pytest.mark.parametrize("law", list(ENERGIES))
+def test_rest_and_rigid_motions_are_force_free(device, law):
     mesh = two_tets()
-    model = Model(mesh, MATERIAL, device, law="neo-hookean")
+    model = Model(mesh, MATERIAL, device, law=law)
     c, s = np.cos(1.1), np.sin(1.1)
     rotated = mesh.vertices @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T + 0.3
     for x in (mesh.vertices, rotated):  # float32 rounding of the positions: ~1e-5 strain, 1e-5 N (30% strain: 0.1 N)
@@ -140,8 +179,8 @@ def anp_stiffness(x, tets, young, poisson):
     return fem.stiffness(x, tets, 2 * mu, 0.0) + B.T @ sp.diags(S / 4 * lam) @ B
 
 
-@pytest.mark.parametrize("integrator", ["explicit", "implicit"])
-def test_small_press_is_linear_elasticity(device, integrator):
+@pytest.mark.parametrize("integrator,law", [("explicit", "neo-hookean"), ("implicit", "neo-hookean"), ("implicit", "corotational")])
+def test_small_press_is_linear_elasticity(device, integrator, law):
     """A 0.2 mm press of one vertex into a supported 10 mm ball: the global model's hold force within
     1% of linear elasticity on the same tets with the volume change averaged over each vertex's tets
     (anp_stiffness: fem.py's P1 shear part plus a nodal volumetric part written out here; plain P1,
@@ -150,7 +189,7 @@ def test_small_press_is_linear_elasticity(device, integrator):
     mesh = tet_ball(10.0, 3.0)
     z_fix, depth = -5e-3, 0.2e-3
     top = int(np.argmax(mesh.vertices[:, 2]))
-    pal = Palpation(mesh, MATERIAL, rings="global", law="neo-hookean", integrator=integrator, dt=1e-3, device=device,
+    pal = Palpation(mesh, MATERIAL, rings="global", law=law, integrator=integrator, dt=1e-3, device=device,
                     fixed_below=z_fix)
     pal.touch(top)
     result = pal.press(depth, ramp=0.05, hold=0.4, settle=0.01)
@@ -239,9 +278,9 @@ def test_a_sphere_stroke_holds_the_same_force_with_either_integrator(device):
     np.testing.assert_allclose(held["implicit"], held["explicit"], rtol=1e-3)
 
 
-@pytest.mark.parametrize("integrator", ["explicit", "implicit"])
-def test_a_batch_presses_as_each_palpation_bit_for_bit(device, integrator):
-    """BatchPalpation with the neo-Hookean law (the exact kernel, the regions' tets as local corners)
+@pytest.mark.parametrize("integrator,law", [("explicit", "neo-hookean"), ("implicit", "neo-hookean"), ("explicit", "corotational")])
+def test_a_batch_presses_as_each_palpation_bit_for_bit(device, integrator, law):
+    """BatchPalpation with a tet law (the exact kernel, the regions' tets as local corners)
     against Palpation at each contact: the same bits (at the same substeps) on the CPU; on CUDA, where
     the two kernels are compiled apart (their multiply-adds fused differently), within float32's rounding."""
     from almsdm_warp.batch.batch_palpation import BatchPalpation
@@ -251,12 +290,12 @@ def test_a_batch_presses_as_each_palpation_bit_for_bit(device, integrator):
     contacts = surface[mesh.vertices[surface, 2] > 5e-3][:4]
     steps = {"substeps": 6} if integrator == "explicit" else {}
     dt = 1e-3 if integrator == "explicit" else 2e-3
-    model = Model(mesh, MATERIAL, device, law="neo-hookean", fixed_below=-8e-3)
+    model = Model(mesh, MATERIAL, device, law=law, fixed_below=-8e-3)
     batch = BatchPalpation(model=model, rings=2, dt=dt, integrator=integrator, **steps).touch(contacts)
     assert batch.kernel == "exact"
     got = batch.press(1e-3, ramp=0.05, hold=0.1, settle=0.05)
     for b, v in enumerate(contacts):
-        pal = Palpation(mesh, MATERIAL, rings=2, law="neo-hookean", integrator=integrator, dt=dt, device=device, fixed_below=-8e-3, **steps)
+        pal = Palpation(mesh, MATERIAL, rings=2, law=law, integrator=integrator, dt=dt, device=device, fixed_below=-8e-3, **steps)
         pal.touch(int(v))
         want = pal.press(1e-3, ramp=0.05, hold=0.1, settle=0.05)
         assert want.peak_force_N > 0.02

@@ -32,7 +32,7 @@ from ..errors import InputError
 from ..export.output import atomic_write, check_regular
 from ..export.tables import TableLayout
 from ..solvers import integrators
-from ..tissue.laws import law_entry
+from ..tissue.laws import law_entry, resolve_law
 from .sampling import pressable_points, sample_points
 from .sweep import run_local
 from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, check_sphere_travel
@@ -313,6 +313,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     if rings == AUTO:
         raise InputError(f"scene {name!r} has rings = 'auto'; a dataset presses a fixed ring count: give [dataset] rings")
     mesh = scene.load_mesh()
+    scene = replace(scene, law=resolve_law(scene.law, mesh, scene.tissue))
     try:  # the scene's [tissue] law: a batch's kernels, before any work
         law_entry(scene.law).require(integrator=spec.integrator, path="batch")
     except ValueError as exc:

@@ -64,7 +64,7 @@ class SweepPlan:
     sampling: "Sampling | None" = None
     """Where `points` and `vertices` are still being sampled (Sampling, filled block by block), or None;
     not part of the plan's numbers (the points are)."""
-    law: str = "springs"
+    law: str | None = None
     """The tissue law (Model's law; a law without kernels for a batch is refused before the plan)."""
     element_scale: np.ndarray | None = None
     """A volumetric law's lesion: each tet's modulus factor (Model's element_scale), or None."""

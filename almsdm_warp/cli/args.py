@@ -224,7 +224,8 @@ def add_law_arg(parser, path: str) -> None:
     parse.__name__ = "law"
     usable = [name for name, law in LAWS.items() if law.has(path=path)]
     parser.add_argument("--law", type=parse, default=None, metavar="{" + ",".join(usable) + "}",
-                        help=f"tissue law: {' or '.join(usable)} (default: the scene's [tissue] law, else springs)")
+                        help=f"tissue law: {' or '.join(usable)} (default: the scene's [tissue] law, else neo-hookean for a material "
+                             "on a tet mesh and springs otherwise)")
 
 
 def require_law(law, path: str, what: str) -> str:
@@ -240,11 +241,15 @@ def require_law(law, path: str, what: str) -> str:
     return law
 
 
-def check_law(scene, mesh, integrator: str, path: str, why: str = "") -> None:
-    """InputError, one line (`why` first), where the scene's tissue law has no `integrator` step or no
-    kernels for the protocol `path`, or cannot model its mesh or tissue (before any work)."""
-    from ..tissue.laws import LAWS
+def check_law(scene, mesh, integrator: str, path: str, why: str = ""):
+    """The scene with its tissue law named (None: the default for `mesh` and its tissue, default_law);
+    InputError, one line (`why` first), where that law has no `integrator` step or no kernels for the
+    protocol `path`, or cannot model the mesh or tissue (before any work)."""
+    from dataclasses import replace
 
+    from ..tissue.laws import LAWS, resolve_law
+
+    scene = replace(scene, law=resolve_law(scene.law, mesh, scene.tissue))
     law = LAWS[scene.law]
     try:
         law.require(integrator=integrator, path=path)
@@ -252,6 +257,7 @@ def check_law(scene, mesh, integrator: str, path: str, why: str = "") -> None:
             law.check(law.name, mesh, scene.tissue)
     except ValueError as exc:
         raise InputError(f"{why}{exc}") from None
+    return scene
 
 
 def add_probe_radius_arg(parser) -> None:
@@ -291,9 +297,9 @@ def scene_with_tissue_args(args, scene, mesh):
         elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
             base.update(damping_ratio=0.0)
         base.update(given)
-        from ..tissue.laws import LAWS
+        from ..tissue.laws import LAWS, default_law
 
-        law = getattr(args, "law", None) or "springs"
+        law = getattr(args, "law", None) or scene.law or default_law(True, Material(**base))
         becomes_volume = getattr(args, "volume", "off") == "auto" and law in LAWS and LAWS[law].volumetric
         if not mesh.is_volume and not becomes_volume and not base.get("thickness", 0.0) > 0.0:
             raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0")

@@ -196,13 +196,13 @@ def _resolve(args) -> _Run:
     dt = args.dt_ms * 1e-3
     check_protocol(depth, dt, ramp, hold, settle, args.presses, float(np.ptp(mesh.vertices, axis=0).max()))
     vertex, point, contact_extra = _contact(args, mesh, device)
-    if needs_volume(args.volume, mesh, scene.tissue, getattr(args, "law", "springs")):
+    if needs_volume(args.volume, mesh, scene.tissue, scene.law):
         mesh, vertex, point, contact_extra = _volume(args, scene, mesh, point, depth, device)
     if scene.fixed_below is not None and mesh.vertices[vertex, 2] < scene.fixed_below:
         raise InputError(f"the contact vertex {vertex} (z {mesh.vertices[vertex, 2] * 1e3:.4g} mm) is supported: it lies below "
                          f"the support plane z = {scene.fixed_below * 1e3:g} mm and cannot be pressed")
     tol = auto_tol(args, rings, scene)
-    check_law(scene, mesh, args.integrator, "adaptive" if tol is not None else "palpation",
+    scene = check_law(scene, mesh, args.integrator, "adaptive" if tol is not None else "palpation",
               "--rings auto (an adaptive region): " if tol is not None else "")
     radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
     return _Run(scene, mesh, device, rings, tol, depth, ramp, hold, settle, dt, vertex, point, contact_extra, radius)

@@ -153,7 +153,7 @@ def _plan(args, devices, times):
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings
     tol = auto_tol(args, rings, scene)
-    check_law(scene, mesh, args.integrator, "batch")
+    scene = check_law(scene, mesh, args.integrator, "batch")
     if tol is not None:
         check_law(scene, mesh, args.integrator, "adaptive", "--rings auto (each region sized by an adaptive press): ")
     radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3

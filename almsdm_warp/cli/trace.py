@@ -216,7 +216,7 @@ def _make_stroke(args, scene, mesh, dt, device):
         raise InputError(f"the scene {scene.name!r} sizes its region automatically (rings = \"auto\"): almsdm trace "
                          f"takes a ring count or the global model (--rings N or global)")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
-    check_law(scene, mesh, args.integrator, "stroke")
+    scene = check_law(scene, mesh, args.integrator, "stroke")
     radius = _probe_radius(args, scene)
     scales = scene.lesion.model_scales(mesh, None, scene.law) if scene.lesion is not None else {}
     try:

@@ -15,12 +15,13 @@ def add_volume_arg(parser) -> None:
                              "(fTetWild, the volume extra; edges <= 0.45 x the contact radius at the press); default off")
 
 
-def needs_volume(choice: str, mesh, tissue, law: str = "springs") -> bool:
+def needs_volume(choice: str, mesh, tissue, law: str | None = None) -> bool:
     """Whether --volume `choice` makes `mesh` a volume: auto, a surface mesh, a Material and a
-    volumetric law (tissue/laws.py)."""
-    from ..tissue.laws import LAWS
+    volumetric law (tissue/laws.py; None: the law a volume would get, default_law)."""
+    from ..tissue.laws import LAWS, default_law
     from ..tissue.material import Material
 
+    law = default_law(True, tissue) if law is None else law
     return (choice == "auto" and not mesh.is_volume and isinstance(tissue, Material)
             and law in LAWS and LAWS[law].volumetric)
 

@@ -117,7 +117,7 @@ class MultiPalpation:
 
     def __init__(self, mesh, tissue=None, *, tol=1e-4, rings=None, integrator="explicit", dt=1e-3, device=None,
                  start_rings=1, max_rings=64, check_interval=0.01, retire=True, force_tol=FORCE_TOL, margin=MARGIN,
-                 capture=True, law="springs", **solver_kw):
+                 capture=True, law=None, **solver_kw):
         if rings is not None:
             start_rings = check_rings(rings)
             if start_rings < 1:

@@ -125,7 +125,7 @@ class Palpation:
     """What this class is, as a tissue law's `paths` name it (a law without kernels for it is refused)."""
 
     def __init__(self, mesh, tissue=None, *, rings=4, integrator="explicit", dt=1e-3, device=None, capture=True,
-                 edge_scale=None, anchor_scale=None, fixed_below=None, substeps="auto", probe_radius=0.0, law="springs",
+                 edge_scale=None, anchor_scale=None, fixed_below=None, substeps="auto", probe_radius=0.0, law=None,
                  element_scale=None, **solver_kw):
         if not (isinstance(rings, (int, np.integer)) and not isinstance(rings, bool)) and rings not in GLOBAL_MODELS:
             raise ValueError(f"rings must be an int >= 1 or one of {GLOBAL_MODELS}, got {rings!r}")

@@ -35,8 +35,9 @@ if TYPE_CHECKING:
 
 DEFAULT_SCENE = "stomach"
 """The scene used when none is given."""
-DEFAULT_LAW = "springs"
-"""The tissue law of a scene that names none ([tissue] law): the paper's springs."""
+DEFAULT_LAW = None
+"""The tissue law of a scene that names none ([tissue] law): None, the model's default for its mesh and
+tissue (tissue.laws.default_law: neo-Hookean tets for a material on a tet mesh, else springs)."""
 
 
 def check_law_name(law, what: str) -> str:
@@ -75,9 +76,10 @@ class Scene:
     plate, pressed from above, +z up); None: no supports."""
     probe_radius: float = 0.0
     """Radius of the spherical probe [m]; 0: the paper's probe (the contact vertex driven)."""
-    law: str = DEFAULT_LAW
-    """The tissue law ([tissue] law, a key of tissue.laws.LAWS): "springs" (the paper's, every path) or
-    "neo-hookean" (stable neo-Hookean tets: a material on a tet mesh, one explicit region so far)."""
+    law: str | None = DEFAULT_LAW
+    """The tissue law ([tissue] law, a key of tissue.laws.LAWS): "springs" (the paper's), "neo-hookean"
+    (stable neo-Hookean tets) or "corotational" (corotational linear tets), both for a material on a
+    tet mesh; None: the model's default (tissue.laws.default_law)."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
@@ -90,7 +92,8 @@ class Scene:
         if self.fixed_below is not None:
             object.__setattr__(self, "fixed_below", check_value(self.fixed_below, float, "number", "Scene.fixed_below"))
         object.__setattr__(self, "probe_radius", check_value(self.probe_radius, float, ">= 0", "Scene.probe_radius"))
-        check_law_name(self.law, "Scene.law")
+        if self.law is not None:
+            check_law_name(self.law, "Scene.law")
         if self.tol is not None:
             object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
@@ -125,7 +128,7 @@ class Scene:
         for section, keys in SCHEMA.items():
             out[section] = {}
             if section == "tissue":
-                out[section] = {"model": self.tissue_model, "law": self.law, **self._tissue_dict()}
+                out[section] = {"model": self.tissue_model, **({"law": self.law} if self.law is not None else {}), **self._tissue_dict()}
                 continue
             for key, (attr, _kind, factor, _rule) in keys.items():
                 value = _get(self, section, attr)
@@ -191,7 +194,8 @@ def load_scene(path) -> Scene:
         rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
         raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
     mesh_path = _mesh_path(values["mesh"].get("path"), p, where)
-    law = check_law_name(values["tissue"].pop("law", DEFAULT_LAW), f"{where}: [tissue] law")
+    law = values["tissue"].pop("law", DEFAULT_LAW)
+    law = None if law is None else check_law_name(law, f"{where}: [tissue] law")
     tissue = _tissue(data.get("tissue", {}), values["tissue"], where)
 
     try:  # the SI values are checked again: say which file they came from

@@ -13,7 +13,7 @@ import warp as wp
 
 from ..kernels.arrays import ProbeArrays, ProbeSphereArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
-from ..tissue.laws import law_entry
+from ..tissue.laws import law_entry, resolve_law
 from ..tissue.material import Material, damping, springs_for_mesh
 from ..tissue.params import TissueParams
 
@@ -45,7 +45,7 @@ class Model:
     """The static tissue model on one device: rest shape, topology, masses, springs, anchors."""
 
     def __init__(self, mesh, tissue=None, device=None, *, edge_scale=None, anchor_scale=None, fixed_below=None,
-                 support=None, anchors=None, law: str = "springs", element_scale=None):
+                 support=None, anchors=None, law: str | None = None, element_scale=None):
         """mesh: TissueMesh or DeviceMesh. tissue: TissueParams (the paper's per-spring constants, SI;
         default: the stomach scene's) or Material (every spring, anchor, damper and mass derived per
         edge and vertex by tissue.material.springs_for_mesh).
@@ -57,19 +57,20 @@ class Model:
         fixed. anchors: keep the anchor springs k_i (True), drop them (False), or None: dropped on a
         supported tet mesh (the support holds it), kept otherwise; the vertex dampers d_i stay (with
         a material they hold the mass-proportional Rayleigh damping). law: the tissue law, a key of
-        almsdm_warp.tissue.laws.LAWS (its kernels' functions, critical step and stiffness bound).
+        almsdm_warp.tissue.laws.LAWS (its kernels' functions, critical step and stiffness bound);
+        None: stable neo-Hookean tets for a material on a tet mesh, springs otherwise (default_law).
         element_scale [tet_count]: a volumetric law's multiplier of each tet's moduli (a lesion,
         `Lesion.model_scales`); edge_scale and anchor_scale are the springs law's.
         """
-        self.law_entry = law_entry(law)
-        self.law = self.law_entry.name
-        """The tissue law's name: the step kernels are made for it (kernels/laws)."""
         self.dmesh = dm = as_device_mesh(mesh, device)
         self.mesh = dm.mesh
         self.device = dm.device
         self.tissue = t = tissue if tissue is not None else TissueParams()
         if not isinstance(t, (TissueParams, Material)):
             raise TypeError(f"tissue must be a TissueParams or a Material, got {type(t).__name__}")
+        self.law_entry = law_entry(resolve_law(law, self.mesh, t))
+        self.law = self.law_entry.name
+        """The tissue law's name: the step kernels are made for it (kernels/laws)."""
         if self.law_entry.check is not None:
             self.law_entry.check(self.law, self.mesh, t)
         n, e = dm.vertex_count, dm.edge_count

@@ -143,12 +143,12 @@ def _tet_material(model):
     return tets, dm, det / 6.0, (mu * scale, lam * scale)  # per tet (a lesion scales both)
 
 
-def neo_hookean_entries(model):
-    """The neo-Hookean law's entries: each vertex's incident tets (vertex-to-tet CSR), each with the
-    tet's four vertex ids and its rest data (D_m^-1, V_0, mu_0, lambda_0, the corner)."""
+def tet_entries(model):
+    """A tet law's entries (kernels/laws/tets.py): each vertex's incident tets (vertex-to-tet CSR), each
+    with the tet's four vertex ids and its rest data (D_m^-1, V_0, mu_0, lambda_0, the corner)."""
     import warp as wp
 
-    from ..kernels.laws.neo_hookean import TetEntry
+    from ..kernels.laws.tets import TetEntry
 
     tets, dm, volume, (mu, lam0) = _tet_material(model)
     n = model.particle_count
@@ -186,7 +186,7 @@ def _tet_gradients(model, vertices=None):
 
 
 def tet_stiffness(model, vertices=None):
-    """The neo-Hookean law linearized at rest [N/m], 3n x 3n: its tets' linear elasticity of Lame
+    """A tet law (neo-Hookean or corotational) linearized at rest [N/m], 3n x 3n: its tets' linear elasticity of Lame
     parameters (mu_0, 0) plus the nodal volumetric term, B^T diag(S_a kappa_a / 4) B with B the nodal
     volume change per displacement, B[a, c] = sum over a's tets t holding c of V_t b_c / S_a (S_a =
     sum of a's tets' V_t): together linear elasticity of (mu_0, lambda_0) with the volume change
@@ -210,8 +210,8 @@ def tet_stiffness(model, vertices=None):
     return (K + B.T @ sp.diags(nodal_volume * kappa / 4.0) @ B).tocsr()
 
 
-def neo_hookean_critical_dt(model, vertices=None, anchors: bool = True) -> float:
-    """Largest stable step [s] of semi-implicit Euler for the neo-Hookean law linearized at rest (its
+def tet_critical_dt(model, vertices=None, anchors: bool = True) -> float:
+    """Largest stable step [s] of semi-implicit Euler for a tet law linearized at rest (its
     tets' linear elasticity, the anchors and the vertex dampers; stable_step). A deep press stiffens
     a compressed tet: Palpation takes its substeps under 0.9 of this."""
     import scipy.sparse as sp
@@ -222,7 +222,7 @@ def neo_hookean_critical_dt(model, vertices=None, anchors: bool = True) -> float
     return stable_step(model.particle_mass_host, K, C, vertices, f"E {model.tissue.youngs_modulus:.3g} Pa")
 
 
-def neo_hookean_stiffness_bound(model) -> float:
+def tet_stiffness_bound(model) -> float:
     """An upper bound of the largest row sum of |K| of the tets at rest, plus the stiffest anchor [N/m]:
     each block |K_ab| <= V (2 mu + lambda) |b_a| |b_b| (at most 3x that a row), summed over a vertex's
     tets, without assembling K (O(tets) memory: a mesh of 1e5 tets costs no start-up)."""
@@ -277,10 +277,28 @@ class Law:
 
 LAWS = {
     "springs": Law("springs", KERNEL_LAWS["springs"], springs_critical_dt, springs_stiffness_bound, springs_entries),
-    "neo-hookean": Law("neo-hookean", KERNEL_LAWS["neo-hookean"], neo_hookean_critical_dt, neo_hookean_stiffness_bound,
-                       neo_hookean_entries, check=check_volumetric),
+    "neo-hookean": Law("neo-hookean", KERNEL_LAWS["neo-hookean"], tet_critical_dt, tet_stiffness_bound,
+                       tet_entries, check=check_volumetric),
+    "corotational": Law("corotational", KERNEL_LAWS["corotational"], tet_critical_dt, tet_stiffness_bound,
+                        tet_entries, check=check_volumetric),
 }
 """Law name -> its entry."""
+
+
+def default_law(volume: bool, tissue) -> str:
+    """The tissue law of a model that names none: stable neo-Hookean tets for a material on a volume
+    (a tet mesh), the springs elsewhere (a surface, or the paper's per-spring constants)."""
+    from .material import Material
+
+    return "neo-hookean" if volume and isinstance(tissue, Material) else "springs"
+
+
+def resolve_law(law: str | None, mesh, tissue) -> str:
+    """`law`, or for None the default of `mesh` (a TissueMesh or DeviceMesh) and `tissue` (default_law)."""
+    if law is not None:
+        return law
+    tets = getattr(mesh, "tetrahedra", None)
+    return default_law(tets is not None and len(tets) > 0, tissue)
 
 
 def law_entry(name: str) -> Law:

@@ -71,12 +71,13 @@ class Lesion:
         anchor_scale = np.where(self.vertex_inside(v), self.stiffness_factor, 1.0)
         return edge_scale, anchor_scale
 
-    def model_scales(self, mesh, tissue=None, law: str = "springs") -> dict:
-        """Model's keywords for this lesion under tissue law `law`: a volumetric law's per-tet modulus
-        factor (element_scale: element_factor of each tet), else the springs' (edge_scale, anchor_scale: scales)."""
-        from .laws import law_entry
+    def model_scales(self, mesh, tissue=None, law: str | None = None) -> dict:
+        """Model's keywords for this lesion under tissue law `law` (None: the mesh's default, default_law):
+        a volumetric law's per-tet modulus factor (element_scale: element_factor of each tet), else the
+        springs' (edge_scale, anchor_scale: scales)."""
+        from .laws import law_entry, resolve_law
 
-        if law_entry(law).volumetric:
+        if law_entry(resolve_law(law, mesh, tissue)).volumetric:
             return {"element_scale": self.element_factor(mesh.vertices, mesh.tetrahedra)}
         edge_scale, anchor_scale = self.scales(mesh, tissue)
         return {"edge_scale": edge_scale, "anchor_scale": anchor_scale}

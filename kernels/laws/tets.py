@@ -1,0 +1,205 @@
+"""What every tet law shares (kernels/laws/neo_hookean.py, kernels/laws/corotational.py): a vertex's
+incident tets as its entries, the nodal pressure pass, and the three functions a law gives the step
+kernels (vertex_force, implicit_row, static_row), made by `tet_law` from the law's element force.
+
+A tet law's energy is a sum over its tets of an element energy with a small bulk modulus of its own,
+plus a sum over vertices of lambda_0 on each vertex's nodal volume change (average nodal pressure:
+Bonet & Burton 1998; neo_hookean.py's docstring says why and how): the element force on a corner is
+the law's (`corner_force(F, dJ, p, pressure)`, pressure the tet's mean nodal pressure p_t, to add as
+p_t dJ/dF to its stress); the rest is here, once.
+"""
+
+from typing import Any
+
+import warp as wp
+
+from .springs import anchor_force, anchor_row, row_unknown
+
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class TetEntry:
+    """One (tet, corner) incidence: the tet's rest data and which of its corners the vertex is."""
+
+    dm_inv: wp.mat33
+    """D_m^-1, the inverse of the rest edge matrix [1/m]."""
+    volume: float
+    """Rest volume V_0 [m^3]."""
+    mu: float
+    """mu [Pa]."""
+    bulk: float
+    """lambda_0 [Pa], the material's first Lame parameter, which the nodal volumetric term carries."""
+    corner: int
+    """The vertex's corner in the tet, 0..3."""
+    gradient: wp.vec3
+    """b: the gradient of that corner's barycentric coordinate at rest [1/m] (a row of D_m^-1; corner 0:
+    minus their sum), so that the tet's force on the corner is -V_0 P b."""
+
+
+VOLUMETRIC = True
+"""A tet law's entries are a vertex's incident tets (a batch builds them as local tets) and it has a
+nodal pressure pass (`nodal_pressure`) before its forces."""
+
+ENTRY_TOPOLOGY = wp.array(dtype=wp.vec4i)
+"""Entry k: the four vertex ids of its tet."""
+ENTRY_PARAMS = wp.array(dtype=TetEntry)
+"""Entry k: its tet's rest data and corner."""
+
+
+@wp.struct
+class Entries:
+    """The law's entries as one kernel argument (Model.entries): CSR offsets, topology, parameters."""
+
+    offsets: wp.array(dtype=wp.int32)
+    topology: ENTRY_TOPOLOGY
+    params: ENTRY_PARAMS
+    pressure: wp.array(dtype=float)
+    """Each vertex's nodal pressure [Pa] as the last pressure pass left it (a volumetric law's; else one zero)."""
+
+
+@wp.func
+def column(m: wp.mat33, c: int):
+    return wp.vec3(m[0, c], m[1, c], m[2, c])
+
+
+@wp.func
+def tet_state(q: Any, t: wp.vec4i, p: TetEntry):
+    # the tet's deformation gradient F = D_s D_m^-1 and dJ/dF = [f1 x f2, f2 x f0, f0 x f1]
+    x0 = q[t[0]]
+    F = wp.matrix_from_cols(q[t[1]] - x0, q[t[2]] - x0, q[t[3]] - x0) * p.dm_inv
+    f0 = column(F, 0)
+    f1 = column(F, 1)
+    f2 = column(F, 2)
+    return F, wp.matrix_from_cols(wp.cross(f1, f2), wp.cross(f2, f0), wp.cross(f0, f1))
+
+
+@wp.func
+def tet_pressure(t: wp.vec4i, pressure: Any):
+    # p_t: the mean of the tet's corners' nodal pressures
+    return 0.25 * ((pressure[t[0]] + pressure[t[1]]) + (pressure[t[2]] + pressure[t[3]]))
+
+
+@wp.func
+def corner_position(q: Any, rest: Any, c: int):
+    # corner c's position: q[c], or for c < 0 (a batch's corner outside its region) rest[-c - 1], at rest
+    if c < 0:
+        return rest[-c - 1]
+    return q[c]
+
+
+@wp.func
+def nodal_pressure(begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, rest: Any):
+    # p_a = kappa_a (J_a - 1) of a vertex from its incident tets, entries begin..end (corner positions
+    # from q, or `rest` for a negative corner: corner_position): J_a = sum v_t / sum V_t, kappa_a =
+    # sum V_t lambda_0 / sum V_t, v_t the deformed volume (the module's docstring)
+    rest_volume = float(0.0)
+    volume = float(0.0)
+    bulk = float(0.0)
+    for k in range(begin, end):
+        t = topology[k]
+        p = params[k + shift]
+        x0 = corner_position(q, rest, t[0])
+        v6 = wp.dot(wp.cross(corner_position(q, rest, t[1]) - x0, corner_position(q, rest, t[2]) - x0), corner_position(q, rest, t[3]) - x0)
+        rest_volume += p.volume
+        volume += v6 * (1.0 / 6.0)
+        bulk += p.volume * p.bulk
+    if rest_volume <= 0.0:
+        return 0.0
+    return (bulk / rest_volume) * (volume / rest_volume - 1.0)
+
+
+@wp.func
+def corner_gradient(dm_inv: wp.mat33, c: int):
+    # b_c: the gradient of corner c's barycentric coordinate at rest (rows of D_m^-1; corner 0 minus their sum)
+    if c == 0:
+        return -wp.vec3(dm_inv[0, 0] + dm_inv[1, 0] + dm_inv[2, 0], dm_inv[0, 1] + dm_inv[1, 1] + dm_inv[2, 1],
+                        dm_inv[0, 2] + dm_inv[1, 2] + dm_inv[2, 2])
+    return wp.vec3(dm_inv[c - 1, 0], dm_inv[c - 1, 1], dm_inv[c - 1, 2])
+
+
+def tet_law(corner_force: Any, shear: float, element_bulk: float):
+    """(vertex_force, implicit_row, static_row) of a tet law whose element force on a corner is
+    `corner_force(F, dJ, p, pressure)` (p: the TetEntry; pressure: the tet's mean nodal pressure), and
+    whose Gauss-Newton blocks are K_ab = V_0 (shear mu (b_a . b_b) I + (element_bulk mu + lambda_0)
+    (dJ b_a)(dJ b_b)^T): positive semi-definite in every state (neo_hookean.py's docstring)."""
+    SHEAR, ELEMENT_BULK = float(shear), float(element_bulk)
+
+    @wp.func
+    def vertex_force(
+        x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float,
+        begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, qd: Any, pressure: Any,
+    ):
+        # the internal force on a vertex at x with velocity u: its anchor and damper (scaled by `scale`),
+        # eq. (3), then the elastic forces of its incident tets, entries begin..end (tet topology[k], rest
+        # data params[k + shift]; corner positions from q, nodal pressures from `pressure`, indexed as q)
+        f = anchor_force(x, u, x_rest, ka, kda, scale)
+        for k in range(begin, end):
+            t = topology[k]
+            p = params[k + shift]
+            F, dJ = tet_state(q, t, p)
+            f += corner_force(F, dJ, p, tet_pressure(t, pressure))
+        return f
+
+
+    @wp.func
+    def implicit_row(
+        x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float, m: float, dt: float,
+        begin: int, end: int, topology: Any, params: Any, shift: int, row_begin: int, row_end: int, row_neighbour: Any,
+        q: Any, qd: Any, local_of: Any, by_local: int, self_id: int, driven: int, dv_driven: wp.vec3, free_count: int,
+        csr_block: Any, csr_local: Any, out_shift: int, pressure: Any,
+    ):
+        # one vertex's row of (M + dt C + dt^2 K) dv = dt (f0 - dt K v0) - A_ic dv_c (the springs law's
+            # implicit_row says what each argument is): the anchor's terms, then each incident tet's force
+        # and Gauss-Newton blocks (this module's docstring), the blocks of its other corners added into
+        # the row's CSR entries (row_begin..row_end of row_neighbour), which start from zero.
+        f, D, Kv = anchor_row(x, u, x_rest, ka, kda, scale, m, dt)
+        correction = wp.vec3(0.0)
+        for k in range(row_begin, row_end):
+            csr_block[k + out_shift] = wp.mat33(0.0)
+            csr_local[k + out_shift] = row_unknown(row_neighbour[k], local_of, by_local, self_id, driven, free_count)
+        for k in range(begin, end):
+            t = topology[k]
+            p = params[k + shift]
+            F, dJ = tet_state(q, t, p)
+            f += corner_force(F, dJ, p, tet_pressure(t, pressure))
+            b_a = p.gradient
+            g_a = dJ * b_a
+            volumetric = ELEMENT_BULK * p.mu + p.bulk
+            for c in range(4):
+                b_c = corner_gradient(p.dm_inv, c)
+                K = p.volume * ((SHEAR * p.mu) * wp.dot(b_a, b_c) * wp.identity(n=3, dtype=float) + volumetric * wp.outer(g_a, dJ * b_c))
+                vc = t[c]
+                Kv += K * qd[vc]
+                if c == p.corner:
+                    D += dt * dt * K
+                else:
+                    for e in range(row_begin, row_end):
+                        if row_neighbour[e] == vc:
+                            csr_block[e + out_shift] = csr_block[e + out_shift] - dt * dt * K
+                    if vc == driven:
+                        correction -= dt * dt * K * dv_driven
+        return f, D, Kv, correction
+
+
+    @wp.func
+    def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, topology: Any, params: Any, shift: int, q: Any,
+                   pressure: Any):
+        # the static equilibrium at a vertex whose neighbours are held where they are (velocities zero):
+        # its force (anchor and incident tets) and its diagonal stiffness block (the anchor's and the
+        # tets' Gauss-Newton blocks, as implicit_row's)
+        zero = wp.vec3(0.0)
+        f = anchor_force(x, zero, x_rest, ka, 0.0, 1.0)
+        D = ka * wp.identity(n=3, dtype=float)
+        for k in range(begin, end):
+            t = topology[k]
+            p = params[k + shift]
+            F, dJ = tet_state(q, t, p)
+            f += corner_force(F, dJ, p, tet_pressure(t, pressure))
+            b_a = p.gradient
+            g_a = dJ * b_a
+            D += p.volume * ((SHEAR * p.mu) * wp.dot(b_a, b_a) * wp.identity(n=3, dtype=float) + (ELEMENT_BULK * p.mu + p.bulk) * wp.outer(g_a, g_a))
+        return f, D
+
+    return vertex_force, implicit_row, static_row
