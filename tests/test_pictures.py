@@ -1,0 +1,139 @@
+"""The pictures' decisions, not their pixels: what is coloured, what is marked and where, what is hidden,
+the scale of what is drawn, the labels and units on every axis, no text over text."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from almsdm_warp.export import sweep_png  # noqa: E402
+from almsdm_warp.mesh.primitives import icosphere_arrays  # noqa: E402
+
+
+def ellipsoid(half_height=0.5, subdivisions=2):
+    """An icosphere of 50 mm flattened along z (so the maps look along z): (vertices [m], triangles)."""
+    v, t = icosphere_arrays(50.0, subdivisions)
+    return v * [1.0, 1.0, half_height], np.asarray(t, dtype=np.int64)
+
+
+def table(vertices_m, vertex, stiffness):
+    xyz = vertices_m[vertex] * 1e3
+    return {"vertex": np.asarray(vertex), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2],
+            "stiffness_N_per_mm": np.asarray(stiffness, dtype=np.float64)}
+
+
+def test_unpressed_vertices_and_faces_stay_uncoloured():
+    # the old map gave every vertex the value of the nearest pressed point; now only pressed ones have one
+    v, t = ellipsoid()
+    rng = np.random.default_rng(1)
+    vertex = rng.choice(len(v), 60)  # with repeats: a vertex pressed twice has the mean
+    stiff = rng.uniform(0.01, 0.05, len(vertex))
+    stiff[3] = np.nan  # a press without a result gives its vertex nothing
+    per_vertex = sweep_png.vertex_values(len(v), vertex, stiff)
+    for k in range(len(v)):
+        got = [s for i, s in zip(vertex, stiff) if i == k and np.isfinite(s)]
+        if got:
+            assert per_vertex[k] == pytest.approx(np.mean(got))
+        else:
+            assert np.isnan(per_vertex[k])
+    assert np.isnan(per_vertex).sum() > len(v) // 2
+    faces = sweep_png.face_values(t, per_vertex)
+    for f, corners in zip(faces, t):
+        if all(np.isfinite(per_vertex[c]) for c in corners):
+            assert f == pytest.approx(np.mean(per_vertex[corners]))
+        else:
+            assert np.isnan(f)
+
+
+def test_extremes_are_the_true_max_and_min_of_the_table():
+    rng = np.random.default_rng(2)
+    stiff = rng.uniform(0.0, 1.0, 500)
+    stiff[rng.choice(500, 20)] = np.nan
+    found = sweep_png.extremes({"stiffness_N_per_mm": stiff})
+    finite = [(s, i) for i, s in enumerate(stiff) if np.isfinite(s)]
+    assert found == {"stiffest": max(finite)[1], "softest": min(finite)[1]}
+    assert sweep_png.extremes({"stiffness_N_per_mm": np.full(3, np.nan)}) == {}
+
+
+def test_hidden_points_on_a_sphere_and_behind_another():
+    # a sphere seen from +z hides its lower half; a second sphere above it hides the part of the first's
+    # upper half under its disc (the closed form: a vertical ray from the point meets the upper sphere)
+    v, t = icosphere_arrays(10.0, 3)
+    v = v * 1e3
+    both = np.vstack([v, v + [0.0, 0.0, 30.0]])
+    tris = np.vstack([t, t + len(v)]).astype(np.int64)
+    lower = np.arange(len(v))
+    got = sweep_png.hidden(both[lower], lower, both, tris, [0.0, 0.0, 1.0])
+    r = np.hypot(v[:, 0], v[:, 1])
+    clear = (np.abs(v[:, 2]) > 1.0) & (np.abs(r - 10.0) > 1.0)  # away from the rims, where a polygon is not a sphere
+    expected = (v[:, 2] < 0) | (r < 10.0)
+    np.testing.assert_array_equal(got[clear], expected[clear])
+    upper = lower + len(v)
+    np.testing.assert_array_equal(sweep_png.hidden(both[upper], upper, both, tris, [0, 0, 1])[clear], (v[:, 2] < 0)[clear])
+
+
+@pytest.fixture(scope="module")
+def sweep_fig():
+    """A map of the flattened sphere: 50 pressed vertices, the stiffest one on the underside."""
+    v, t = ellipsoid()
+    rng = np.random.default_rng(3)
+    vertex = rng.choice(len(v), 50, replace=False)
+    stiff = rng.uniform(0.01, 0.03, 50)
+    low = int(np.argmin(v[vertex, 2]))  # the lowest pressed vertex: hidden from the top
+    stiff[low] = 0.07
+    columns = table(v, vertex, stiff)
+    fig = sweep_png.sweep_figure(SimpleNamespace(vertices=v, triangles=t), columns, title="test")
+    fig.canvas.draw()
+    return fig, v * 1e3, t, columns
+
+
+def test_sweep_map_axes_in_mm_and_named_views(sweep_fig):
+    fig, *_ = sweep_fig
+    maps = [ax for ax in fig.axes if ax.get_title()]
+    assert [ax.get_title() for ax in maps] == ["top: seen from +z", "bottom: seen from -z"]
+    for ax in maps:
+        assert ax.get_xlabel().startswith("x [mm]") and ax.get_ylabel() == "y [mm]"
+        assert len(ax.get_xticklabels()) > 2 and len(ax.get_yticklabels()) > 2
+    lo, hi = maps[1].get_xlim()
+    assert lo > hi  # seen from below, x runs right to left
+    assert "[N/mm]" in fig.axes[-1].get_ylabel()  # the colour bar
+
+
+def test_sweep_map_marks_the_stiffest_point_in_every_view(sweep_fig):
+    from matplotlib.text import Annotation
+
+    fig, v, t, columns = sweep_fig
+    row = int(np.nanargmax(columns["stiffness_N_per_mm"]))
+    at = v[columns["vertex"][row]]
+    for ax, behind in zip(fig.axes[:2], (True, False)):
+        notes = [a for a in ax.texts if isinstance(a, Annotation) and a.get_text().startswith("stiffest")]
+        assert len(notes) == 1
+        assert notes[0].get_text() == f"stiffest {columns['stiffness_N_per_mm'][row]:.3g} N/mm" + (" (behind)" if behind else "")
+        np.testing.assert_allclose(notes[0].xy, at[:2])
+
+
+def test_sweep_map_colours_only_faces_pressed_at_every_corner(sweep_fig):
+    from matplotlib.collections import PolyCollection
+
+    fig, v, t, columns = sweep_fig
+    pressed = np.zeros(len(v), dtype=bool)
+    pressed[columns["vertex"]] = True
+    expected = sum(all(pressed[c]) for c in t)
+    for ax in fig.axes[:2]:
+        (surface,) = [c for c in ax.collections if isinstance(c, PolyCollection) and len(c.get_paths()) == len(t)]
+        rgb = surface.get_facecolors()[:, :3]
+        coloured = ~(np.isclose(rgb[:, 0], rgb[:, 1]) & np.isclose(rgb[:, 1], rgb[:, 2]))
+        assert coloured.sum() == expected
+
+
+def test_sweep_map_labels_stay_inside_their_axes_and_apart(sweep_fig):
+    fig, *_ = sweep_fig
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes[:2]:
+        frame = ax.get_window_extent(renderer)
+        boxes = [a.get_bbox_patch().get_window_extent(renderer) for a in ax.texts]  # the texts, not their arrows
+        for b in boxes:
+            assert frame.x0 <= b.x0 and b.x1 <= frame.x1 and frame.y0 <= b.y0 and b.y1 <= frame.y1
+        assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
