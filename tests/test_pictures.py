@@ -137,3 +137,48 @@ def test_sweep_map_labels_stay_inside_their_axes_and_apart(sweep_fig):
         for b in boxes:
             assert frame.x0 <= b.x0 and b.x1 <= frame.x1 and frame.y0 <= b.y0 and b.y1 <= frame.y1
         assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+
+
+@pytest.fixture(scope="module")
+def pressed_snapshot():
+    """A 10 mm sphere 5 mm into a 50 mm icosphere, caught at the end of the hold (Snapshot.of)."""
+    from almsdm_warp.export.preview import Snapshot
+    from almsdm_warp.mesh.primitives import icosphere
+    from almsdm_warp.protocol.palpation import Palpation
+
+    mesh = icosphere(50.0, 3)
+    pal = Palpation(mesh, rings=2, dt=1e-3, device="cpu", probe_radius=0.01)
+    pal.touch(int(np.argmax(mesh.vertices[:, 2])))
+    shots = {}
+    pal.press(0.005, 0.05, 0.02, 0.02, record=lambda k, total: shots.setdefault(k, Snapshot.of(pal, k * pal.dt)), record_every=1)
+    return mesh, shots[70]
+
+
+def test_preview_sphere_touches_the_dent_it_made(pressed_snapshot):
+    # the drawn sphere is where the simulation's sphere is: 5 mm below the rest contact, no vertex inside it
+    mesh, snap = pressed_snapshot
+    assert snap.in_contact and snap.probe_radius == 0.01
+    top = mesh.vertices[snap.contact_vertex]
+    np.testing.assert_allclose(snap.probe_centre, top + [0.0, 0.0, 0.01 - 0.005], atol=1e-6)
+    gap = np.linalg.norm(snap.positions - snap.probe_centre, axis=1) - snap.probe_radius
+    assert gap.min() > -2e-4 and gap.min() < 2e-4
+
+
+def test_preview_draws_the_sphere_to_scale_and_labels_every_axis(pressed_snapshot):
+    from almsdm_warp.export.preview import preview_figure
+
+    mesh, snap = pressed_snapshot
+    fig = preview_figure(mesh, snap, title="test")
+    fig.canvas.draw()
+    views = [ax for ax in fig.axes if ax.name == "3d"]
+    assert len(views) == 2
+    whole = fig.get_window_extent()
+    for ax in views:
+        (sphere,) = [c for c in ax.collections if c.get_gid() == "probe sphere"]
+        corners = np.concatenate(sphere._faces)  # the 3D quads as given [mm] (matplotlib keeps them here)
+        np.testing.assert_allclose(np.linalg.norm(corners - snap.probe_centre * 1e3, axis=1), 10.0, rtol=1e-9)
+        for axis, name in zip((ax.xaxis, ax.yaxis, ax.zaxis), "xyz"):
+            assert axis.get_label_text() == f"{name} [mm]"
+            box = axis.label.get_window_extent(fig.canvas.get_renderer())
+            assert whole.x0 <= box.x0 and box.x1 <= whole.x1 and whole.y0 <= box.y0 and box.y1 <= whole.y1, name
+    assert "10 mm sphere, to scale" in views[1].get_title()
