@@ -182,3 +182,30 @@ def test_preview_draws_the_sphere_to_scale_and_labels_every_axis(pressed_snapsho
             box = axis.label.get_window_extent(fig.canvas.get_renderer())
             assert whole.x0 <= box.x0 and box.x1 <= whole.x1 and whole.y0 <= box.y0 and box.y1 <= whole.y1, name
     assert "10 mm sphere, to scale" in views[1].get_title()
+
+
+def test_trace_figure_labels_the_peak_and_every_region_move():
+    from matplotlib.text import Annotation
+
+    from almsdm_warp.export.trace_png import trace_figure
+
+    rng = np.random.default_rng(4)
+    n = 400
+    t = np.arange(n) * 1e-3
+    columns = {"t_s": t, "relocations": np.cumsum(rng.random(n) < 0.02)}
+    for a in "xyz":
+        columns[f"force_{a}_N"] = np.cumsum(rng.normal(0.0, 0.01, n))
+        columns[f"probe_{a}_mm"] = np.cumsum(rng.normal(0.0, 0.1, n))
+    fig = trace_figure(columns, title="test")
+    force, probe = fig.axes
+    mags = [np.sqrt(sum(columns[f"force_{a}_N"][i] ** 2 for a in "xyz")) for i in range(n)]
+    peak = max(range(n), key=lambda i: mags[i])
+    (note,) = [a for a in force.texts if isinstance(a, Annotation)]
+    assert note.get_text() == f"peak {mags[peak]:.3f} N at t = {t[peak]:.3f} s"
+    moves = [i for i in range(n) if columns["relocations"][i] > (columns["relocations"][i - 1] if i else 0)]
+    assert moves
+    for ax in (force, probe):
+        dotted = [line for line in ax.lines if line.get_linestyle() == ":" and len(line.get_xdata()) == 2]
+        assert sorted(line.get_xdata()[0] for line in dotted) == pytest.approx(t[moves])
+        assert f"region moved ({len(moves)}x)" in [x.get_text() for x in ax.get_legend().get_texts()]
+    assert force.get_ylabel().endswith("[N]") and probe.get_ylabel().endswith("[mm]") and probe.get_xlabel() == "t [s]"
