@@ -198,70 +198,31 @@ def _frame(ax, vertices, view: View) -> None:
 def _mark_extremes(ax, mesh_mm, columns, view: View, found: dict, colour, renderer) -> None:
     """The stiffest (star) and softest (triangle) point: filled where seen, hollow and '(behind)' where
     the surface hides them; each labelled with its stiffness in a spot off the organ (after the layout)."""
+    from .labels import marker_boxes, place
+
     vertices, triangles, _ = mesh_mm
     plane = list(view.plane)
     silhouette = vertices[:, plane][triangles]
     vertex = np.asarray(columns["vertex"], dtype=np.int64)
     stiff = np.asarray(columns["stiffness_N_per_mm"], dtype=np.float64)
     spots = {k: vertices[vertex[r]] for k, r in found.items()}
-    taken = [_box_around(ax.transData.transform(p[plane]), 9.0) for p in spots.values()]
+    taken = marker_boxes(ax, [p[plane] for p in spots.values()], 9.0)
+    centre = ax.transData.transform((vertices.max(axis=0) + vertices.min(axis=0))[plane] / 2)
+
+    def on_organ(box):  # label samples that fall on the organ
+        gx, gy = np.meshgrid(np.linspace(box[0], box[2], 7), np.linspace(box[1], box[3], 3))
+        return int(covered(ax.transData.inverted().transform(np.column_stack([gx.ravel(), gy.ravel()])), silhouette).sum())
+
     for key, row in found.items():
         p = spots[key]
         behind = bool(hidden(p[None], vertex[row:row + 1], vertices, triangles, view.camera)[0])
         ax.scatter(*p[plane], s=190, marker="*" if key == "stiffest" else "v", zorder=5, linewidths=1.3,
                    edgecolors="black", facecolors="none" if behind else colour(stiff[row]),
                    linestyles="--" if behind else "-")
-        label = f"{key} {stiff[row]:.3g} N/mm" + (" (behind)" if behind else "")
-        centre = (vertices.max(axis=0) + vertices.min(axis=0))[plane] / 2
-        taken.append(_place_label(ax, label, p[plane], centre, silhouette, taken, renderer))
-
-
-def _box_around(xy, half_w, half_h=None) -> np.ndarray:
-    """A display box [x0, y0, x1, y1] around xy."""
-    half_h = half_w if half_h is None else half_h
-    return np.array([xy[0] - half_w, xy[1] - half_h, xy[0] + half_w, xy[1] + half_h])
-
-
-def _place_label(ax, label, where2d, centre2d, silhouette, taken, renderer) -> np.ndarray:
-    """Annotate `where2d` with `label` at the first spot around it (outward from the organ's centre
-    first, then turning, then farther) whose box is inside the axes, off the organ and off the boxes
-    `taken`; the spot covering the least otherwise. Returns the label's display box."""
-    probe = ax.text(0, 0, label, fontsize=8, transform=None)
-    ext = probe.get_window_extent(renderer)
-    probe.remove()
-    half = np.array([ext.width, ext.height]) / 2 + 3.0
-    here, mid = ax.transData.transform(where2d), ax.transData.transform(centre2d)
-    start = np.arctan2(*(here - mid)[::-1]) if np.linalg.norm(here - mid) > 1 else np.pi / 2
-    frame = ax.get_window_extent(renderer)
-    px = ax.figure.dpi / 72.0
-    best = None
-    for r in (28.0, 48.0, 72.0):
-        for turn in (0, 1, -1, 2, -2, 3, -3, 4):
-            a = start + turn * np.pi / 4
-            spot = here + px * (r + half[0] / px * abs(np.cos(a))) * np.array([np.cos(a), np.sin(a)])
-            box = _box_around(spot, *half)
-            cost = _label_cost(ax, box, frame, silhouette, taken)
-            if best is None or cost < best[0]:
-                best = (cost, spot, box)
-            if cost == 0:
-                break
-        if best[0] == 0:
-            break
-    _, spot, box = best
-    ann = ax.annotate(label, where2d, xytext=ax.transData.inverted().transform(spot), textcoords="data", fontsize=8,
-                      ha="center", va="center", zorder=6, arrowprops={"arrowstyle": "-", "lw": 0.7, "shrinkB": 6},
-                      bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "0.5", "lw": 0.5, "alpha": 0.9})
-    ann.set_in_layout(False)
-    return box
-
-
-def _label_cost(ax, box, frame, silhouette, taken) -> int:
-    """How badly a label box sits: 100 outside the axes, 10 a taken box it overlaps, 1 a sample point on the organ."""
-    inside = box[0] >= frame.x0 and box[1] >= frame.y0 and box[2] <= frame.x1 and box[3] <= frame.y1
-    overlap = sum(not (box[2] < t[0] or t[2] < box[0] or box[3] < t[1] or t[3] < box[1]) for t in taken)
-    gx, gy = np.meshgrid(np.linspace(box[0], box[2], 7), np.linspace(box[1], box[3], 3))
-    samples = ax.transData.inverted().transform(np.column_stack([gx.ravel(), gy.ravel()]))
-    return 100 * (not inside) + 10 * overlap + int(covered(samples, silhouette).sum())
+        out = ax.transData.transform(p[plane]) - centre  # away from the organ's centre first
+        place(ax, f"{key} {stiff[row]:.3g} N/mm" + (" (behind)" if behind else ""), p[plane], renderer, taken,
+              radii=(20.0, 40.0, 64.0), start=float(np.arctan2(out[1], out[0])), extra_cost=on_organ, arrow_from=0,
+              zorder=6, bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "0.5", "lw": 0.5, "alpha": 0.9})
 
 
 def _caption(columns, found: dict, pressed_vertices: int, vertex_count: int, lesion) -> str:
