@@ -209,3 +209,79 @@ def test_trace_figure_labels_the_peak_and_every_region_move():
         assert sorted(line.get_xdata()[0] for line in dotted) == pytest.approx(t[moves])
         assert f"region moved ({len(moves)}x)" in [x.get_text() for x in ax.get_legend().get_texts()]
     assert force.get_ylabel().endswith("[N]") and probe.get_ylabel().endswith("[mm]") and probe.get_xlabel() == "t [s]"
+
+
+def drawn_texts(fig) -> list:
+    """(what, display box) of every text a drawing of `fig` shows: titles, axis labels, the tick labels in
+    view, notes (their words, not their arrows), legends (one box each)."""
+    from almsdm_warp.export.labels import extent, text_box
+
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    out = []
+
+    def add(what, t):
+        if t is not None and t.get_visible() and t.get_text().strip():
+            out.append((f"{what} {t.get_text()[:40]!r}", text_box(t, renderer)))
+
+    add("suptitle", fig._suptitle)
+    for i, ax in enumerate(fig.axes):
+        for t in (ax.title, ax._left_title, ax._right_title, ax.xaxis.label, ax.yaxis.label, *ax.texts):
+            add(f"axes {i}", t)
+        for axis in (ax.xaxis, ax.yaxis):
+            for tick in axis._update_ticks():  # the ticks a drawing shows (in view)
+                add(f"axes {i} tick", tick.label1)
+                add(f"axes {i} tick", tick.label2)
+        if ax.get_legend() is not None:
+            out.append((f"axes {i} legend", extent(ax.get_legend().get_window_extent(renderer))))
+    out += [("figure legend", extent(leg.get_window_extent(renderer))) for leg in fig.legends]
+    return out
+
+
+def overlapping_texts(fig, pad=0.5) -> list:
+    """Pairs of drawn texts whose boxes overlap by more than `pad` pixels both ways."""
+    boxes = drawn_texts(fig)
+    return [(a, b) for i, (a, ba) in enumerate(boxes) for b, bb in boxes[i + 1:]
+            if min(ba[2], bb[2]) - max(ba[0], bb[0]) > pad and min(ba[3], bb[3]) - max(ba[1], bb[1]) > pad]
+
+
+def labelled_ticks(axis) -> int:
+    return sum(bool(t.label1.get_visible() and t.label1.get_text().strip()) for t in axis._update_ticks())
+
+
+EVALUATE_FIGURES = {
+    "recovery": lambda p, r: p.plot_recovery(r["recovery"], "recovery.png"),
+    "force_displacement": lambda p, r: p.plot_force_displacement(r["recovery"], r["table1"], "fd.png"),
+    "speed_accuracy": lambda p, r: p.plot_speed_accuracy(r["accuracy"], r["accuracy"].get("extra", []), "sa.png", r["against_fem"]),
+    "stability": lambda p, r: p.plot_stability(r["stability"], "stability.png"),
+    "anatomy_cost": lambda p, r: p.plot_anatomy_cost(r["anatomy"], "cost.png"),
+    "anatomy_force": lambda p, r: p.plot_anatomy_force(r["anatomy"], "force.png"),
+    "convergence": lambda p, r: p.plot_convergence(r["convergence"], "convergence.png"),
+    "against_fem": lambda p, r: p.plot_against_fem(r["against_fem"], "fem.png"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(EVALUATE_FIGURES))
+def test_evaluate_figures_have_no_text_over_text_and_ticks_on_every_axis(name, monkeypatch):
+    # the published results (docs/results.json) drawn again: the figure as finished, just before it is written
+    import json
+
+    import matplotlib.pyplot as plt
+
+    from almsdm_warp.evaluation import plots
+    from conftest import ROOT
+
+    results = json.loads((ROOT / "docs" / "results.json").read_text())
+    figures = []
+    monkeypatch.setattr(plots, "_write", lambda fig, path: figures.append(fig) or path)
+    EVALUATE_FIGURES[name](plots, results)
+    (fig,) = figures
+    try:
+        assert overlapping_texts(fig) == []
+        for i, ax in enumerate(fig.axes):
+            for axis in (ax.xaxis, ax.yaxis):
+                if axis.get_visible():
+                    assert labelled_ticks(axis) >= 2, (i, axis.axis_name)
+            assert ax.get_xlabel(), i
+    finally:
+        plt.close(fig)

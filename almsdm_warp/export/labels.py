@@ -26,6 +26,15 @@ def extent(bbox) -> np.ndarray:
     return np.array([bbox.x0, bbox.y0, bbox.x1, bbox.y1])
 
 
+def text_box(text, renderer) -> np.ndarray:
+    """The display box [x0, y0, x1, y1] of a Text's words (an Annotation's without its arrow)."""
+    from matplotlib.text import Annotation, Text
+
+    if isinstance(text, Annotation):
+        text.update_positions(renderer)
+    return extent(Text.get_window_extent(text, renderer))
+
+
 def text_half_size(ax, text: str, fontsize: float, renderer, pad: float = 2.0) -> np.ndarray:
     """Half the width and height [px] of `text` at `fontsize`, plus `pad`."""
     probe = ax.text(0, 0, text, fontsize=fontsize, transform=None)
@@ -45,6 +54,7 @@ def place(ax, text: str, xy, renderer, taken: list, *, fontsize: float = 8, radi
     here = ax.transData.transform(xy)
     frame = extent(ax.get_window_extent(renderer))
     px = ax.figure.dpi / 72.0
+    boxes = np.asarray(taken, dtype=np.float64).reshape(-1, 4)
     best = None
     for k, r in enumerate(radii):
         for turn in TURNS:
@@ -53,7 +63,9 @@ def place(ax, text: str, xy, renderer, taken: list, *, fontsize: float = 8, radi
             spot = here + u * (px * r + np.abs(u) @ half)  # the text's near side r from the point
             box = box_around(spot, *half)
             inside = box[0] >= frame[0] and box[1] >= frame[1] and box[2] <= frame[2] and box[3] <= frame[3]
-            cost = 100 * (not inside) + 10 * sum(overlaps(box, t) for t in taken) + (extra_cost(box) if extra_cost else 0)
+            hits = (np.minimum(box[2], boxes[:, 2]) > np.maximum(box[0], boxes[:, 0])) & (
+                np.minimum(box[3], boxes[:, 3]) > np.maximum(box[1], boxes[:, 1]))
+            cost = 100 * (not inside) + 10 * int(hits.sum()) + (extra_cost(box) if extra_cost else 0)
             if best is None or cost < best[0]:
                 best = (cost, spot, box, k)
             if cost == 0:
