@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
 from .common import PAPER
 from ..export.output import atomic_path
 
@@ -58,11 +60,11 @@ def _readable_log_ticks(ax) -> None:
         if math.log10(hi / lo) >= 2.5:
             continue
         decades = range(math.floor(math.log10(lo)), math.ceil(math.log10(hi)) + 1)
-        for subs in ((1, 2, 5), (1, 1.5, 2, 3, 5, 7), (1, 1.5, 2, 2.5, 3, 4, 5, 6, 7, 8, 9)):
+        for subs in ((1, 2, 5), (1, 1.5, 2, 3, 5, 7), (1, 1.5, 2, 2.5, 3, 4, 5, 6, 7, 8, 9), np.arange(10, 100) / 10):
             ticks = [m * 10.0**d for d in decades for m in subs if lo <= m * 10.0**d <= hi]
             if len(ticks) >= 3:
                 break
-        axis.set_major_locator(FixedLocator(ticks))
+        axis.set_major_locator(FixedLocator(ticks[::-(-len(ticks) // 7)]))  # at most 7
         axis.set_major_formatter(StrMethodFormatter("{x:g}"))
 
 
