@@ -10,6 +10,7 @@ pytest.importorskip("matplotlib")
 
 from almsdm_warp.export import sweep_png  # noqa: E402
 from almsdm_warp.mesh.primitives import icosphere_arrays  # noqa: E402
+from almsdm_warp.tissue.lesion import Lesion  # noqa: E402
 
 
 def ellipsoid(half_height=0.5, subdivisions=2):
@@ -84,7 +85,8 @@ def sweep_fig():
     low = int(np.argmin(v[vertex, 2]))  # the lowest pressed vertex: hidden from the top
     stiff[low] = 0.07
     columns = table(v, vertex, stiff)
-    fig = sweep_png.sweep_figure(SimpleNamespace(vertices=v, triangles=t), columns, title="test")
+    lesion = Lesion(center=(0.01, -0.02, 0.005), radius=0.012, stiffness_factor=3.0)
+    fig = sweep_png.sweep_figure(SimpleNamespace(vertices=v, triangles=t), columns, title="test", lesion=lesion)
     fig.canvas.draw()
     return fig, v * 1e3, t, columns
 
@@ -112,6 +114,16 @@ def test_sweep_map_marks_the_stiffest_point_in_every_view(sweep_fig):
         assert len(notes) == 1
         assert notes[0].get_text() == f"stiffest {columns['stiffness_N_per_mm'][row]:.3g} N/mm" + (" (behind)" if behind else "")
         np.testing.assert_allclose(notes[0].xy, at[:2])
+
+
+def test_sweep_map_outlines_the_lesion_at_its_size(sweep_fig):
+    from matplotlib.patches import Circle
+
+    fig, *_ = sweep_fig
+    for ax in fig.axes[:2]:
+        (circle,) = [p for p in ax.patches if isinstance(p, Circle)]
+        assert circle.get_radius() == pytest.approx(12.0)
+        np.testing.assert_allclose(circle.center, [10.0, -20.0])
 
 
 def test_sweep_map_colours_only_faces_pressed_at_every_corner(sweep_fig):
