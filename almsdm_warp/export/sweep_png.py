@@ -166,11 +166,24 @@ def _draw_view(ax, mesh_mm, columns, view: View, cmap, norm, lesion) -> None:
     vertex = np.asarray(columns["vertex"], dtype=np.int64)
     stiff = np.asarray(columns["stiffness_N_per_mm"], dtype=np.float64)
     shown = ~hidden(vertices[vertex], vertex, vertices, triangles, view.camera) & np.isfinite(stiff)
-    ax.scatter(*vertices[vertex[shown]][:, list(view.plane)].T, c=stiff[shown], cmap=cmap, norm=norm, s=14,
-               edgecolors="black", linewidths=0.35, zorder=3)
+    dots = vertices[vertex[shown]][:, list(view.plane)]
+    size = _dot_size(dots, vertices[:, list(view.plane)])
+    ax.scatter(*dots.T, c=stiff[shown], cmap=cmap, norm=norm, s=size, edgecolors="black",
+               linewidths=0.35 if size >= 8 else 0.0, zorder=3)
     if lesion is not None:
         _draw_lesion(ax, lesion, list(view.plane))
     _frame(ax, vertices, view)
+
+
+def _dot_size(dots: np.ndarray, flat: np.ndarray, map_pt: float = 330.0) -> float:
+    """Marker area [pt^2] of the pressed points: 14 where they lie apart; where they crowd (the dots'
+    mean spacing on a map about `map_pt` points wide under 12 pt) smaller and without an edge, so that
+    the colours, not the edges, fill the map."""
+    if not len(dots):
+        return 14.0
+    span = np.ptp(flat, axis=0)
+    spacing_pt = np.sqrt(max(span[0] * span[1], 1e-12) / len(dots)) * map_pt / max(span.max(), 1e-12)
+    return float(np.clip((0.45 * spacing_pt) ** 2, 1.0, 14.0))
 
 
 def _draw_lesion(ax, lesion, plane) -> None:
