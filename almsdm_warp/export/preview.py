@@ -105,6 +105,9 @@ def _draw(ax, mesh, snap, faces, rest, cmap, norm, title, *, shaft_mm, elev):
     ax.add_collection3d(Poly3DCollection(p[tri], facecolors=colors, edgecolors="none", linewidths=0, zorder=1))
     if snap.vertex_ring is not None:
         outline = region_outline(mesh.triangles, snap.vertex_ring)
+        drawn = np.zeros(len(p), dtype=bool)
+        drawn[tri.ravel()] = True
+        outline = outline[drawn[outline].all(axis=1)]  # the part in view
         if len(outline):
             ax.add_collection3d(Line3DCollection(p[outline], colors="black", linewidths=1.4, zorder=2))
     probe = _draw_probe(ax, snap, shaft_mm)
@@ -163,6 +166,21 @@ def _frame(ax, points, outward, elev, title) -> None:
     ax.tick_params(labelsize=6, pad=0)
 
 
+def _close_up(mesh, snap: Snapshot):
+    """The close-up's faces (a corner within 1.2x the region's radius of the contact, at least 1.5 sphere
+    radii, at most 5 sphere radii or 30% of the organ: a region of the whole organ is no close-up) and
+    that radius [m]."""
+    rest = mesh.vertices
+    if snap.vertex_ring is not None:
+        inside = np.flatnonzero(snap.vertex_ring >= 0)
+        radius = 1.2 * np.linalg.norm(rest[inside] - rest[snap.contact_vertex], axis=1).max()
+    else:
+        radius = 0.15 * np.ptp(rest, axis=0).max()
+    radius = max(min(radius, max(5 * snap.probe_radius, 0.3 * np.ptp(rest, axis=0).max())), 1.5 * snap.probe_radius, 1e-6)
+    near = np.linalg.norm(rest - rest[snap.contact_vertex], axis=1) <= radius
+    return np.flatnonzero(np.any(near[mesh.triangles], axis=1)), radius
+
+
 def preview_figure(mesh, snap: Snapshot, *, title: str = ""):
     """The figure of `snap` of `mesh` (matplotlib Figure, not yet saved): the whole organ and a close-up."""
     import matplotlib
@@ -177,21 +195,18 @@ def preview_figure(mesh, snap: Snapshot, *, title: str = ""):
     fig = Figure(figsize=(11, 5.0), dpi=90)
     FigureCanvasAgg(fig)
     everything = np.arange(mesh.triangle_count)
-    # the close-up: faces with a corner within 1.2x the region's radius (at least the sphere's) of the contact, seen lower
-    if snap.vertex_ring is not None:
-        inside = np.flatnonzero(snap.vertex_ring >= 0)
-        radius = np.linalg.norm(rest[inside] - rest[snap.contact_vertex], axis=1).max()
-    else:
-        radius = 0.15 * np.ptp(rest, axis=0).max()
-    radius = max(radius, 1.5 * snap.probe_radius, 1e-6)
-    near = np.linalg.norm(rest - rest[snap.contact_vertex], axis=1) <= 1.2 * radius
-    close = np.flatnonzero(np.any(near[mesh.triangles], axis=1))
+    close, radius = _close_up(mesh, snap)
     ax1 = fig.add_subplot(1, 2, 1, projection="3d")
     _draw(ax1, mesh, snap, everything, rest, cmap, norm, "whole organ", shaft_mm=25.0, elev=35.0)
     ax2 = fig.add_subplot(1, 2, 2, projection="3d")
     probe = f"a {snap.probe_radius * 1e3:g} mm sphere, to scale" if snap.probe_radius > 0 else "the point probe"
-    close_title = f"region (outlined) and {probe}" if snap.vertex_ring is not None else f"around {probe}"
-    _draw(ax2, mesh, snap, close, rest, cmap, norm, close_title, shaft_mm=0.6 * radius * 1e3, elev=20.0)
+    if snap.vertex_ring is None:
+        close_title = f"around {probe}"
+    elif np.linalg.norm(rest[snap.vertex_ring >= 0] - rest[snap.contact_vertex], axis=1).max() <= radius:
+        close_title = f"region (outlined) and {probe}"
+    else:
+        close_title = f"{radius * 1e3:.0f} mm around the contact (the region reaches farther) and {probe}"
+    _draw(ax2, mesh, snap, close, rest, cmap, norm, close_title, shaft_mm=min(0.5 * radius * 1e3, 25.0), elev=20.0)
     fig.subplots_adjust(left=0.0, right=0.88, bottom=0.03, top=0.88, wspace=0.1)
     sm = matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap)
     fig.colorbar(sm, cax=fig.add_axes((0.91, 0.2, 0.015, 0.6)), label="displacement [mm]")
