@@ -109,10 +109,12 @@ def plot_recovery(rec, path):
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     top = 10.0
-    for row in rec["rows"]:
+    for k, row in enumerate(rec["rows"]):
         res = [x for x in row["residual_mm"] if x is not None and math.isfinite(x)]
         label = f"{row['rings']} ring{'s' if row['rings'] != 1 else ''}" if isinstance(row["rings"], int) else "global, no anchors"
-        line = ax.plot(range(1, len(res) + 1), res, marker="o", label=label)
+        # each ring count's markers smaller than the last's: counts that coincide (all at 0) stay visible as rings
+        size = {"ms": max(11 - 2.5 * k, 3), "lw": max(3.0 - 0.6 * k, 1.2)} if isinstance(row["rings"], int) else {}
+        line = ax.plot(range(1, len(res) + 1), res, marker="o", label=label, **size)
         top = max([top] + [x * 10 for x in res])
         if row.get("ran_away_at_press"):
             k = row["ran_away_at_press"]
@@ -124,7 +126,7 @@ def plot_recovery(rec, path):
         ax.axhline(value, color="grey", lw=0.8, ls=":")
         ax.text(1.02, value, text, fontsize=7, va="bottom", color="grey")
     ax.set_yscale("symlog", linthresh=1e-3)
-    ax.set_ylim(0, top)
+    ax.set_ylim(-3e-4, top)  # room under 0 for the markers of the series that recover fully
     ax.set_xlim(0.7, len(rec["rows"][0]["residual_mm"]) + 0.3)
     ax.xaxis.get_major_locator().set_params(integer=True)
     ax.set_xlabel("press at the same spot")
