@@ -444,7 +444,8 @@ def draw_maps(folder: DatasetFolder) -> list[Path]:
         name = item.scene if folder.spec.maps == "scene" else item.name
         what = "no lesion" if item.lesion is None else f"lesion {item.lesion_id} ({item.lesion.radius * 1e3:g} mm, x{item.lesion.stiffness_factor:g})"
         title = f"{item.scene}, {what}: stiffness under a {item.plan.depth * 1e3:g} mm press"
-        written.append(plot_sweep(item.plan.mesh, SWEEP_TABLE.read(folder.item_path(item)), folder.dir / "maps" / f"{name}.png", title=title))
+        table = SWEEP_TABLE.read(folder.item_path(item))
+        written.append(plot_sweep(item.plan.mesh, table, folder.dir / "maps" / f"{name}.png", title=title, lesion=item.lesion))
     return written
 
 

@@ -131,7 +131,8 @@ def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_s
     if args.png:
         from ..export.sweep_png import plot_sweep
 
-        plot_sweep(plan.mesh, columns, args.png, title=f"{scene.name}: stiffness under a {plan.depth * 1e3:g} mm press, {rings_text}")
+        title = f"{scene.name}: stiffness under a {plan.depth * 1e3:g} mm press, {rings_text}"
+        plot_sweep(plan.mesh, columns, args.png, title=title, lesion=scene.lesion)
         print(f"wrote {args.png}")
     return 0
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
 from .common import PAPER
 from ..export.output import atomic_path
 
@@ -25,6 +27,17 @@ def _plt():
 
 
 def _save(fig, path) -> Path:
+    """Finish the figure (_finish) and write it (_write)."""
+    _finish(fig)
+    return _write(fig, path)
+
+
+def _finish(fig) -> None:
+    for ax in fig.axes:
+        _readable_log_ticks(ax)
+
+
+def _write(fig, path) -> Path:
     path = Path(path)
     try:
         with atomic_path(path, ".png") as tmp:
@@ -32,6 +45,46 @@ def _save(fig, path) -> Path:
     finally:
         _plt().close(fig)
     return path
+
+
+def _readable_log_ticks(ax) -> None:
+    """A logarithmic axis over less than 2.5 decades gets plain numbers at 1-2-5 (or finer) steps, at
+    least three in view; a wider one its decades only (matplotlib's default labels one tick, or
+    crowds the minor ones). Axes with ticks set by hand are left alone."""
+    from matplotlib.ticker import FixedLocator, LogLocator, NullFormatter, StrMethodFormatter
+
+    for axis, (lo, hi) in ((ax.xaxis, sorted(ax.get_xlim())), (ax.yaxis, sorted(ax.get_ylim()))):
+        if axis.get_scale() != "log" or not isinstance(axis.get_major_locator(), LogLocator) or lo <= 0:
+            continue
+        axis.set_minor_formatter(NullFormatter())
+        if math.log10(hi / lo) >= 2.5:
+            continue
+        decades = range(math.floor(math.log10(lo)), math.ceil(math.log10(hi)) + 1)
+        for subs in ((1, 2, 5), (1, 1.5, 2, 3, 5, 7), (1, 1.5, 2, 2.5, 3, 4, 5, 6, 7, 8, 9), np.arange(10, 100) / 10):
+            ticks = [m * 10.0**d for d in decades for m in subs if lo <= m * 10.0**d <= hi]
+            if len(ticks) >= 3:
+                break
+        axis.set_major_locator(FixedLocator(ticks[::-(-len(ticks) // 7)]))  # at most 7
+        axis.set_major_formatter(StrMethodFormatter("{x:g}"))
+
+
+def _annotate_apart(fig, notes, fontsize=6) -> None:
+    """Write the notes [(axes, text, (x, y) data)] where each hides no other note, text, marker or
+    legend of its axes (export.labels.place), once the limits are final."""
+    from ..export.labels import extent, marker_boxes, place, text_box
+
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    taken = {}
+    for ax in dict.fromkeys(n[0] for n in notes):
+        boxes = [text_box(t, renderer) for t in ax.texts]
+        boxes += [extent(ax.get_legend().get_window_extent(renderer))] if ax.get_legend() else []
+        for line in ax.lines:
+            if line.get_marker() not in (None, "None", "", " "):
+                boxes += marker_boxes(ax, line.get_xydata())
+        taken[ax] = boxes
+    for ax, text, xy in notes:
+        place(ax, text, xy, renderer, taken[ax], fontsize=fontsize, radii=(1.0, 6.0, 14.0, 26.0, 40.0))
 
 
 def _label_axes(ax, xlabel, ylabel, title=None, *, log="", legend=7, loc="best", title_size=None):
@@ -56,10 +109,12 @@ def plot_recovery(rec, path):
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     top = 10.0
-    for row in rec["rows"]:
+    for k, row in enumerate(rec["rows"]):
         res = [x for x in row["residual_mm"] if x is not None and math.isfinite(x)]
         label = f"{row['rings']} ring{'s' if row['rings'] != 1 else ''}" if isinstance(row["rings"], int) else "global, no anchors"
-        line = ax.plot(range(1, len(res) + 1), res, marker="o", label=label)
+        # each ring count's markers smaller than the last's: counts that coincide (all at 0) stay visible as rings
+        size = {"ms": max(11 - 2.5 * k, 3), "lw": max(3.0 - 0.6 * k, 1.2)} if isinstance(row["rings"], int) else {}
+        line = ax.plot(range(1, len(res) + 1), res, marker="o", label=label, **size)
         top = max([top] + [x * 10 for x in res])
         if row.get("ran_away_at_press"):
             k = row["ran_away_at_press"]
@@ -71,7 +126,7 @@ def plot_recovery(rec, path):
         ax.axhline(value, color="grey", lw=0.8, ls=":")
         ax.text(1.02, value, text, fontsize=7, va="bottom", color="grey")
     ax.set_yscale("symlog", linthresh=1e-3)
-    ax.set_ylim(0, top)
+    ax.set_ylim(-3e-4, top)  # room under 0 for the markers of the series that recover fully
     ax.set_xlim(0.7, len(rec["rows"][0]["residual_mm"]) + 0.3)
     ax.xaxis.get_major_locator().set_params(integer=True)
     ax.set_xlabel("press at the same spot")
@@ -93,8 +148,7 @@ def plot_force_displacement(rec, table1, path):
         ax = axes[0] if row["scene"] == "stomach" else axes[1]
         ax.plot(d, f, label=row["label"].split(", ", 1)[1], ls="--" if "global" in row["label"] else "-")
     for ax, name, paper in ((axes[0], "stomach (surface)", 2.402), (axes[1], "liver (volume)", 2.312)):
-        ax.axhline(paper, color="grey", lw=0.8, ls=":")
-        ax.text(5.0, paper, f"paper, 4 rings at 10 mm: {paper} N", fontsize=7, va="bottom", color="grey")
+        ax.axhline(paper, color="grey", lw=0.8, ls=":", label=f"paper, 4 rings at 10 mm: {paper} N")
         ax.set_title(name)
         ax.set_xlabel("displacement of the contact vertex [mm]")
         ax.set_ylabel("feedback force [N]")
@@ -107,6 +161,7 @@ def plot_speed_accuracy(acc, extra, path, against_fem=None):
     plt = _plt()
     fig, axes = plt.subplots(1, 3 if against_fem else 2, figsize=(16.5 if against_fem else 11, 4.4))
     rows = acc["rows"] + list(extra)
+    notes = []  # (axes, text, point): written apart once the limits are final
     groups = {}
     for r in rows:
         groups.setdefault((r["scene"], r["integrator"], r["device"]), []).append(r)
@@ -115,16 +170,15 @@ def plot_speed_accuracy(acc, extra, path, against_fem=None):
         auto = [r for r in rs if str(r["rings"]).startswith("auto")]
         for ax, key in ((axes[0], "force_error_N"), (axes[1], "disp_error_mm")):
             line = ax.plot([r["step_us"] for r in local], [max(r[key], FLOOR) for r in local], marker="o", ms=4, label=f"{scene}, {integrator}, {device}")
-            for r in local:
-                ax.annotate(str(r["rings"]), (r["step_us"], max(r[key], FLOOR)), fontsize=6, xytext=(2, 2), textcoords="offset points")
+            notes += [(ax, str(r["rings"]), (r["step_us"], max(r[key], FLOOR))) for r in local]
             for r in auto:  # the adaptive region: one point per tolerance, not on the fixed-ring line
                 y = max(r[key], FLOOR)
                 ax.plot([r["step_us"]], [y], marker="*", ms=8, ls="none", color=line[0].get_color(), mec="k", mew=0.4)
-                ax.annotate(f"tol {str(r['rings']).split(':', 1)[-1]}", (r["step_us"], y), fontsize=6, xytext=(3, -7), textcoords="offset points")
+                notes.append((ax, f"tol {str(r['rings']).split(':', 1)[-1]}", (r["step_us"], y)))
             for r in rs:
                 if r["rings"] == "global":
                     ax.plot([r["step_us"]], [FLOOR], marker="s", color=line[0].get_color(), mfc="none")
-                    ax.annotate("global", (r["step_us"], FLOOR), fontsize=6, xytext=(2, 3), textcoords="offset points")
+                    notes.append((ax, "global", (r["step_us"], FLOOR)))
     for ax, label in ((axes[0], "error of the peak force at the probe [N]"), (axes[1], "largest displacement error over the mesh [mm]")):
         ax.axvline(1000.0, color="k", lw=0.8, ls="--")
         ax.text(1000.0, 0.5, " 1 kHz haptic budget", fontsize=7, transform=ax.get_xaxis_transform())
@@ -133,11 +187,12 @@ def plot_speed_accuracy(acc, extra, path, against_fem=None):
             ax.text(1e6 / fps, 0.05, " " + text, fontsize=7, rotation=90, color="grey", transform=ax.get_xaxis_transform())
         _label_axes(ax, "time per step [us] (paper: per rendered frame)", label, log="xy", loc="upper right")
     if against_fem:
-        _fem_reference_panel(axes[2], against_fem)
+        notes += _fem_reference_panel(axes[2], against_fem)
     fig.suptitle(
-        "Speed against accuracy: rings 1..N against the global anchored reference "
-        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})"
+        "Speed against accuracy: rings 1..N against the global anchored reference\n"
+        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})", y=1.07
     )
+    _annotate_apart(fig, notes)
     return _save(fig, path)
 
 
@@ -212,26 +267,28 @@ def plot_anatomy_force(anat, path):
     return _save(fig, path)
 
 
-def _fem_reference_panel(ax, fem):
+def _fem_reference_panel(ax, fem) -> list:
     """The ball's configurations: each one's force error against the P2 reference (filled) and against
-    the global model (open), over its step time; the P2 force itself is the reference line at 0."""
+    the global model (open), over its step time; the P2 force itself is the reference line at 0.
+    Returns the notes (rings at each point) for _annotate_apart."""
     rows = [r for r in fem["rows"] if r["step_us"]]
     x = [r["step_us"] for r in rows]
     ax.plot(x, [max(abs(r["error_vs_fem_pct"]), 100 * FLOOR) for r in rows], "o-", color="C3", label="against P2 FEM")
     ax.plot(x, [max(abs(r["error_vs_global_pct"]), 100 * FLOOR) for r in rows], "o--", color="C0", mfc="none", label="against the global model")
-    for r in rows:
-        ax.annotate(str(r["rings"]), (r["step_us"], max(abs(r["error_vs_fem_pct"]), 100 * FLOOR)), fontsize=6, xytext=(2, 2), textcoords="offset points")
+    notes = [(ax, str(r["rings"]), (r["step_us"], max(abs(r["error_vs_fem_pct"]), 100 * FLOOR))) for r in rows]
     glob = next(r for r in fem["rows"] if r["rings"] == "global")
     ax.axhline(abs(glob["error_vs_fem_pct"]), color="C3", lw=0.8, ls=":")
     ax.text(min(x), abs(glob["error_vs_fem_pct"]), " the global model against P2: the cost of springs", fontsize=7, va="bottom", color="C3")
     _label_axes(ax, "time per step [us]", "force error [%] (|error|)",
                 f"tet ball {fem['edge_mm']:g} mm, sphere R 50 mm at 2 mm: P2 {fem['p2_force_N']:.4f} N",
                 log="xy", loc="upper right", title_size=9)
+    return notes
 
 
 def plot_convergence(conv, path):
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    notes = []
     for ax, part, xkey, xlabel, title in (
         (axes[0], conv["icosphere"], "vertices", "mesh vertices", "icosphere R 50 mm, sphere R 10 mm pressed 5 mm (4 rings)"),
         (axes[1], conv["ball"], "vertices", "mesh vertices", "tet ball R 50 mm, pressed 2 mm (global)"),
@@ -240,11 +297,12 @@ def plot_convergence(conv, path):
             ref = forces[-1]
             ax.plot(part[xkey], [f / ref for f in forces], marker="o", color=f"C{i}",
                     label=f"{label}: spread {100 * part['spread'][label]:.1f}%")
-            for xv, f in zip(part[xkey], forces):
-                ax.annotate(f"{f:.3f} N", (xv, f / ref), fontsize=6, xytext=(3, 3 - 9 * i), textcoords="offset points")  # series apart where they meet
+            notes += [(ax, f"{f:.3f} N", (xv, f / ref)) for xv, f in zip(part[xkey], forces)]
         ax.axhspan(0.95, 1.05, color="grey", alpha=0.12, lw=0)
         _label_axes(ax, xlabel, "hold force / the finest level's", title, log="x", title_size=9)
         ax.set_xticks(part[xkey], [str(v) for v in part[xkey]])  # the levels themselves: less than a decade apart
+        ax.set_xlim(min(part[xkey]) / 1.15, max(part[xkey]) * 1.15)  # room for the labels at the ends
+    _annotate_apart(fig, notes)
     fig.suptitle("Mesh convergence: the same press at three resolutions (grey: within 5% of the finest)", y=1.02)
     return _save(fig, path)
 
@@ -255,12 +313,12 @@ def plot_against_fem(fem, path):
     rows = [r for r in fem["rows"] if r["rings"] != "global"]
     glob = next(r for r in fem["rows"] if r["rings"] == "global")
     ax.plot([r["region_vertices"] for r in rows], [r["force_N"] for r in rows], "o-", color="C0", label="local model (rings)")
-    for r in rows:
-        ax.annotate(f"{r['rings']}", (r["region_vertices"], r["force_N"]), fontsize=7, xytext=(3, -9), textcoords="offset points")
     ax.plot([glob["region_vertices"]], [glob["force_N"]], "s", color="C0", mfc="none", label=f"global model {glob['force_N']:.4f} N")
     ax.axhline(fem["p2_force_N"], color="C3", lw=1.2, label=f"P2 FEM, same mesh: {fem['p2_force_N']:.4f} N")
     ax.axhline(fem["hertz_force_N"], color="grey", lw=1.0, ls="--", label=f"Hertz, two 50 mm spheres: {fem['hertz_force_N']:.4f} N")
     _label_axes(ax, "vertices simulated", "hold force [N]",
                 f"The ball case against continuum mechanics (tet ball, edge {fem['edge_mm']:g} mm)",
-                log="x", loc="lower right", title_size=9)
+                log="x", loc="upper center", title_size=9)
+    ax.get_legend().set_bbox_to_anchor((0.5, -0.16))  # below the axes: off the points and their labels
+    _annotate_apart(fig, [(ax, f"{r['rings']} rings", (r["region_vertices"], r["force_N"])) for r in rows], fontsize=7)
     return _save(fig, path)

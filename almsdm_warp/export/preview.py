@@ -34,24 +34,43 @@ class Snapshot:
     vertex_ring: np.ndarray | None
     """Ring of every vertex (-1 outside), or None for a global model."""
     contact_vertex: int
-    probe_tip: np.ndarray
-    """[m]."""
+    probe_centre: np.ndarray
+    """The sphere's centre [m], or the point probe's tip (probe_radius 0)."""
     outward: np.ndarray
     """Unit outward normal at the contact at rest (the probe's axis)."""
     in_contact: bool
     force_N: float
     time_s: float
+    probe_radius: float = 0.0
+    """The sphere's radius [m]; 0: the paper's point probe."""
 
     @classmethod
     def of(cls, pal, time_s: float) -> "Snapshot":
-        from ..sim.model import PROBE_OFF
+        from ..sim.model import PROBE_OFF, PROBE_SPHERE
 
         q = pal.positions()
         contact = pal.probe_mode != PROBE_OFF
-        tip = q[pal.vertex] if contact else pal.rest_position()
+        outward = -pal.inward_normal()
+        if pal.probe_mode == PROBE_SPHERE:
+            centre = pal.probe_target
+        elif contact:
+            centre = q[pal.vertex]
+        else:  # lifted: drawn touching the contact at rest
+            centre = pal.rest_position() + outward * pal.probe_radius
         ring = pal.region.vertex_ring.numpy().copy() if pal.region is not None else None
         force = float(np.linalg.norm(pal.feedback_force)) if contact else 0.0
-        return cls(q, ring, int(pal.vertex), np.asarray(tip, dtype=np.float64), -pal.inward_normal(), contact, force, float(time_s))
+        return cls(q, ring, int(pal.vertex), np.asarray(centre, dtype=np.float64), outward, contact, force, float(time_s),
+                   float(pal.probe_radius))
+
+
+def sphere_faces(centre_mm, radius_mm: float, rings: int = 12) -> np.ndarray:
+    """Quads of a latitude-longitude sphere of `radius_mm` around `centre_mm` (every corner on it):
+    [rings * 2 rings, 4, 3] mm."""
+    theta = np.linspace(0.0, np.pi, rings + 1)
+    phi = np.linspace(0.0, 2 * np.pi, 2 * rings + 1)
+    t, f = np.meshgrid(theta, phi, indexing="ij")
+    p = np.stack([np.sin(t) * np.cos(f), np.sin(t) * np.sin(f), np.cos(t)], axis=-1) * radius_mm + np.asarray(centre_mm)
+    return np.stack([p[:-1, :-1], p[:-1, 1:], p[1:, 1:], p[1:, :-1]], axis=2).reshape(-1, 4, 3)
 
 
 def region_outline(triangles: np.ndarray, vertex_ring: np.ndarray) -> np.ndarray:
@@ -81,74 +100,125 @@ def _draw(ax, mesh, snap, faces, rest, cmap, norm, title, *, shaft_mm, elev):
     disp = np.linalg.norm(snap.positions - rest, axis=1) * 1e3
     tri = mesh.triangles[faces]
     colors = cmap(norm(disp[tri].mean(axis=1)))
-    # Lambert shading from a light over the viewer's shoulder, so the dent reads as a dent
-    fn = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
-    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-12)
-    light = snap.outward + np.array([0.3, -0.3, 0.5])
-    colors[:, :3] *= (0.45 + 0.55 * np.abs(fn @ (light / np.linalg.norm(light))))[:, None]
+    colors[:, :3] *= _brightness(_face_normals(p[tri]), snap.outward)[:, None]  # so the dent reads as a dent
     ax.computed_zorder = False  # draw in the order given: surface, outline, probe
     ax.add_collection3d(Poly3DCollection(p[tri], facecolors=colors, edgecolors="none", linewidths=0, zorder=1))
     if snap.vertex_ring is not None:
         outline = region_outline(mesh.triangles, snap.vertex_ring)
+        drawn = np.zeros(len(p), dtype=bool)
+        drawn[tri.ravel()] = True
+        outline = outline[drawn[outline].all(axis=1)]  # the part in view
         if len(outline):
             ax.add_collection3d(Line3DCollection(p[outline], colors="black", linewidths=1.4, zorder=2))
-    tip = snap.probe_tip * 1e3
-    shaft = tip + snap.outward * shaft_mm
-    ax.plot(*np.stack([tip, shaft]).T, color="dimgray", linewidth=4, solid_capstyle="round", zorder=3)
-    ax.scatter(*tip, color="black", s=30, depthshade=False, zorder=4)
-    box = p[np.unique(tri)]
-    lo, hi = box.min(axis=0), box.max(axis=0)
-    lo, hi = np.minimum(lo, shaft), np.maximum(hi, shaft)
+    probe = _draw_probe(ax, snap, shaft_mm)
+    _frame(ax, np.vstack([p[np.unique(tri)], probe]), snap.outward, elev, title)
+
+
+def _face_normals(corners: np.ndarray) -> np.ndarray:
+    """Unit normals of the triangles corners [k, 3, 3]."""
+    fn = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    return fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-12)
+
+
+def _brightness(normals: np.ndarray, outward: np.ndarray) -> np.ndarray:
+    """Lambert brightness of faces with unit `normals` [k, 3] under a light over the viewer's shoulder."""
+    light = outward + np.array([0.3, -0.3, 0.5])
+    return 0.45 + 0.55 * np.abs(normals @ (light / np.linalg.norm(light)))
+
+
+def _draw_probe(ax, snap, shaft_mm) -> np.ndarray:
+    """The sphere to scale (or the point probe's tip) and its shaft along the outward normal; returns
+    the points [mm] the view must hold."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    centre, radius = snap.probe_centre * 1e3, snap.probe_radius * 1e3
+    top = centre + snap.outward * radius
+    shaft = top + snap.outward * shaft_mm
+    if radius > 0:
+        quads = sphere_faces(centre, radius)
+        shade = _brightness((quads.mean(axis=1) - centre) / radius, snap.outward)
+        colors = np.column_stack([np.outer(shade, [0.6, 0.68, 0.8]), np.full(len(quads), 0.15)])  # the dent shows through
+        ax.add_collection3d(Poly3DCollection(quads, facecolors=colors, edgecolors=(0.15, 0.25, 0.45, 0.45), linewidths=0.4,
+                                             zorder=3, gid="probe sphere"))
+    else:
+        ax.scatter(*centre, color="black", s=30, depthshade=False, zorder=4)
+    ax.plot(*np.stack([top, shaft]).T, color="dimgray", linewidth=3, solid_capstyle="round", zorder=4)
+    return np.vstack([centre - radius, centre + radius, shaft])
+
+
+def _frame(ax, points, outward, elev, title) -> None:
+    """True proportions around `points` [mm], the view from the contact's side, every axis labelled in mm."""
+    from matplotlib.ticker import MaxNLocator
+
+    lo, hi = points.min(axis=0), points.max(axis=0)
     span = np.maximum(hi - lo, 0.05 * (hi - lo).max())  # true proportions, no flat axis
     lo = (lo + hi) / 2 - span / 2
     ax.set_xlim(lo[0], lo[0] + span[0])
     ax.set_ylim(lo[1], lo[1] + span[1])
     ax.set_zlim(lo[2], lo[2] + span[2])
-    ax.set_box_aspect(tuple(span / span.max()), zoom=1.1)
-    ax.view_init(*_view(snap.outward, elev))
+    ax.set_box_aspect(tuple(span / span.max()), zoom=0.85)  # room for the labels inside the axes
+    ax.view_init(*_view(outward, elev))
     ax.set_title(title, fontsize=9)
-    ax.set_xlabel("x [mm]", fontsize=7)
-    ax.set_ylabel("y [mm]", fontsize=7)
-    ax.set_zlabel("z [mm]", fontsize=7)
-    ax.tick_params(labelsize=6)
-    from matplotlib.ticker import MaxNLocator
-
-    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+    for axis, name in zip((ax.xaxis, ax.yaxis, ax.zaxis), "xyz"):
         axis.set_major_locator(MaxNLocator(4))
+        axis.set_label_text(f"{name} [mm]", fontsize=8)
+        axis.labelpad = 2
+    ax.tick_params(labelsize=6, pad=0)
 
 
-def render_png(path, mesh, snap: Snapshot, *, title: str = "") -> Path:
-    """Draw `snap` of `mesh` to the PNG `path` (a temporary file, then a rename)."""
+def _close_up(mesh, snap: Snapshot):
+    """The close-up's faces (a corner within 1.2x the region's radius of the contact, at least 1.5 sphere
+    radii, at most 5 sphere radii or 30% of the organ: a region of the whole organ is no close-up) and
+    that radius [m]."""
+    rest = mesh.vertices
+    if snap.vertex_ring is not None:
+        inside = np.flatnonzero(snap.vertex_ring >= 0)
+        radius = 1.2 * np.linalg.norm(rest[inside] - rest[snap.contact_vertex], axis=1).max()
+    else:
+        radius = 0.15 * np.ptp(rest, axis=0).max()
+    radius = max(min(radius, max(5 * snap.probe_radius, 0.3 * np.ptp(rest, axis=0).max())), 1.5 * snap.probe_radius, 1e-6)
+    near = np.linalg.norm(rest - rest[snap.contact_vertex], axis=1) <= radius
+    return np.flatnonzero(np.any(near[mesh.triangles], axis=1)), radius
+
+
+def preview_figure(mesh, snap: Snapshot, *, title: str = ""):
+    """The figure of `snap` of `mesh` (matplotlib Figure, not yet saved): the whole organ and a close-up."""
     import matplotlib
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    p = check_png_path(path)
     rest = mesh.vertices
     disp = np.linalg.norm(snap.positions - rest, axis=1) * 1e3
     vmax = max(float(disp.max()), 1.0)  # at least 1 mm: float32 rounding at rest stays pale
     cmap = matplotlib.colormaps["magma_r"]
     norm = matplotlib.colors.Normalize(0.0, vmax)
-    fig = Figure(figsize=(10.5, 4.8), dpi=90)
+    fig = Figure(figsize=(11, 5.0), dpi=90)
     FigureCanvasAgg(fig)
     everything = np.arange(mesh.triangle_count)
-    # the close-up: faces with a corner within 1.2x the region's radius of the contact, seen lower
-    if snap.vertex_ring is not None:
-        inside = np.flatnonzero(snap.vertex_ring >= 0)
-        radius = np.linalg.norm(rest[inside] - rest[snap.contact_vertex], axis=1).max()
-    else:
-        radius = 0.15 * np.ptp(rest, axis=0).max()
-    near = np.linalg.norm(rest - rest[snap.contact_vertex], axis=1) <= 1.2 * max(radius, 1e-6)
-    close = np.flatnonzero(np.any(near[mesh.triangles], axis=1))
+    close, radius = _close_up(mesh, snap)
     ax1 = fig.add_subplot(1, 2, 1, projection="3d")
     _draw(ax1, mesh, snap, everything, rest, cmap, norm, "whole organ", shaft_mm=25.0, elev=35.0)
     ax2 = fig.add_subplot(1, 2, 2, projection="3d")
-    close_title = "region (outlined) and probe" if snap.vertex_ring is not None else "around the probe"
-    _draw(ax2, mesh, snap, close, rest, cmap, norm, close_title, shaft_mm=0.6 * radius * 1e3, elev=20.0)
+    probe = f"a {snap.probe_radius * 1e3:g} mm sphere, to scale" if snap.probe_radius > 0 else "the point probe"
+    if snap.vertex_ring is None:
+        close_title = f"around {probe}"
+    elif np.linalg.norm(rest[snap.vertex_ring >= 0] - rest[snap.contact_vertex], axis=1).max() <= radius:
+        close_title = f"region (outlined) and {probe}"
+    else:
+        close_title = f"{radius * 1e3:.0f} mm around the contact (the region reaches farther) and {probe}"
+    _draw(ax2, mesh, snap, close, rest, cmap, norm, close_title, shaft_mm=min(0.5 * radius * 1e3, 25.0), elev=20.0)
+    fig.subplots_adjust(left=0.0, right=0.88, bottom=0.03, top=0.88, wspace=0.1)
     sm = matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap)
-    fig.colorbar(sm, ax=[ax1, ax2], shrink=0.7, pad=0.09, label="displacement [mm]")
+    fig.colorbar(sm, cax=fig.add_axes((0.91, 0.2, 0.015, 0.6)), label="displacement [mm]")
     state = f"probe force {snap.force_N:.3f} N" if snap.in_contact else "probe lifted"
     fig.suptitle(f"{title}  t = {snap.time_s:.3f} s, {state}".strip(), fontsize=10)
+    return fig
+
+
+def render_png(path, mesh, snap: Snapshot, *, title: str = "") -> Path:
+    """Draw `snap` of `mesh` to the PNG `path` (a temporary file, then a rename)."""
+    p = check_png_path(path)
+    fig = preview_figure(mesh, snap, title=title)
     with atomic_path(p, ".tmp.png") as tmp:
         fig.savefig(tmp, format="png")
     return p
