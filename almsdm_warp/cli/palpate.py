@@ -28,6 +28,7 @@ from .args import (
     mesh_json,
     number_arg,
     path_arg,
+    load_scene_and_mesh,
     print_notes,
     probe_position,
     quiet_warp,
@@ -174,15 +175,9 @@ def cmd_palpate(args) -> int:
 
 def _resolve(args) -> _Run:
     """The device, scene, mesh, region, press protocol and contact that the arguments ask for."""
-    from ..scene.loader import resolve_scene_or_mesh
-
     quiet_warp()
     device = get_device(args.device)
-    scene = resolve_scene_or_mesh(args.scene, scale_mm=1.0 if args.scale_mm is None else args.scale_mm)
-    if args.scale_mm is not None and scene.path is not None:
-        raise InputError(f"--scale-mm is for a mesh file; the scene {scene.name!r} sets its own ([mesh] scale_mm)")
-    mesh = scene.load_mesh()
-    print_notes(mesh)
+    scene, mesh = load_scene_and_mesh(args)
     scene = scene_with_tissue_args(args, scene, mesh)
 
     rings = scene.rings if args.rings is None else args.rings
@@ -198,6 +193,7 @@ def _resolve(args) -> _Run:
     vertex, point, contact_extra = _contact(args, mesh, device)
     if needs_volume(args.volume, mesh, scene.tissue, getattr(args, "law", "springs")):
         mesh, vertex, point, contact_extra = _volume(args, scene, mesh, point, depth, device)
+    scene = scene.with_support(mesh, float(mesh.vertices[vertex, 2]))  # a relative support, from this contact
     if scene.fixed_below is not None and mesh.vertices[vertex, 2] < scene.fixed_below:
         raise InputError(f"the contact vertex {vertex} (z {mesh.vertices[vertex, 2] * 1e3:.4g} mm) is supported: it lies below "
                          f"the support plane z = {scene.fixed_below * 1e3:g} mm and cannot be pressed")
@@ -215,7 +211,7 @@ def _build(args, run: _Run):
 
     mesh, scene = run.mesh, run.scene
     print(mesh.summary())
-    support = f"; fixed below z = {scene.fixed_below * 1e3:g} mm" if scene.fixed_below is not None else ""
+    support = f"; support {scene.support_text()}" if scene.fixed_below is not None or scene.support else ""
     print(f"tissue: {scene.tissue_model} ({scene.tissue_text()}), law {scene.law}{support}")
     if scene.lesion is not None:
         les = scene.lesion.as_dict()
