@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 
+from ..checks import rings_text  # noqa: F401  (the commands take it from here)
 from ..errors import InputError
 
 GLOBAL_RINGS = ("global", "global-free")

@@ -31,6 +31,7 @@ from .args import (
     load_scene_and_mesh,
     print_notes,
     probe_position,
+    rings_text,
     quiet_warp,
     rings_arg,
     scene_with_tissue_args,
@@ -251,10 +252,10 @@ def _report_model(args, run: _Run, pal):
     if tol is not None:
         what = (
             f"auto rings (tol {tol * 1e3:g} mm) around vertex {run.vertex}, grown from "
-            f"{pal.region.outer_ring} ring(s) of {pal.region_vertices} vertices"
+            f"{rings_text(pal.region.outer_ring)} of {pal.region_vertices} vertices"
         )
     elif pal.region is not None:
-        what = f"{rings} rings around vertex {run.vertex}, {pal.region_vertices} vertices ({free_count} free)"
+        what = f"{rings_text(rings)} around vertex {run.vertex}, {pal.region_vertices} vertices ({free_count} free)"
     else:
         kind = "anchored" if anchored else "free, no anchors"
         what = f"{rings} ({kind}), {free_count} of {pal.region_vertices} vertices free"
@@ -282,7 +283,7 @@ def _press(args, run: _Run, pal) -> list:
     presses = []
     original_step = pal.step
     deepest = PressSchedule.from_times(dt, ramp, hold).release_step  # the end of the first hold
-    label = f"{run.mesh.name}, {run.rings} {'rings' if pal.region is not None else 'model'}, {run.depth * 1e3:g} mm press"
+    label = f"{run.mesh.name}, {rings_text(run.rings) if pal.region is not None else f'{run.rings} model'}, {run.depth * 1e3:g} mm press"
     recording = Recording(args, pal, args.presses, per_press, deepest, label)
     with recording, Progress(args.presses * per_press, enabled=args.progress) as bar:
 
@@ -302,7 +303,7 @@ def _press(args, run: _Run, pal) -> list:
                     raise InputError(str(exc)) from exc
                 bar.done = (i + 1) * per_press
                 presses.append(result)
-                auto = f", {pal.rings_chosen} rings ({pal.auto_reason})" if run.tol is not None else ""
+                auto = f", {rings_text(pal.rings_chosen)} ({pal.auto_reason})" if run.tol is not None else ""
                 rt = result.recovery_time_s
                 rt_text = f"{rt:.3f} s" if math.isfinite(rt) else f"not within the {settle:g} s settle window"
                 bar.close()

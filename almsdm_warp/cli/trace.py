@@ -25,7 +25,7 @@ from ..errors import InputError
 from ..export.tables import TableLayout
 from ..mesh.validate import MAX_COORDINATE_M
 from .args import add_command, add_integrator_arg, add_law_arg, add_probe_radius_arg, add_tissue_args, check_law, count_arg
-from .args import get_device, number_arg, path_arg, print_notes, quiet_warp, rings_arg, scene_with_tissue_args
+from .args import auto_tol, get_device, load_scene_and_mesh, number_arg, path_arg, quiet_warp, rings_arg, rings_text, scene_with_tissue_args
 
 PATH_COLUMNS = ("t_s", "x_mm", "y_mm", "z_mm")
 """The columns of a path file, in this order, after a header line that names them."""
@@ -54,7 +54,8 @@ def add_parser(sub) -> None:
         "the global model), and write the force at each reported step: " + ", ".join(COLUMNS) + ".")
     p.add_argument("scene", nargs="?", default=None, type=path_arg, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     p.add_argument("--path", dest="path_csv", default=None, type=path_arg, metavar="CSV", help="the sphere centre's path: a header t_s,x_mm,y_mm,z_mm, then rows with t_s increasing (default: the built-in stroke on the scene)")
-    p.add_argument("--rings", type=rings_arg(("global",)), default=None, metavar="{N,global}", help="rings of the local region, or the global model, anchored (default: the scene's)")
+    p.add_argument("--rings", type=rings_arg(("auto", "global")), default=None, metavar="{N,auto,global}", help="rings of the local region, auto (sized to --tol-mm by an adaptive press at the top, as palpate's), or the global model, anchored (default: the scene's)")
+    p.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
     add_integrator_arg(p)
     add_law_arg(p, "stroke")
     add_probe_radius_arg(p)
@@ -197,13 +198,7 @@ def make_coupling(args, dt):
 
 def _scene(args):
     """The scene (with the tissue flags) and its mesh."""
-    from ..scene.loader import resolve_scene_or_mesh
-
-    scene = resolve_scene_or_mesh(args.scene, scale_mm=1.0 if args.scale_mm is None else args.scale_mm)
-    if args.scale_mm is not None and scene.path is not None:
-        raise InputError(f"--scale-mm is for a mesh file; the scene {scene.name!r} sets its own ([mesh] scale_mm)")
-    mesh = scene.load_mesh()
-    print_notes(mesh)
+    scene, mesh = load_scene_and_mesh(args)
     return scene_with_tissue_args(args, scene, mesh), mesh
 
 
@@ -212,18 +207,38 @@ def _make_stroke(args, scene, mesh, dt, device):
     from ..protocol.stroke import ProbeStroke
 
     rings = scene.rings if args.rings is None else args.rings
-    if rings == "auto":  # the scene's [region] rings
-        raise InputError(f"the scene {scene.name!r} sizes its region automatically (rings = \"auto\"): almsdm trace "
-                         f"takes a ring count or the global model (--rings N or global)")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     check_law(scene, mesh, args.integrator, "stroke")
     radius = _probe_radius(args, scene)
     scales = scene.lesion.model_scales(mesh, None, scene.law) if scene.lesion is not None else {}
+    tol = auto_tol(args, rings, scene)
+    if tol is not None:
+        rings = _auto_rings(args, scene, mesh, tol, radius, dt, scales)
     try:
         return ProbeStroke(mesh, scene.tissue, probe_radius=radius, rings=rings, integrator=args.integrator, dt=dt,
                            device=device, fixed_below=scene.fixed_below, law=scene.law, **scales)
     except ValueError as exc:  # a parameter the stroke rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
+
+
+def _auto_rings(args, scene, mesh, tol, radius, dt, scales) -> int:
+    """--rings auto: the rings an adaptive region grows to under the scene's press at the top of the organ
+    (batch.sweep_auto.size_regions, as `almsdm palpate --rings auto` sizes it), said in one line."""
+    from ..batch.sweep_auto import size_regions
+    from ..region.contact import top_vertex
+    from ..solvers.stepper import SimulationDiverged
+
+    check_law(scene, mesh, args.integrator, "adaptive", "--rings auto (the region sized by an adaptive press): ")
+    vertex, p = top_vertex(mesh), scene.press
+    try:
+        rings = int(size_regions(mesh, scene.tissue, [vertex], tol, depth=p.depth, ramp=p.ramp, hold=p.hold,
+                                 integrator=args.integrator, dt=dt, probe_radius=radius, fixed_below=scene.fixed_below,
+                                 law=scene.law, **scales)[0])
+    except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
+        raise InputError(str(exc)) from exc
+    print(f"auto rings: {rings_text(rings)}, sized to {tol * 1e3:g} mm by the scene's {p.depth * 1e3:g} mm press at vertex {vertex} "
+          f"(the top), as almsdm palpate --rings auto sizes it")
+    return rings
 
 
 def _probe_radius(args, scene) -> float:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import InputError
-from ..checks import AUTO, check_rings, check_value, describe
+from ..checks import AUTO, check_rings, check_value, describe, rings_text
 from ..protocol.schedule import PressParams
 from ..tissue.laws import LAWS
 from ..tissue.material import Material, material_as_dict
@@ -154,7 +154,7 @@ class Scene:
     def rings_text(self) -> str:
         """"4 rings", or "auto rings (tol 0.1 mm)" ("tol: the default" when the scene gives none)."""
         if self.rings != AUTO:
-            return f"{self.rings} rings"
+            return rings_text(self.rings)
         return f"auto rings (tol {self.tol * 1e3:g} mm)" if self.tol is not None else "auto rings (tol: the default)"
 
     def as_dict(self) -> dict:
