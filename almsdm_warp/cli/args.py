@@ -22,7 +22,8 @@ class Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line (an InputError), not usage + message."""
 
     def error(self, message):
-        raise InputError(f"{self.prog}: {message}")
+        command = self.prog.split()[1:]  # "almsdm palpate" -> the subcommand; the line already starts "almsdm:"
+        raise InputError(f"{' '.join(command)}: {message}" if command else message)
 
 
 def add_command(sub, name: str, summary: str, description: str):

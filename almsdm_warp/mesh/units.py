@@ -22,12 +22,18 @@ def mesh_span(vertices) -> float:
     return float(np.ptp(v, axis=0).max()) if len(v) else 0.0
 
 
+def is_organ_size(span_mm: float) -> bool:
+    """Whether a largest extent of `span_mm` [mm] is an organ's (within ORGAN_SPAN_MM)."""
+    lo, hi = ORGAN_SPAN_MM
+    return lo <= span_mm <= hi
+
+
 def guess_scale(span: float) -> tuple[float, str]:
     """(millimetres per file unit, one line saying why) for a mesh of largest extent `span` file units:
     the first of UNITS that makes it an organ's size, or 1 (millimetres) where none does."""
     lo, hi = ORGAN_SPAN_MM
     for scale, name in UNITS:
-        if lo <= span * scale <= hi:
+        if is_organ_size(span * scale):
             how = "" if scale == 1.0 else f" (x{scale:g} mm a file unit)"
             return scale, (f"read in {name}{how}, guessed from its size: {span:.4g} file units across, a "
                            f"{span * scale:.4g} mm organ; --scale-mm sets the unit")

@@ -138,16 +138,17 @@ class Scene:
         return load_mesh(self.mesh_path, scale=self.scale_mm)
 
     def load_mesh_guessing_units(self) -> tuple["Scene", TissueMesh, str]:
-        """(the scene at the unit guessed from its mesh's size, the mesh, one line saying so): a bare mesh
-        file's unit is unknown (mesh.units.guess_scale); a scene file's is its own (no line)."""
-        from ..mesh.units import guess_scale, mesh_span
+        """(the scene at the unit guessed from its mesh's size, the mesh, one line saying so, "" where it is
+        millimetres as read): a bare mesh file's unit is unknown (mesh.units.guess_scale); a scene file's is
+        its own (no line)."""
+        from ..mesh.units import guess_scale, is_organ_size, mesh_span
 
         mesh = self.load_mesh()
         if self.path is not None:
             return self, mesh, ""
         scale, line = guess_scale(mesh_span(mesh.vertices) * 1e3 / self.scale_mm)
         if scale == self.scale_mm:
-            return self, mesh, line
+            return self, mesh, ("" if is_organ_size(mesh_span(mesh.vertices) * 1e3) else line)  # millimetres: no news
         scene = replace(self, scale_mm=scale)
         return scene, scene.load_mesh(), line
 
