@@ -16,7 +16,7 @@ from almsdm_warp.mesh.topology import inverted_tets, tet_quality
 from almsdm_warp.mesh.validate import SLIVER_QUALITY
 from almsdm_warp.scene.loader import load_scene
 
-PRESS = ["--rings", "2", "--depth-mm", "0.5", "--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05"]
+PRESS = ["--tissue", "paper", "--rings", "2", "--depth-mm", "0.5", "--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05"]
 NEO = ["--law", "neo-hookean", "--youngs-modulus-kpa", "10", "--rayleigh-alpha-per-s", "200", "--fixed-below-mm", "-5"]
 
 
@@ -109,7 +109,7 @@ def test_law_flag_with_the_implicit_step_and_the_adaptive_region(ball, extra, tm
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--law", "neo-hookean"], "the neo-hookean law needs a material"),  # a bare mesh: the paper's preset
+    (["--law", "neo-hookean", "--tissue", "paper"], "the neo-hookean law needs a material"),  # the paper's preset, on request
     (["--law", "corotational"], "--law: 'corotational' is not a tissue law (allowed: springs, neo-hookean)"),
 ])
 def test_palpate_refusals_are_one_line(ball, args, message, capsys):
@@ -255,5 +255,5 @@ def test_a_sliver_is_named_at_load(tmp_path):
     assert q < SLIVER_QUALITY
     note = next(n for n in mesh.notes if "sliver" in n)
     assert note.startswith("1 sliver tetrahedron of 2 (quality under 0.02") and "worst: tetrahedron 1, vertices (1, 2, 3, 4)" in note
-    assert f"quality {q:.3g})" in note
+    assert f"quality {q:.3g}" in note
     assert mesh.tet_count == 2  # kept: only zero-volume tets are dropped

@@ -183,10 +183,7 @@ def load_scene_and_mesh(args):
     scene = resolve_scene_or_mesh(args.scene, scale_mm=1.0 if scale is None else scale, tissue=getattr(args, "tissue", None))
     if scale is not None and scene.path is not None:
         raise InputError(f"--scale-mm is for a mesh file; the scene {scene.name!r} sets its own ([mesh] scale_mm)")
-    if scale is None:
-        scene, mesh, units = scene.load_mesh_guessing_units()
-    else:
-        mesh, units = scene.load_mesh(), ""
+    scene, mesh, units = scene.load_mesh_guessing_units(guess=scale is None)
     print_notes(mesh, units)
     return scene, mesh
 

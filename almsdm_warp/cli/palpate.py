@@ -207,7 +207,7 @@ def _resolve(args) -> _Run:
 
 def _build(args, run: _Run):
     """Say what is pressed, then make the palpation (adaptive for rings "auto") and touch the contact."""
-    from ..protocol.palpation import Palpation
+    from ..scene.press import build_palpation
     from ..tissue.material import holding_notes
 
     mesh, scene = run.mesh, run.scene
@@ -221,17 +221,9 @@ def _build(args, run: _Run):
         f"contact: vertex {run.vertex} at {np.round(run.point * 1e3, 2).tolist()} mm; press {run.depth * 1e3:g} mm "
         f"(ramp {run.ramp:g} s, hold {run.hold:g} s, settle {run.settle:g} s) x {args.presses}"
     )
-    scales = scene.lesion.model_scales(mesh, scene.tissue, scene.law) if scene.lesion is not None else {}
-    lesion = dict(scales, fixed_below=scene.fixed_below)
     try:
-        if run.tol is not None:
-            from ..protocol.adaptive import AdaptivePalpation
-
-            pal = AdaptivePalpation(mesh, scene.tissue, tol=run.tol, integrator=args.integrator, dt=run.dt, device=run.device,
-                                    probe_radius=run.probe_radius, law=scene.law, **lesion)
-        else:
-            pal = Palpation(mesh, scene.tissue, rings=run.rings, integrator=args.integrator, dt=run.dt, device=run.device,
-                            probe_radius=run.probe_radius, law=scene.law, **lesion)
+        pal = build_palpation(scene, mesh, rings="auto" if run.tol is not None else run.rings, tol=run.tol,
+                              integrator=args.integrator, dt=run.dt, device=run.device, probe_radius=run.probe_radius)
         if run.probe_radius > 0:
             pal.touch(run.vertex, run.depth)  # the region grown from the patch the sphere covers at this depth
         else:

@@ -3,7 +3,7 @@
 The path is the sphere centre's, read from a CSV (t_s, x_mm, y_mm, z_mm) or, without --path, the
 built-in stroke on the scene (touch down, press, slide across the surface, lift). It is sampled at
 each step of the simulation (linear interpolation in time) and the region follows the contact.
-With a virtual coupling (--coupling-stiffness-N-per-mm), the path is the haptic device's and the
+With a virtual coupling (--coupling-stiffness-n-per-mm), the path is the haptic device's and the
 tool follows it through a spring-damper (protocol/coupling.py); the trace then holds the tool's
 position and the force sent to the device.
 
@@ -14,6 +14,7 @@ device, step, send the force). The USD stage's time code k is the state after st
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import math
 from pathlib import Path
@@ -47,6 +48,16 @@ MAX_PATH_STEPS = 10_000_000
 """Steps a path may take at dt (about 3 hours at 1 kHz); beyond, its times or dt are a mistake."""
 
 
+COUPLING_FLAGS = (
+    ("--coupling-stiffness-n-per-mm", "--coupling-stiffness-N-per-mm", "coupling_k", "> 0", None, "K", "coupling spring k_c [N/mm]"),
+    ("--coupling-damping-ns-per-m", "--coupling-damping-Ns-per-m", "coupling_b", ">= 0", 0.0, "B", "coupling damper b_c [N s/m] (default 0)"),
+    ("--device-damping-ns-per-m", "--device-damping-Ns-per-m", "device_b", ">= 0", None, "B",
+     "the haptic device's physical damping b [N s/m]; the coupling must meet b > k_c T / 2 + |b_c| (T = dt)"),
+)
+"""The virtual coupling's flags, lower case as every flag: (flag, its old spelling, still taken but not listed,
+dest, rule, default, metavar, help)."""
+
+
 def add_parser(sub) -> None:
     p = add_command(
         sub, "trace", "move the probe along a path (a CSV or the built-in stroke) and write the force trace",
@@ -68,9 +79,9 @@ def add_parser(sub) -> None:
     p.add_argument("--usd-every", type=count_arg, default=10, metavar="N", help="a USD frame every Nth step (default 10)")
     p.add_argument("--json", default=None, type=path_arg, metavar="PATH", help="a JSON summary: path, model, peak force, relocations")
     c = p.add_argument_group("virtual coupling (a haptic device: the path is the device's, the tool follows it)")
-    c.add_argument("--coupling-stiffness-N-per-mm", dest="coupling_k", type=number_arg("> 0"), default=None, metavar="K", help="coupling spring k_c [N/mm]")
-    c.add_argument("--coupling-damping-Ns-per-m", dest="coupling_b", type=number_arg(">= 0"), default=0.0, metavar="B", help="coupling damper b_c [N s/m] (default 0)")
-    c.add_argument("--device-damping-Ns-per-m", dest="device_b", type=number_arg(">= 0"), default=None, metavar="B", help="the haptic device's physical damping b [N s/m]; the coupling must meet b > k_c T / 2 + |b_c| (T = dt)")
+    for flag, old, dest, rule, default, metavar, text in COUPLING_FLAGS:
+        c.add_argument(flag, dest=dest, type=number_arg(rule), default=default, metavar=metavar, help=text)
+        c.add_argument(old, dest=dest, type=number_arg(rule), default=default, help=argparse.SUPPRESS)
     add_tissue_args(p)
     p.set_defaults(func=cmd_trace)
 
@@ -179,21 +190,21 @@ def cmd_trace(args) -> int:
 
 
 def make_coupling(args, dt):
-    """The VirtualCoupling the flags ask for (None without --coupling-stiffness-N-per-mm); InputError
+    """The VirtualCoupling the flags ask for (None without --coupling-stiffness-n-per-mm); InputError
     for a device damping missing or too small for it."""
     if args.coupling_k is None:
         if args.device_b is not None or args.coupling_b:
-            raise InputError("--coupling-damping-Ns-per-m and --device-damping-Ns-per-m need --coupling-stiffness-N-per-mm")
+            raise InputError("--coupling-damping-ns-per-m and --device-damping-ns-per-m need --coupling-stiffness-n-per-mm")
         return None
     if args.device_b is None:
-        raise InputError("--coupling-stiffness-N-per-mm needs --device-damping-Ns-per-m: the haptic device's damping b, "
+        raise InputError("--coupling-stiffness-n-per-mm needs --device-damping-ns-per-m: the haptic device's damping b, "
                          "which the passivity condition b > k_c T / 2 + |b_c| is checked with")
     from ..protocol.coupling import VirtualCoupling
 
     try:
         return VirtualCoupling(args.coupling_k * 1e3, args.coupling_b, dt, args.device_b)
     except ValueError as exc:
-        raise InputError(f"--coupling-stiffness-N-per-mm {args.coupling_k:g}: {exc}") from None
+        raise InputError(f"--coupling-stiffness-n-per-mm {args.coupling_k:g}: {exc}") from None
 
 
 def _scene(args):

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-ORGAN_SPAN_MM = (20.0, 2000.0)
-"""An organ's largest extent lies between these [mm] (a gallbladder to a whole torso)."""
+ORGAN_SPAN_MM = (15.0, 2000.0)
+"""An organ's largest extent lies between these [mm]: a 12.8 mm "organ" is one of 12.8 cm."""
 UNITS = ((1.0, "millimetres"), (10.0, "centimetres"), (1000.0, "metres"), (1.0e-3, "micrometres"))
 """(millimetres per file unit, its name), in the order they are tried."""
 

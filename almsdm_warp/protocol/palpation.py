@@ -73,6 +73,11 @@ class PressResult:
         return float(self.force[self.release_step - 1]) if self.release_step > 0 else 0.0
 
     @property
+    def stiffness_N_per_mm(self) -> float:
+        """Hold force over depth [N/mm], as BatchResult.stiffness_N_per_mm."""
+        return self.hold_force_N / (self.depth * 1e3)
+
+    @property
     def recovery_error_mm(self) -> float:
         """Residual displacement of the contact vertex at the end of the settle window [mm]."""
         return float(self.displacement[-1] * 1e3)

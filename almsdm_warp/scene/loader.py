@@ -137,15 +137,19 @@ class Scene:
 
         return load_mesh(self.mesh_path, scale=self.scale_mm)
 
-    def load_mesh_guessing_units(self) -> tuple["Scene", TissueMesh, str]:
+    def load_mesh_guessing_units(self, guess: bool = True) -> tuple["Scene", TissueMesh, str]:
         """(the scene at the unit guessed from its mesh's size, the mesh, one line saying so, "" where it is
         millimetres as read): a bare mesh file's unit is unknown (mesh.units.guess_scale); a scene file's is
-        its own (no line)."""
+        its own (no line). guess=False: the unit as given (--scale-mm), a line only where it makes no organ."""
         from ..mesh.units import guess_scale, is_organ_size, mesh_span
 
         mesh = self.load_mesh()
         if self.path is not None:
             return self, mesh, ""
+        if not guess:  # the unit given: a note only where it makes no organ
+            span = mesh_span(mesh.vertices) * 1e3
+            return self, mesh, "" if is_organ_size(span) else (
+                f"the mesh spans {span:.4g} mm at --scale-mm {self.scale_mm:g}: not an organ's size; is the unit right?")
         scale, line = guess_scale(mesh_span(mesh.vertices) * 1e3 / self.scale_mm)
         if scale == self.scale_mm:
             return self, mesh, ("" if is_organ_size(mesh_span(mesh.vertices) * 1e3) else line)  # millimetres: no news
