@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -184,8 +185,10 @@ def cmd_trace(args) -> int:
     if coupling is not None:
         print(f"coupling: k_c {coupling.stiffness * 1e-3:g} N/mm, b_c {coupling.damping:g} N s/m, device damping "
               f"{coupling.device_damping:g} N s/m (passivity margin {coupling.device_damping - coupling.stiffness * dt / 2 - coupling.damping:.3g} N s/m)")
-    columns = run_trace(args, stroke, times, centres, coupling)
-    _finish(args, scene, mesh, stroke, columns, src)
+    columns, step_us = run_trace(args, stroke, times, centres, coupling)
+    print(f"step: p50 {step_us['p50_us']:.1f} us, p99 {step_us['p99_us']:.1f} us, max {step_us['max_us']:.1f} us over "
+          f"{step_us['steps']} steps after the first (wall clock, on {device}; the region's moves included)")
+    _finish(args, scene, mesh, stroke, columns, src, step_us)
     return 0
 
 
@@ -286,6 +289,7 @@ def run_trace(args, stroke, times, centres, coupling) -> dict:
     ints = np.zeros((count, 2), dtype=np.int64)
     recorder = _recorder(args, stroke)
     force = np.zeros(3)
+    step_s = np.zeros(n)  # each step's wall time, the region's relocations included
     if coupling is not None:
         coupling.reset(centres[0])
     r = 0
@@ -297,7 +301,10 @@ def run_trace(args, stroke, times, centres, coupling) -> dict:
                 coupling.update(centres[k], force)
                 tool = coupling.tool
             try:
-                force = np.array(stroke.step(tool), dtype=np.float64)
+                t0 = time.perf_counter()
+                felt_now = stroke.step(tool)
+                step_s[k] = time.perf_counter() - t0
+                force = np.array(felt_now, dtype=np.float64)
             except (SimulationDiverged, ValueError) as exc:
                 raise InputError(f"at t = {times[k]:.4g} s: {exc}") from exc
             if recorder is not None and (k % args.usd_every == 0 or k == n - 1):
@@ -312,7 +319,17 @@ def run_trace(args, stroke, times, centres, coupling) -> dict:
     columns.update(region_vertices=ints[:, 0], relocations=ints[:, 1])
     if coupling is not None:
         columns.update({c: dev[:, i] for i, c in enumerate(DEVICE_COLUMNS)})
-    return columns
+    return columns, step_percentiles(step_s[1:] if n > 1 else step_s)
+
+
+STEP_PERCENTILES = (("p50", 50.0), ("p99", 99.0), ("max", 100.0))
+"""The step-time figures a trace reports [us]: median, 99th percentile, worst."""
+
+
+def step_percentiles(step_s) -> dict:
+    """{"p50_us", "p99_us", "max_us", "steps"} of the step wall times `step_s` [s] (numpy's linear percentile)."""
+    us = np.asarray(step_s, dtype=np.float64) * 1e6
+    return {**{f"{name}_us": float(np.percentile(us, q)) for name, q in STEP_PERCENTILES}, "steps": int(len(us))}
 
 
 def _recorder(args, stroke):
@@ -324,7 +341,7 @@ def _recorder(args, stroke):
     return UsdRecorder(args.usd, stroke, every=args.usd_every, probe_radius=stroke.radius)
 
 
-def _finish(args, scene, mesh, stroke, columns, src) -> None:
+def _finish(args, scene, mesh, stroke, columns, src, step_us) -> None:
     """Print the summary; write the trace, the plot and the JSON."""
     f = np.column_stack([columns[f"force_{a}_N"] for a in "xyz"])
     mag = np.linalg.norm(f, axis=1)
@@ -340,7 +357,7 @@ def _finish(args, scene, mesh, stroke, columns, src) -> None:
     if args.png:
         from ..export.trace_png import plot_trace
 
-        plot_trace(columns, args.png, title=f"{mesh.name}, {stroke.rings} {'rings' if stroke.region is not None else 'model'}")
+        plot_trace(columns, args.png, title=f"{mesh.name}, {rings_text(stroke.rings) if stroke.region is not None else 'global model'}")
         print(f"wrote {args.png}")
     if args.json:
         from ..export.writers import write_output
@@ -358,6 +375,7 @@ def _finish(args, scene, mesh, stroke, columns, src) -> None:
             "peak_force_N": finite(mag[i]),
             "peak_force_t_s": finite(columns["t_s"][i]),
             "relocations": moves,
+            "step_us": step_us,
         }
         write_output(args.json, record, "record")
         print(f"wrote {args.json}")
