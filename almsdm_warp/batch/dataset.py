@@ -286,7 +286,7 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
         seen[scene.name] = seen.get(scene.name, 0) + 1
         name = scene.name if seen[scene.name] == 1 else f"{scene.name}_{seen[scene.name]}"
         name = name.replace(",", "_")  # a CSV cell
-        mesh, base = _scene_plan(spec, scene, name, cuda)
+        mesh, base, scene = _scene_plan(spec, scene, name, cuda)
         if spec.centers:
             centers = spec.centers.get(scene.name, np.zeros((0, 3)))
         else:
@@ -306,13 +306,16 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
 
 
 def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
-    """The scene's mesh and its baseline plan (no lesion), after the checks a sweep makes."""
+    """(The scene's mesh, its baseline plan (no lesion), the scene with its support made a plane for a
+    press from above, as a sweep's), after the checks a sweep makes."""
     from ..checks import check_ring_count
+    from ..region.contact import top_vertex
 
     rings = spec.rings if spec.rings is not None else scene.rings
     if rings == AUTO:
         raise InputError(f"scene {name!r} has rings = 'auto'; a dataset presses a fixed ring count: give [dataset] rings")
     mesh = scene.load_mesh()
+    scene = scene.with_support(mesh, float(mesh.vertices[top_vertex(mesh), 2]))
     try:  # the scene's [tissue] law: a batch's kernels, before any work
         law_entry(scene.law).require(integrator=spec.integrator, path="batch")
     except ValueError as exc:
@@ -327,7 +330,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     plan = SweepPlan(mesh, scene.tissue, None, None, int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
                      press["settle"], points, vertices, chunk, spec.integrator, probe_radius=scene.probe_radius,
                      fixed_below=scene.fixed_below, law=scene.law)
-    return mesh, plan
+    return mesh, plan, scene
 
 
 def spec_key(items: list[DatasetItem]) -> str:

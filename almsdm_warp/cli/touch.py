@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
 from ..errors import InputError
+from ..tissue.presets import PRESETS
 from .args import (add_probe_radius_arg, auto_tol, check_contact, get_device, load_scene_and_mesh, mesh_json, number_arg, path_arg,
                    probe_position, quiet_warp, rings_arg, rings_text, scene_with_tissue_args)
 
@@ -19,7 +19,7 @@ def add_parser(sub) -> None:
     touch.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
     touch.add_argument("--probe-mm", type=float, nargs=3, metavar=("X", "Y", "Z"), help="probe position [mm]")
     add_probe_radius_arg(touch)
-    touch.add_argument("--tissue", default=None, help=argparse.SUPPRESS)  # a mesh file's preset: its sphere and rings
+    touch.add_argument("--tissue", choices=tuple(PRESETS), default=None, help="a mesh file's tissue preset, whose sphere and rings it takes (default: liver)")
     touch.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default: guessed from its size)")
     touch.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:0, ...")
     touch.add_argument("--json", default=None, type=path_arg, help="write the result as JSON here")
