@@ -11,10 +11,10 @@ import pytest
 from almsdm_warp.cli.main import main
 from almsdm_warp.errors import InputError
 from almsdm_warp.mesh.io import load_mesh
-from almsdm_warp.mesh.primitives import tet_ball_arrays
 from almsdm_warp.mesh.topology import inverted_tets, tet_quality
 from almsdm_warp.mesh.validate import SLIVER_QUALITY
 from almsdm_warp.scene.loader import load_scene
+from helpers import write_tet_ball
 
 PRESS = ["--tissue", "paper", "--rings", "2", "--depth-mm", "0.5", "--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05"]
 NEO = ["--law", "neo-hookean", "--youngs-modulus-kpa", "10", "--rayleigh-alpha-per-s", "200", "--fixed-below-mm", "-5"]
@@ -23,10 +23,7 @@ NEO = ["--law", "neo-hookean", "--youngs-modulus-kpa", "10", "--rayleigh-alpha-p
 @pytest.fixture(scope="module")
 def ball(tmp_path_factory):
     """A 10 mm tet ball (edges ~4 mm) in a .vtu file the loader reads."""
-    vertices, tets = tet_ball_arrays(10.0, 4.0)
-    path = tmp_path_factory.mktemp("law") / "ball.vtu"
-    meshio.write(path, meshio.Mesh(vertices * 1e3, [("tetra", tets)]))
-    return path
+    return write_tet_ball(tmp_path_factory.mktemp("law") / "ball.vtu", 10.0, 4.0)
 
 
 def scene_file(folder, ball, law_line):

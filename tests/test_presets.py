@@ -11,11 +11,12 @@ import trimesh
 import almsdm_warp as am
 from almsdm_warp.cli.main import main
 from almsdm_warp.errors import InputError
-from almsdm_warp.mesh.primitives import icosphere_arrays, tet_ball_arrays
+from almsdm_warp.mesh.primitives import icosphere_arrays
 from almsdm_warp.mesh.units import guess_scale
 from almsdm_warp.scene.support import FAR_SIDE, parse_support, support_height
 from almsdm_warp.tissue.material import Material
 from almsdm_warp.tissue.presets import DEFAULT_PRESET, PRESETS
+from helpers import write_tet_ball
 
 SHORT = ["--depth-mm", "4", "--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05"]
 
@@ -32,10 +33,7 @@ def sphere_obj(tmp_path_factory):
 @pytest.fixture(scope="module")
 def ball_vtu(tmp_path_factory):
     """A 20 mm tet ball (edges ~7 mm) in millimetres."""
-    v, tets = tet_ball_arrays(20.0, 7.0)
-    path = tmp_path_factory.mktemp("presets") / "ball.vtu"
-    meshio.write(path, meshio.Mesh(v * 1e3, [("tetra", tets)]))
-    return path
+    return write_tet_ball(tmp_path_factory.mktemp("presets") / "ball.vtu", 20.0, 7.0)
 
 
 def palpate_json(path, tmp_path, *extra):

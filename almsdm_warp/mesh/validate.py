@@ -82,9 +82,7 @@ def repair_arrays(vertices, triangles=None, tetrahedra=None, *, scale: float = 1
     inside = np.flatnonzero(np.abs(v).max(axis=1) <= min(MAX_COORDINATE_M / (scale * 1e-3), MAX_FILE_COORDINATE))
     remap = _merge_duplicates(v, inside, diag, notes)
     elements = remap[elements]
-    before = len(elements)
-    elements, ids = _drop_degenerate(v, elements, ids, diag, where, notes)
-    degenerate = before - len(elements)
+    elements, ids, degenerate = _drop_degenerate(v, elements, ids, diag, where, notes)
     elements, ids = _drop_duplicates(elements, ids, notes)
 
     if volume:
@@ -284,7 +282,7 @@ def _drop_degenerate(v, elements, ids, diag, where, notes):
         raise InputError(
             f"{where}: no {many} left: all {len(elements)} are degenerate ({what} ~0 or a repeated vertex)"
         )
-    return elements[~bad], ids[~bad]
+    return elements[~bad], ids[~bad], int(bad.sum())
 
 
 def _drop_duplicates(elements, ids, notes):
