@@ -21,6 +21,8 @@ them, and a value outside them is a typo or a unit mix-up."""
 
 AUTO = "auto"
 """[region] rings = "auto": the region sized to [region] tol_mm during each press (docs/adaptive.md)."""
+AUTO_TOL = 1.0e-4
+"""The tolerance [m] of rings "auto" when none is given (0.1 mm): --tol-mm's default, a scene's, a dataset's."""
 
 _TOML_TYPE = {str: "a string", float: "a number", int: "an integer"}
 

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from almsdm_warp.cli.main import build_parser, main
-from almsdm_warp.export.tables import float_texts
 from almsdm_warp.mesh.io import load_mesh
 from almsdm_warp.mesh.topology import tet_quality
 
@@ -45,14 +44,20 @@ def test_old_spellings_are_taken_and_not_listed(command, old, new, dest):
     assert new == new.lower()  # one rule: flags in lower case, the scene key's words
 
 
-def test_floats_at_the_precision_they_carry():
-    mm = np.array([-0.0232598, 0.0194361]) * 1e3  # metres back to the file's millimetres
-    assert repr(float(mm[0])) == "-23.259800000000002" and float_texts(mm) == ["-23.2598", "19.4361"]
-    single = np.array([0.1823, 1 / 3], dtype=np.float32).astype(np.float64)  # a device's float32 force
-    text = float_texts(single)
-    assert text == ["0.1823", "0.33333334"]
-    assert np.array_equal(np.array(text, dtype=np.float32).astype(np.float64), single)  # reads back to the same float32
-    assert float_texts(np.array([np.nan, np.inf, 1e300])) == ["nan", "inf", "1e+300"]
+def test_floats_at_the_precision_they_carry(tmp_path):
+    """A sweep's coordinates are the mesh file's millimetres (-23.2598, not the -23.259800000000002 of metres x
+    1000), and every float reads back as written (repr: the shortest text of the value)."""
+    from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
+    from almsdm_warp.export.tables import millimetres
+
+    assert repr(float(np.array(-0.0232598) * 1e3)) == "-23.259800000000002"
+    assert repr(float(millimetres(-0.0232598))) == "-23.2598"
+    out = tmp_path / "s.csv"
+    assert main(["sweep", "--points", "2", "--ramp-s", "0.01", "--hold-s", "0", "--settle-s", "0", "--out", str(out)]) == 0
+    first = out.read_text().splitlines()[1].split(",")
+    assert first[:3] == ["-23.2598", "19.4361", "33.9907"]  # vertex 693 as scenes/stomach.obj writes it
+    table = SWEEP_TABLE.read(out)
+    assert table["peak_force_N"][0] == float(first[4])
 
 
 def test_trace_reports_its_step_times(tmp_path, capsys):

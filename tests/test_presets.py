@@ -120,3 +120,24 @@ def test_a_centimetre_mesh_is_read_in_centimetres(tmp_path, capsys):
     assert point[2] == pytest.approx(v[:, 2].max() * 1e3, rel=1e-5)  # 3 cm = 30 mm
     assert main(["touch", str(path), "--scale-mm", "1", "--json", str(out)]) == 0
     assert "not an organ's size" in capsys.readouterr().err
+
+
+def test_a_dataset_of_a_bare_mesh_takes_its_preset(ball_vtu, tmp_path):
+    """A mesh file in a dataset: the preset's sphere, auto rings (sized per point, as a sweep's) and its
+    far-side support (the points it holds left out)."""
+    from almsdm_warp.batch import dataset as ds
+    from almsdm_warp.batch.sampling import pressable_points
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(f'[dataset]\nscenes = ["{ball_vtu}"]\npoints = 4\nmaps = "none"\n'
+                    '[press]\ndepth_mm = 3.0\nramp_s = 0.03\nhold_s = 0.02\nsettle_s = 0.02\n')
+    [item] = ds.plan_items(ds.load_spec(spec))
+    v = item.plan.mesh.vertices
+    plane = v[:, 2].min() + FAR_SIDE * (v[:, 2].max() - v[:, 2].min())
+    assert item.plan.fixed_below == pytest.approx(plane) and item.plan.probe_radius == PRESETS[DEFAULT_PRESET].probe_radius
+    _, kept = pressable_points(item.plan.mesh, 4, None)
+    assert len(item.plan.vertices) == int((v[kept, 2] >= plane).sum()) >= 1
+    assert item.plan.tol == pytest.approx(1e-4) and np.all(item.plan.point_rings >= 1)
+    assert main(["sweep", "--dataset", str(spec), "--out", str(tmp_path / "out")]) == 0
+    table = ds.DATASET_TABLE.read(tmp_path / "out" / "table.npz")
+    np.testing.assert_array_equal(table["rings"], item.plan.point_rings)

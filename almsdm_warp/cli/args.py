@@ -9,12 +9,12 @@ import sys
 
 import numpy as np
 
-from ..checks import rings_text  # noqa: F401  (the commands take it from here)
+from ..checks import AUTO_TOL, rings_text  # noqa: F401  (the commands take rings_text from here)
 from ..errors import InputError
 
 GLOBAL_RINGS = ("global", "global-free")
 """--rings values of the global model (anchored, or free with no anchors)."""
-AUTO_TOL_MM = 0.1
+AUTO_TOL_MM = AUTO_TOL * 1e3
 """--tol-mm when --rings auto is given without it [mm]."""
 
 

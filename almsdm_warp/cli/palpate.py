@@ -65,7 +65,7 @@ def add_parser(sub) -> None:
     palpate.add_argument("--settle-s", type=number_arg(">= 0"), default=None, metavar="S", help="settle window after release [s] (default: the scene's)")
     add_probe_radius_arg(palpate)
     palpate.add_argument("--presses", type=count_arg, default=1, metavar="N", help="presses at the same spot (default 1)")
-    palpate.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default 1; 10 for cm, 1000 for m)")
+    palpate.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default: guessed from its size, said where not 1; 10 for cm, 1000 for m)")
     where = palpate.add_mutually_exclusive_group()
     where.add_argument("--vertex", type=int, default=None, metavar="V", help="contact vertex (a surface vertex id)")
     where.add_argument("--probe-mm", type=float, nargs=3, metavar=("X", "Y", "Z"), help="probe position [mm]; the contact is its nearest surface vertex")

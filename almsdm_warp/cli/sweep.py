@@ -38,7 +38,7 @@ def add_parser(sub) -> None:
     add_integrator_arg(p, batch=True)
     add_law_arg(p, "batch")
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=None, metavar="MS", help="frame [ms] (default 1); the explicit integrator takes it in substeps under 0.9 x the critical step")
-    p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
+    p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default: guessed from its size)")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
     p.add_argument("--chunk", type=count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU; on GPUs, four chunks a device or more, 16384..65536 points each)")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks on Ray actors (one GPU each with a CUDA --device, else one CPU; one a GPU of the cluster); ADDRESS of a cluster, or a local one")

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..checks import check_ring_count
 from ..errors import InputError
-from ..export.tables import TableLayout
+from ..export.tables import TableLayout, millimetres
 from ..mesh.validate import MAX_COORDINATE_M
 from .args import add_command, add_integrator_arg, add_law_arg, add_probe_radius_arg, add_tissue_args, check_law, count_arg
 from .args import auto_tol, get_device, load_scene_and_mesh, number_arg, path_arg, quiet_warp, rings_arg, rings_text, scene_with_tissue_args
@@ -73,7 +73,7 @@ def add_parser(sub) -> None:
     add_probe_radius_arg(p)
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="step [ms] at which the path is sampled (default 1: haptic rate)")
     p.add_argument("--report-every", type=count_arg, default=1, metavar="N", help="a trace row every Nth step, and the last (default 1)")
-    p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default 1)")
+    p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default: guessed from its size)")
     p.add_argument("--out", default=None, type=path_arg, metavar="PATH", help="the trace: .csv (a header line, then one row per reported step) or .npz")
     p.add_argument("--png", default=None, type=path_arg, metavar="PATH", help="a plot of the force against time")
     p.add_argument("--usd", default=None, type=path_arg, metavar="PATH", help="record the stroke to a USD stage (.usda, .usdc, .usd): the organ, the probe, the moving region")
@@ -311,8 +311,8 @@ def run_trace(args, stroke, times, centres, coupling) -> dict:
                 recorder.frame(k, probe_center=tool, force=force)
             if k % every == 0 or k == n - 1:
                 felt = force if coupling is None else coupling.device_force
-                out[r] = (times[k], *(np.asarray(tool) * 1e3), *felt)
-                dev[r] = centres[k] * 1e3
+                out[r] = (times[k], *millimetres(tool), *felt)
+                dev[r] = millimetres(centres[k])
                 ints[r] = (stroke.region_vertices, stroke.relocations)
                 r += 1
     columns = {c: out[:, i] for i, c in enumerate(COLUMNS[:7])}

@@ -70,34 +70,26 @@ def _dtype(name: str):
     return str if name == "str" else np.dtype(name)
 
 
-# -- CSV: a header line, then a row a line; floats at the precision they carry (float_texts)
+# -- CSV: a header line, then a row a line; floats as repr writes them (the shortest text that reads back the same)
 def write_csv(tmp, columns: dict, layout: TableLayout) -> None:
     names = list(columns)
     n = len(columns[names[0]]) if names else 0
     with open(tmp, "w", encoding="utf-8") as f:
         f.write(",".join(names) + "\n")
         for b in range(0, n, CSV_BLOCK):
-            text = [float_texts(col[b : b + CSV_BLOCK]) if col.dtype.kind == "f" else map(str, col[b : b + CSV_BLOCK].tolist())
-                    for col in columns.values()]
+            text = [map(repr if col.dtype.kind == "f" else str, col[b : b + CSV_BLOCK].tolist()) for col in columns.values()]
             f.write("".join(line + "\n" for line in map(",".join, zip(*text))))
 
 
-FLOAT64_DIGITS = 15
-"""Significant digits of a float64 value in a CSV: every digit a double carries for certain, none of the
-noise of a unit's conversion (0.0232598 m x 1000 is -23.259800000000002 in binary; written -23.2598)."""
+MM_DECIMALS = 9
+"""Decimals a length in millimetres is written to (a picometre): below any mesh's float32 resolution, and
+above the noise of a unit's conversion (0.0232598 m x 1000 is -23.259800000000002 in binary)."""
 
 
-def float_texts(values) -> list[str]:
-    """Each float as text at the precision it carries: a column that float32 holds exactly (a device's
-    force, a float32 mesh) as the shortest text of its float32 (0.18234567, not 0.18234567344188690),
-    any other to FLOAT64_DIGITS significant digits."""
-    v = np.asarray(values, dtype=np.float64)
-    with np.errstate(over="ignore", invalid="ignore"):
-        single = v.astype(np.float32)
-        exact = np.array_equal(single.astype(np.float64), v, equal_nan=True)
-    if exact:
-        return single.astype(str).tolist()
-    return [f"{x:.{FLOAT64_DIGITS}g}" for x in v.tolist()]
+def millimetres(metres):
+    """`metres` [m] as millimetres for a table, rounded to MM_DECIMALS: the file's -23.2598, not the
+    -23.259800000000002 a conversion leaves (what a CSV writes is the shortest text of the value)."""
+    return np.round(np.asarray(metres, dtype=np.float64) * 1e3, MM_DECIMALS)
 
 
 def read_csv(path: Path, layout: TableLayout) -> dict:
