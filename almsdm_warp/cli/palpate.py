@@ -25,15 +25,15 @@ from .args import (
     count_arg,
     finite,
     get_device,
+    load_scene_and_mesh,
     mesh_json,
     number_arg,
     path_arg,
-    load_scene_and_mesh,
     print_notes,
     probe_position,
-    rings_text,
     quiet_warp,
     rings_arg,
+    rings_text,
     scene_with_tissue_args,
 )
 from .volume_arg import add_volume_arg, needs_volume, volume_for_press
