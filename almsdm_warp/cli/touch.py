@@ -35,9 +35,9 @@ def cmd_touch(args) -> int:
     if args.json:
         check_output(args.json, "record", "--json")
     quiet_warp()
-    device = get_device(args.device)
     scene, mesh = load_scene_and_mesh(args)
     scene = scene_with_tissue_args(args, scene, mesh)
+    device = get_device(args.device)
     print(mesh.summary())
 
     if args.probe_mm is not None:
