@@ -141,3 +141,19 @@ def test_a_dataset_of_a_bare_mesh_takes_its_preset(ball_vtu, tmp_path):
     assert main(["sweep", "--dataset", str(spec), "--out", str(tmp_path / "out")]) == 0
     table = ds.DATASET_TABLE.read(tmp_path / "out" / "table.npz")
     np.testing.assert_array_equal(table["rings"], item.plan.point_rings)
+
+
+def test_scene_support_rule_key(ball_vtu, tmp_path):
+    """[support] rule: the same rule as --support and the JSON's support.rule; a height beside it is refused."""
+    from almsdm_warp.scene.loader import load_scene
+
+    path = tmp_path / "s.toml"
+    path.write_text(f'[mesh]\npath = "{ball_vtu}"\n[tissue]\nmodel = "material"\nyoungs_modulus_kPa = 5.2\n[support]\nrule = "below:0.25"\n')
+    scene = load_scene(path)
+    assert scene.support == "below:0.25" and scene.as_dict()["support"]["rule"] == "below:0.25"
+    data = palpate_json(path, tmp_path)
+    v = meshio.read(ball_vtu).points
+    assert data["support"]["fixed_below_mm"] == pytest.approx(v[:, 2].min() + 0.25 * np.ptp(v[:, 2]))
+    path.write_text(path.read_text() + "fixed_below_mm = -5.0\n")
+    with pytest.raises(InputError, match=r"\[support\] rule and fixed_below_mm both given"):
+        load_scene(path)

@@ -236,6 +236,8 @@ def load_scene(path) -> Scene:
     if "tol" in region and region.get("rings") != AUTO:
         rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
         raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
+    if len(values["support"]) > 1:
+        raise InputError(f"{where}: [support] rule and fixed_below_mm both given: give one (a rule relative to the organ, or a height)")
     mesh_path = _mesh_path(values["mesh"].get("path"), p, where)
     law = check_law_name(values["tissue"].pop("law", DEFAULT_LAW), f"{where}: [tissue] law")
     tissue = _tissue(data.get("tissue", {}), values["tissue"], where)
@@ -251,6 +253,7 @@ def load_scene(path) -> Scene:
             press=PressParams(**values["press"]),
             lesion=lesion,
             fixed_below=values["support"].get("fixed_below"),
+            support=values["support"].get("support"),
             probe_radius=values["probe"].get("probe_radius", 0.0),
             law=law,
         )
