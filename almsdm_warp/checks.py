@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 import numbers
 
+import numpy as np
+
 from .errors import InputError
 
 MAGNITUDE = (1.0e-12, 1.0e12)
@@ -19,6 +21,8 @@ them, and a value outside them is a typo or a unit mix-up."""
 
 AUTO = "auto"
 """[region] rings = "auto": the region sized to [region] tol_mm during each press (docs/adaptive.md)."""
+AUTO_TOL = 1.0e-4
+"""The tolerance [m] of rings "auto" when none is given (0.1 mm): --tol-mm's default, a scene's, a dataset's."""
 
 _TOML_TYPE = {str: "a string", float: "a number", int: "an integer"}
 
@@ -178,3 +182,10 @@ def fixed_substeps(substeps):
     if isinstance(substeps, bool) or not isinstance(substeps, numbers.Integral) or substeps < 1:
         raise ValueError(f"substeps must be {AUTO!r} or an int >= 1, got {substeps!r}")
     return int(substeps)
+
+
+def rings_text(rings) -> str:
+    """"1 ring", "4 rings", "auto rings", "global": a ring count in words."""
+    if isinstance(rings, (int, np.integer)) and not isinstance(rings, bool):
+        return f"{int(rings)} ring{'' if rings == 1 else 's'}"
+    return f"{rings} rings" if rings == AUTO else str(rings)

@@ -54,3 +54,14 @@ def spring_stiffness_matrix(x, edges, ke, rest_length, anchor_ke):
                 cols.append(3 * edges[:, b] + j)
                 vals.append(sign * blocks[:, i, j])
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
+
+
+def write_tet_ball(path, radius_mm: float, edge_mm: float):
+    """A tet ball (mesh.primitives.tet_ball_arrays) written to `path` (.vtu) in millimetres; returns the path."""
+    import meshio
+
+    from almsdm_warp.mesh.primitives import tet_ball_arrays
+
+    vertices, tets = tet_ball_arrays(radius_mm, edge_mm)
+    meshio.write(path, meshio.Mesh(vertices * 1e3, [("tetra", tets)]))
+    return path

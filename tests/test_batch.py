@@ -9,6 +9,7 @@ from scipy.sparse.csgraph import shortest_path
 from almsdm_warp import Region
 from almsdm_warp.batch.batch_palpation import BatchPalpation
 from almsdm_warp.protocol.palpation import Palpation
+from almsdm_warp.scene.loader import load_scene
 from conftest import SCENES, load_cached
 from test_probe_sphere import anchor_bed  # noqa: F401 (a fixture: the Winkler bed)
 
@@ -355,5 +356,12 @@ def test_sweep_with_sphere_supports_and_material(tmp_path, stomach, supported, c
     assert 0 < len(table["vertex"]) < 10 and np.all(stomach.vertices[table["vertex"], 2] >= z)
     res = BatchPalpation(stomach, material, rings=3, device="cpu", probe_radius=0.004, fixed_below=z).touch(table["vertex"]).press(**SPHERE_PRESS)
     np.testing.assert_array_equal(table["peak_force_N"], res.peak_force)
-    assert main(["sweep", "--out", str(tmp_path / "x.csv"), "--rings", "auto", "--probe-radius-mm", "4"]) == 2
-    assert "needs a ring count" in capsys.readouterr().err
+    # --rings auto with a sphere: each point's rings those an adaptive sphere press grows to (batch.sweep_auto)
+    from almsdm_warp.batch.sweep_auto import size_regions
+
+    short = ["--depth-mm", "5", "--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05"]
+    assert main(["sweep", "--out", str(tmp_path / "x.csv"), "--rings", "auto", "--probe-radius-mm", "4", "--points", "2", *short]) == 0
+    auto = SWEEP_TABLE.read(tmp_path / "x.csv")
+    scene = load_scene(SCENES / "stomach.toml")
+    want = size_regions(stomach, scene.tissue, auto["vertex"], 1e-4, depth=5e-3, ramp=0.05, hold=0.05, probe_radius=0.004)
+    np.testing.assert_array_equal(auto["rings"], want)

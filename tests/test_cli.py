@@ -37,8 +37,8 @@ def test_touch_default_scene_writes_json(tmp_path):
     "args, message",
     [
         (["touch", "no/such/mesh.obj"], "no such file"),
-        (["touch", "--rings", "-1"], "--rings must be >= 0"),
-        (["touch", "--rings", "two"], "invalid int value"),
+        (["touch", "--rings", "-1"], "touch: argument --rings: must be >= 1"),
+        (["touch", "--rings", "two"], "unknown value 'two'"),
         (["touch", "--json", "/no/such/folder/out.json"], "does not exist"),
         (["touch", "--device", "tpu:7"], "unknown device"),
         (["touch", "--probe-mm", "nan", "0", "0"], "--probe-mm must be finite"),

@@ -33,7 +33,7 @@ def test_no_arguments_runs_palpate_on_the_default_stomach(tmp_path, monkeypatch,
     assert main([]) == 0
     out = capsys.readouterr().out
     assert out.splitlines()[0].startswith("stomach.obj: ")
-    assert "model: 1 rings around vertex" in out and "explicit integrator, dt 1 ms" in out  # the scene's [region] rings
+    assert "model: 1 ring around vertex" in out and "explicit integrator, dt 1 ms" in out  # the scene's [region] rings
     assert "press 1: peak force" in out and "steps/s" in out and "press 2:" not in out
     assert list(tmp_path.iterdir()) == []  # no --json: nothing written
 
@@ -320,5 +320,5 @@ def test_auto_scene_without_tol_takes_the_default_and_tol_needs_auto(tmp_path, c
     err = capsys.readouterr().err
     assert "--tol-mm is for --rings auto" in err and "the scene's [region] rings = 1" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
-    assert main(["touch", scene]) == 2
-    assert "give --rings K to touch" in capsys.readouterr().err
+    assert main(["touch", scene]) == 0  # touch sizes an auto region as palpate does
+    assert "auto rings:" in capsys.readouterr().out

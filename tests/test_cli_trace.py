@@ -180,13 +180,13 @@ def test_every_output_written_whole_and_none_left_from_a_run_that_fails(tmp_path
 def test_coupling_flags(tmp_path, top_mm, capsys):
     path = write_path(tmp_path / "p.csv", press_and_slide(top_mm))
     base = ["trace", "paper_stomach", "--path", str(path), "--probe-radius-mm", str(R_MM)]
-    assert main([*base, "--coupling-stiffness-N-per-mm", "1"]) == 2
-    assert "needs --device-damping-Ns-per-m" in capsys.readouterr().err
-    assert main([*base, "--coupling-stiffness-N-per-mm", "1", "--device-damping-Ns-per-m", "0.4"]) == 2
+    assert main([*base, "--coupling-stiffness-n-per-mm", "1"]) == 2
+    assert "needs --device-damping-ns-per-m" in capsys.readouterr().err
+    assert main([*base, "--coupling-stiffness-n-per-mm", "1", "--device-damping-ns-per-m", "0.4"]) == 2
     assert "not passive at T 1 ms" in capsys.readouterr().err  # b 0.4 <= k_c T / 2 = 0.5 N s/m
     out = tmp_path / "c.csv"
-    assert main([*base, "--coupling-stiffness-N-per-mm", "0.5", "--coupling-damping-Ns-per-m", "0.05",
-                 "--device-damping-Ns-per-m", "0.4", "--out", str(out)]) == 0
+    assert main([*base, "--coupling-stiffness-n-per-mm", "0.5", "--coupling-damping-ns-per-m", "0.05",
+                 "--device-damping-ns-per-m", "0.4", "--out", str(out)]) == 0
     header, data = read_csv(out)
     assert header == [*COLUMNS, *DEVICE_COLUMNS]
     device, tool, felt = data[:, 9:12], data[:, 1:4], data[:, 4:7]
@@ -201,12 +201,11 @@ def test_coupling_flags(tmp_path, top_mm, capsys):
 
 
 BAD_FLAGS = {
-    "--rings auto": "unknown value 'auto' (allowed: an integer >= 1 or 'global')",
     "--rings global-free": "unknown value 'global-free'",
     "--probe-radius-mm 0": "--probe-radius-mm must be > 0",
     "--usd t.txt": "unknown USD suffix",
     "--out t.json": "unknown table suffix",
-    "--coupling-damping-Ns-per-m 1": "need --coupling-stiffness-N-per-mm",
+    "--coupling-damping-ns-per-m 1": "need --coupling-stiffness-n-per-mm",
     "--dt-ms 1e-308": "the built-in stroke lasts 3.9 s: inf steps",
     "--rings 1000000": "--rings 1000000 is more than the mesh's 1002 vertices",
 }

@@ -16,7 +16,7 @@ from conftest import SCENES
 POINTS = 6
 SPEC = f"""
 [dataset]
-scenes = ["stomach", "{SCENES / 'liver.vtu'}"]
+scenes = ["stomach", "{SCENES / 'paper_liver.toml'}"]  # a scene file (the liver on the paper's constants: every point pressable)
 points = {POINTS}
 dt_ms = 0.25  # one explicit step a frame even in the 6x lesion (see the palpation check below)
 chunk = 3
@@ -56,14 +56,14 @@ def test_one_table_of_every_item_and_point(whole):
     out, table = whole
     # 2 scenes x (baseline + 1 centre x 1 radius x 2 factors) items of POINTS points each
     assert len(table["vertex"]) == 2 * 3 * POINTS
-    assert table["scene"].tolist() == ["stomach"] * 3 * POINTS + ["liver"] * 3 * POINTS
+    assert table["scene"].tolist() == ["stomach"] * 3 * POINTS + ["paper_liver"] * 3 * POINTS
     np.testing.assert_array_equal(table["lesion_id"], np.tile(np.repeat([0, 1, 2], POINTS), 2))
     np.testing.assert_array_equal(table["point"], np.tile(np.arange(POINTS), 6))
     base = table["lesion_id"] == 0
     assert np.isnan(table["lesion_x_mm"][base]).all() and (table["lesion_factor"][base] == 1.0).all()
     np.testing.assert_array_equal(np.unique(table["lesion_factor"][~base]), [3.0, 6.0])
     # every item of a scene presses the same points; the CSV copy holds the same numbers
-    for scene in ("stomach", "liver"):
+    for scene in ("stomach", "paper_liver"):
         xyz = np.column_stack([table[c][table["scene"] == scene] for c in ("x_mm", "y_mm", "z_mm")]).reshape(3, POINTS, 3)
         np.testing.assert_array_equal(xyz[0], xyz[1])
         np.testing.assert_array_equal(xyz[0], xyz[2])

@@ -11,22 +11,19 @@ import pytest
 from almsdm_warp.cli.main import main
 from almsdm_warp.errors import InputError
 from almsdm_warp.mesh.io import load_mesh
-from almsdm_warp.mesh.primitives import tet_ball_arrays
 from almsdm_warp.mesh.topology import inverted_tets, tet_quality
 from almsdm_warp.mesh.validate import SLIVER_QUALITY
 from almsdm_warp.scene.loader import load_scene
+from helpers import write_tet_ball
 
-PRESS = ["--rings", "2", "--depth-mm", "0.5", "--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05"]
+PRESS = ["--tissue", "paper", "--rings", "2", "--depth-mm", "0.5", "--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05"]
 NEO = ["--law", "neo-hookean", "--youngs-modulus-kpa", "10", "--rayleigh-alpha-per-s", "200", "--fixed-below-mm", "-5"]
 
 
 @pytest.fixture(scope="module")
 def ball(tmp_path_factory):
     """A 10 mm tet ball (edges ~4 mm) in a .vtu file the loader reads."""
-    vertices, tets = tet_ball_arrays(10.0, 4.0)
-    path = tmp_path_factory.mktemp("law") / "ball.vtu"
-    meshio.write(path, meshio.Mesh(vertices * 1e3, [("tetra", tets)]))
-    return path
+    return write_tet_ball(tmp_path_factory.mktemp("law") / "ball.vtu", 10.0, 4.0)
 
 
 def scene_file(folder, ball, law_line):
@@ -122,7 +119,7 @@ def test_law_flag_with_the_implicit_step_and_the_adaptive_region(ball, extra, tm
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--law", "neo-hookean"], "the neo-hookean law needs a material"),  # a bare mesh: the paper's preset
+    (["--law", "neo-hookean", "--tissue", "paper"], "the neo-hookean law needs a material"),  # the paper's preset, on request
     (["--law", "corotational"], "--law: 'corotational' is not a tissue law (allowed: springs, neo-hookean)"),
 ])
 def test_palpate_refusals_are_one_line(ball, args, message, capsys):
@@ -268,5 +265,5 @@ def test_a_sliver_is_named_at_load(tmp_path):
     assert q < SLIVER_QUALITY
     note = next(n for n in mesh.notes if "sliver" in n)
     assert note.startswith("1 sliver tetrahedron of 2 (quality under 0.02") and "worst: tetrahedron 1, vertices (1, 2, 3, 4)" in note
-    assert f"quality {q:.3g})" in note
+    assert f"quality {q:.3g}" in note
     assert mesh.tet_count == 2  # kept: only zero-volume tets are dropped

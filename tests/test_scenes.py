@@ -7,6 +7,8 @@ from pathlib import Path
 import meshio
 import numpy as np
 import pytest
+
+from almsdm_warp.tissue.presets import DEFAULT_PRESET, PRESETS
 import trimesh
 from helpers import load_script
 
@@ -153,7 +155,11 @@ def test_resolve_scene_or_mesh():
     assert resolve_scene_or_mesh(str(SCENES / "liver.toml")).name == "liver"
     bare = resolve_scene_or_mesh(SCENES / "liver.vtu", scale_mm=2.0)
     assert bare.path is None and bare.mesh_path == SCENES / "liver.vtu" and bare.scale_mm == 2.0
-    assert bare.tissue == TissueParams() and bare.press == PressParams() and bare.rings == 4
+    # a bare mesh: the default tissue preset's material, sphere and rings, a support chosen from the mesh
+    assert bare.tissue == PRESETS[DEFAULT_PRESET].tissue and bare.press == PressParams() and bare.rings == "auto"
+    assert bare.probe_radius == PRESETS[DEFAULT_PRESET].probe_radius > 0 and bare.support == "auto"
+    paper = resolve_scene_or_mesh(SCENES / "liver.vtu", tissue="paper")  # the paper's constants only on request
+    assert paper.tissue == TissueParams() and paper.rings == 4 and paper.probe_radius == 0
     with pytest.raises(InputError, match="no such file"):
         resolve_scene_or_mesh("no_such_mesh.obj")
     with pytest.raises(InputError, match="liver, paper_liver, paper_stomach, stomach"):

@@ -132,7 +132,7 @@ def liver_scene(tmp_path, extra):
 def test_scene_support_section(tmp_path):
     scene = load_scene(liver_scene(tmp_path, "[support]\nfixed_below_mm = -5.0\n"))
     assert scene.fixed_below == pytest.approx(-5e-3)
-    assert scene.as_dict()["support"] == {"fixed_below_mm": pytest.approx(-5.0)}
+    assert scene.as_dict()["support"] == {"fixed_below_mm": pytest.approx(-5.0), "rule": None}
     assert load_scene(SCENES / "paper_liver.toml").fixed_below is None
     assert load_scene(SCENES / "liver.toml").fixed_below == pytest.approx(-0.02)  # a tet material needs a support
     for text, message in (("[support]\nfixed_below = 1.0\n", r"unknown key 'fixed_below' in \[support\]"),
@@ -163,7 +163,7 @@ def test_cli_palpate_with_a_material_and_supports_writes_them(tmp_path):
     "args, message",
     [
         (["--youngs-modulus-kpa", "10", "--poisson-ratio", "0.5"], "--poisson-ratio: Material.poisson_ratio = 0.5: must be in (-1, 0.5)"),
-        (["--density-kg-m3", "1000"], "--density-kg-m3 make the tissue a material, which needs --youngs-modulus-kpa"),
+        (["--tissue", "paper", "--density-kg-m3", "1000"], "--density-kg-per-m3 make the tissue a material, which needs --youngs-modulus-kpa"),
         (["--fixed-below-mm", "1000"], "--fixed-below-mm 1000 is above every vertex of liver.vtu"),
         (["--youngs-modulus-kpa", "0"], "argument --youngs-modulus-kpa: must be > 0"),
         (["--fixed-below-mm", "inf"], "argument --fixed-below-mm: must be finite"),

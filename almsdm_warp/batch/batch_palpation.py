@@ -114,6 +114,23 @@ class BatchResult:
     region_vertices: np.ndarray = field(repr=False)
     free_vertices: np.ndarray = field(repr=False)
 
+    # the names of PressResult, each with its unit (the fields above are SI, named without one)
+    @property
+    def peak_force_N(self) -> np.ndarray:
+        """Largest |feedback force| while pressed [N], [B] (PressResult.peak_force_N of each)."""
+        return self.peak_force
+
+    @property
+    def hold_force_N(self) -> np.ndarray:
+        """|feedback force| at the end of the hold [N], [B] (PressResult.hold_force_N of each)."""
+        return self.hold_force
+
+    @property
+    def recovery_error_mm(self) -> np.ndarray:
+        """Distance of the contact vertex from rest at the end of the settle window [mm], [B]
+        (PressResult.recovery_error_mm of each; `recovery_error` is the same in metres)."""
+        return self.recovery_error * 1e3
+
     @property
     def stiffness_N_per_mm(self) -> np.ndarray:
         """Hold force over depth [N/mm]: the tissue's stiffness under the probe."""

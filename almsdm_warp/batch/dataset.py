@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..checks import AUTO, check_limit, check_protocol, check_value, describe
+from ..checks import AUTO, AUTO_TOL, check_limit, check_protocol, check_value, describe
 from ..errors import InputError
 from ..export.output import atomic_write, check_regular
-from ..export.tables import TableLayout
+from ..export.tables import TableLayout, millimetres
 from ..solvers import integrators
 from ..tissue.laws import law_entry, resolve_law
 from .sampling import pressable_points, sample_points
@@ -258,7 +258,7 @@ class DatasetItem:
     def columns(self, sweep: dict) -> dict:
         """This item's rows of the dataset table from its sweep table."""
         n = len(sweep["vertex"])
-        c = (np.nan, np.nan, np.nan) if self.lesion is None else np.asarray(self.lesion.center) * 1e3
+        c = (np.nan, np.nan, np.nan) if self.lesion is None else millimetres(self.lesion.center)
         out = {"scene": np.full(n, self.scene), "lesion_id": np.full(n, self.lesion_id, dtype=np.int64),
                "lesion_x_mm": np.full(n, c[0]), "lesion_y_mm": np.full(n, c[1]), "lesion_z_mm": np.full(n, c[2]),
                "lesion_radius_mm": np.full(n, 0.0 if self.lesion is None else self.lesion.radius * 1e3),
@@ -286,7 +286,7 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
         seen[scene.name] = seen.get(scene.name, 0) + 1
         name = scene.name if seen[scene.name] == 1 else f"{scene.name}_{seen[scene.name]}"
         name = name.replace(",", "_")  # a CSV cell
-        mesh, base = _scene_plan(spec, scene, name, cuda)
+        mesh, base, scene = _scene_plan(spec, scene, name, cuda)
         if spec.centers:
             centers = spec.centers.get(scene.name, np.zeros((0, 3)))
         else:
@@ -306,29 +306,38 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
 
 
 def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
-    """The scene's mesh and its baseline plan (no lesion), after the checks a sweep makes."""
+    """(The scene's mesh, its baseline plan (no lesion), the scene with its support made a plane for a
+    press from above, as a sweep's), after the checks a sweep makes."""
     from ..checks import check_ring_count
+    from ..region.contact import top_vertex
 
     rings = spec.rings if spec.rings is not None else scene.rings
-    if rings == AUTO:
-        raise InputError(f"scene {name!r} has rings = 'auto'; a dataset presses a fixed ring count: give [dataset] rings")
     mesh = scene.load_mesh()
+    scene = scene.with_support(mesh, float(mesh.vertices[top_vertex(mesh), 2]))
     scene = replace(scene, law=resolve_law(scene.law, mesh, scene.tissue))
     try:  # the scene's [tissue] law: a batch's kernels, before any work
         law_entry(scene.law).require(integrator=spec.integrator, path="batch")
     except ValueError as exc:
         raise InputError(f"scene {name!r}: {exc}") from None
-    check_ring_count(rings, mesh.vertex_count, f"rings of {name}")
+    if rings != AUTO:
+        check_ring_count(rings, mesh.vertex_count, f"rings of {name}")
     press = {k: spec.press.get(k, getattr(scene.press, k)) for k in ("depth", "ramp", "hold", "settle")}
     check_protocol(press["depth"], spec.dt, press["ramp"], press["hold"], press["settle"], 1, float(np.ptp(mesh.vertices, axis=0).max()))
     check_limit(spec.points, "points", "[dataset] points")
     check_sphere_travel(scene.probe_radius, press["depth"], spec.dt, press["ramp"])
     points, vertices = pressable_points(mesh, spec.points, scene.fixed_below)
     chunk = spec.chunk or (len(vertices) if cuda else 64)
-    plan = SweepPlan(mesh, scene.tissue, None, None, int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
-                     press["settle"], points, vertices, chunk, spec.integrator, probe_radius=scene.probe_radius,
+    tol = (scene.tol or AUTO_TOL) if rings == AUTO else None
+    plan = SweepPlan(mesh, scene.tissue, None, None, 1 if tol else int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
+                     press["settle"], points, vertices, chunk, spec.integrator, tol, probe_radius=scene.probe_radius,
                      fixed_below=scene.fixed_below, law=scene.law)
-    return mesh, plan
+    if tol is not None:  # rings "auto" (a mesh file's preset): each point's sized once, on the baseline, as a sweep's
+        from .sweep_auto import size_regions
+
+        plan.rings = size_regions(mesh, scene.tissue, vertices, tol, depth=press["depth"], ramp=press["ramp"], hold=press["hold"],
+                                  integrator=spec.integrator, dt=spec.dt, probe_radius=scene.probe_radius,
+                                  fixed_below=scene.fixed_below, law=scene.law)
+    return mesh, plan, scene
 
 
 def spec_key(items: list[DatasetItem]) -> str:

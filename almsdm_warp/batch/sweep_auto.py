@@ -20,20 +20,22 @@ import numpy as np
 
 
 def size_regions(mesh, tissue, vertices, tol, *, depth, ramp, hold, integrator="explicit", dt=1e-3,
-                 edge_scale=None, anchor_scale=None, on_point=None) -> np.ndarray:
+                 on_point=None, **model) -> np.ndarray:
     """Rings the adaptive region grows to at each of `vertices` under the press (depth [m], ramp and
     hold [s]) at tolerance `tol` [m]: int64, one per vertex (each distinct vertex sized once).
 
+    model: the palpation's keywords (edge_scale, anchor_scale, element_scale, fixed_below, law,
+    probe_radius: a sphere's region grown from the patch it covers at `depth`, as palpate's).
     on_point(): called after each distinct vertex (a progress bar)."""
     from ..protocol.adaptive import AdaptivePalpation, hold_press
 
     verts = np.asarray(vertices, dtype=np.int64)
     distinct, inverse = np.unique(verts, return_inverse=True)
-    pal = AdaptivePalpation(mesh, tissue, tol=tol, integrator=integrator, dt=dt, device="cpu", retire=False,
-                            edge_scale=edge_scale, anchor_scale=anchor_scale)
+    pal = AdaptivePalpation(mesh, tissue, tol=tol, integrator=integrator, dt=dt, device="cpu", retire=False, **model)
+    sphere = pal.probe_radius > 0
     chosen = np.empty(len(distinct), dtype=np.int64)
     for i, v in enumerate(distinct):
-        pal.touch(int(v))
+        pal.touch(int(v), depth if sphere else None)
         hold_press(pal, depth, ramp, hold)
         chosen[i] = pal.rings_chosen
         pal.retire_region()  # every vertex at rest in both states: the next contact starts from rest

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..export.tables import TableLayout
+from ..export.tables import TableLayout, millimetres
 from .sampling import Sampling
 
 COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "hold_force_N", "stiffness_N_per_mm", "recovery_error_mm", "rings")
@@ -149,7 +149,7 @@ class SweepPlan:
 
     def columns(self, begin: int, end: int, results) -> dict:
         """The output columns of points begin..end from [(indices in the chunk, BatchResult)], one per ring count."""
-        p = self.points[begin:end] * 1e3
+        p = millimetres(self.points[begin:end])
         n = end - begin
         out = {"x_mm": p[:, 0], "y_mm": p[:, 1], "z_mm": p[:, 2], "vertex": np.empty(n, dtype=np.int64),
                "rings": self.point_rings[begin:end].copy()}

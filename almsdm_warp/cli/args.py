@@ -9,11 +9,12 @@ import sys
 
 import numpy as np
 
+from ..checks import AUTO_TOL, rings_text  # noqa: F401  (the commands take rings_text from here)
 from ..errors import InputError
 
 GLOBAL_RINGS = ("global", "global-free")
 """--rings values of the global model (anchored, or free with no anchors)."""
-AUTO_TOL_MM = 0.1
+AUTO_TOL_MM = AUTO_TOL * 1e3
 """--tol-mm when --rings auto is given without it [mm]."""
 
 
@@ -21,7 +22,8 @@ class Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line (an InputError), not usage + message."""
 
     def error(self, message):
-        raise InputError(f"{self.prog}: {message}")
+        command = self.prog.split()[1:]  # "almsdm palpate" -> the subcommand; the line already starts "almsdm:"
+        raise InputError(f"{' '.join(command)}: {message}" if command else message)
 
 
 def add_command(sub, name: str, summary: str, description: str):
@@ -165,33 +167,31 @@ def check_contact(contact, probe, mesh):
                          f"(it is too far from the mesh)")
 
 
-ORGAN_SPAN_MM = (2.0, 2000.0)
-"""An organ's largest extent lies between these [mm]; outside, the mesh's unit is likely not mm."""
-
-
-def units_hint(mesh) -> str | None:
-    """A note when the mesh's largest extent suggests its file is not in millimetres, else None."""
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    span = float(np.ptp(vertices, axis=0).max()) * 1e3 if len(vertices) else 0.0
-    lo, hi = ORGAN_SPAN_MM
-    if 0.0 < span < lo:
-        return f"the mesh spans {span:.4g} mm; if its file is in metres or centimetres, give --scale-mm 1000 or 10"
-    if span > hi:
-        return f"the mesh spans {span:.4g} mm; if its file is in micrometres or tenths of a millimetre, give --scale-mm 0.001 or 0.1"
-    return None
-
-
-def print_notes(mesh):
-    """The mesh's validation notes, and a units hint where its size suggests one, one line each on stderr."""
-    hint = units_hint(mesh)
-    for note in [*mesh.notes, *([hint] if hint else [])]:
+def print_notes(mesh, extra: str = ""):
+    """The mesh's validation notes (and `extra`, a line on its unit), one line each on stderr."""
+    for note in [*mesh.notes, *([extra] if extra else [])]:
         print(f"note: {note}", file=sys.stderr)
+
+
+def load_scene_and_mesh(args):
+    """(scene, mesh) as every command reads them: the scene or mesh file (args.scene), a mesh file at
+    --scale-mm or else at the unit guessed from its size, with --tissue's preset; the mesh's notes
+    and the unit line printed. InputError for --scale-mm on a scene file."""
+    from ..scene.loader import resolve_scene_or_mesh
+
+    scale = getattr(args, "scale_mm", None)
+    scene = resolve_scene_or_mesh(args.scene, scale_mm=1.0 if scale is None else scale, tissue=getattr(args, "tissue", None))
+    if scale is not None and scene.path is not None:
+        raise InputError(f"--scale-mm is for a mesh file; the scene {scene.name!r} sets its own ([mesh] scale_mm)")
+    scene, mesh, units = scene.load_mesh_guessing_units(guess=scale is None)
+    print_notes(mesh, units)
+    return scene, mesh
 
 
 MATERIAL_FLAGS = {
     "youngs_modulus_kpa": ("--youngs-modulus-kpa", "youngs_modulus", 1.0e-3, "> 0", "KPA", "Young's modulus E [kPa]"),
     "poisson_ratio": ("--poisson-ratio", "poisson_ratio", 1.0, "number", "NU", "Poisson ratio nu, in (-1, 0.5) (default 0.45)"),
-    "density_kg_m3": ("--density-kg-m3", "density", 1.0, "> 0", "RHO", "density [kg/m^3] (default 1000)"),
+    "density_kg_per_m3": ("--density-kg-per-m3", "density", 1.0, "> 0", "RHO", "density [kg/m^3] (default 1000)", "--density-kg-m3"),
     "thickness_mm": ("--thickness-mm", "thickness", 1.0e3, ">= 0", "MM", "membrane thickness of a surface mesh [mm] (needed there)"),
     "foundation_kpa_per_mm": ("--foundation-kpa-per-mm", "foundation", 1.0e-6, ">= 0", "K",
                               "Winkler foundation of a surface mesh [kPa/mm]: anchors k_i = K x area (default 0)"),
@@ -199,8 +199,9 @@ MATERIAL_FLAGS = {
     "rayleigh_alpha_per_s": ("--rayleigh-alpha-per-s", "rayleigh_alpha", 1.0, ">= 0", "A", "mass-proportional Rayleigh damping [1/s]"),
     "rayleigh_beta_s": ("--rayleigh-beta-s", "rayleigh_beta", 1.0, ">= 0", "B", "stiffness-proportional Rayleigh damping [s]"),
 }
-"""The tissue-as-a-material flags: dest -> (flag, Material attribute, flag units per SI unit, rule, metavar, help).
-Any of them switches the run to the material model (tissue/material.py) with the scene's values as defaults."""
+"""The tissue-as-a-material flags: dest -> (flag, Material attribute, flag units per SI unit, rule, metavar, help,
+old spellings still taken). Named as the scene's keys are (tissue.material.MATERIAL_KEYS), lower case. Any of
+them switches the run to the material model (tissue/material.py) with the scene's values as defaults."""
 
 
 def add_integrator_arg(parser, batch: bool = False) -> None:
@@ -266,53 +267,110 @@ def add_probe_radius_arg(parser) -> None:
 
 
 def add_tissue_args(parser, supports: bool = True) -> None:
-    """The material flags and (with `supports`) --fixed-below-mm, in their own group."""
+    """--tissue, the material flags and (with `supports`) --support and --fixed-below-mm, in their own group."""
+    from ..tissue.presets import DEFAULT_PRESET, PRESETS
+
     group = parser.add_argument_group("tissue as a material (any of these replaces the scene's per-spring constants)")
-    for dest, (flag, _attr, _factor, rule, metavar, text) in MATERIAL_FLAGS.items():
+    group.add_argument("--tissue", choices=tuple(PRESETS), default=None,
+                       help=f"a tissue preset (docs/calibration.md): its material and, for a mesh file, its probe and region "
+                            f"(default: the scene's; a mesh file's: {DEFAULT_PRESET}); paper: the paper's per-spring constants")
+    for dest, (flag, _attr, _factor, rule, metavar, text, *aliases) in MATERIAL_FLAGS.items():
         group.add_argument(flag, dest=dest, type=number_arg(rule), default=None, metavar=metavar, help=text)
+        for alias in aliases:  # an old spelling, still taken, not listed
+            group.add_argument(alias, dest=dest, type=number_arg(rule), default=None, help=argparse.SUPPRESS)
     if supports:
-        group.add_argument("--fixed-below-mm", type=number_arg("number"), default=None, metavar="Z",
+        where = group.add_mutually_exclusive_group()
+        where.add_argument("--support", type=support_arg, default=None, metavar="{far-side,below:FRACTION,none}",
+                           help="what holds the organ: far-side (every vertex lower than 30%% of the way from its bottom to the "
+                                "contact), below:FRACTION (its lowest FRACTION of height) or none (default: the scene's; a mesh "
+                                "file's: far-side on a tet volume of a material, none on a surface, held by its foundation)")
+        where.add_argument("--fixed-below-mm", type=number_arg("number"), default=None, metavar="Z",
                            help="support: every vertex with z below Z [mm] is fixed (an organ on a plate, +z up; default: the scene's)")
 
 
-def scene_with_tissue_args(args, scene, mesh):
-    """The scene with the material flags and --fixed-below-mm applied; InputError for a material that
-    cannot be (no E to start from, a surface with no thickness, nu out of range) or a support that
-    holds every vertex."""
-    from dataclasses import asdict, replace
+def support_arg(text):
+    """An argparse type for --support (scene.support.parse_support)."""
+    from ..scene.support import parse_support
+
+    try:
+        return parse_support(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+support_arg.__name__ = "support"
+
+
+def scene_with_tissue_args(args, scene, mesh, contact_z: float | None = None):
+    """The scene with --tissue, the material flags, --law and the support (--support, --fixed-below-mm, or the
+    scene's relative rule made a plane for a press from above at `contact_z` [m], default the top vertex's)
+    applied; InputError for a material that cannot be (no E to start from, a surface with no thickness, nu
+    out of range) or a support that holds every vertex."""
+    from dataclasses import replace
+
+    scene = _with_preset(args, scene)
+    tissue = _material_from_flags(args, scene, mesh)
+    law = scene.law if getattr(args, "law", None) is None else args.law
+    scene = replace(scene, tissue=tissue, law=law)
+    flag_z, rule = getattr(args, "fixed_below_mm", None), getattr(args, "support", None)
+    if flag_z is not None:
+        scene = replace(scene, support=None, fixed_below=flag_z * 1e-3)
+    elif rule is not None:
+        scene = replace(scene, support=rule)
+    if contact_z is None:
+        from ..region.contact import top_vertex
+
+        contact_z = float(mesh.vertices[top_vertex(mesh), 2])
+    scene = scene.with_support(mesh, contact_z)
+    fixed_below = scene.fixed_below
+    if fixed_below is not None and not (mesh.vertices[:, 2] >= fixed_below).any():
+        where = f"--fixed-below-mm {flag_z:g}" if flag_z is not None else "the scene's [support] fixed_below_mm"
+        raise InputError(f"{where} is above every vertex of {mesh.name} (highest z {mesh.vertices[:, 2].max() * 1e3:.4g} mm): "
+                         f"nothing could move")
+    return scene
+
+
+def _with_preset(args, scene):
+    """The scene with --tissue's material in place of its own (a mesh file took the preset when read)."""
+    from dataclasses import replace
+
+    from ..tissue.presets import tissue_preset
+
+    name = getattr(args, "tissue", None)
+    if name is None or scene.preset == name:
+        return scene
+    return replace(scene, tissue=tissue_preset(name).tissue, preset=name)
+
+
+def _material_from_flags(args, scene, mesh):
+    """The scene's tissue with the material flags applied (none given: the scene's tissue)."""
+    from dataclasses import asdict
 
     from ..tissue.material import Material
 
     given = {attr: getattr(args, dest) / factor for dest, (_f, attr, factor, *_rest) in MATERIAL_FLAGS.items()
              if getattr(args, dest, None) is not None}
     tissue = scene.tissue
-    if given:
-        base = asdict(tissue) if isinstance(tissue, Material) else {}
-        if "youngs_modulus" not in given and not base:
-            flags = ", ".join(MATERIAL_FLAGS[d][0] for d in MATERIAL_FLAGS if getattr(args, d, None) is not None)
-            raise InputError(f"{flags} make the tissue a material, which needs --youngs-modulus-kpa "
-                             f"(the scene {scene.name!r} gives per-spring constants, not a material)")
-        if "damping_ratio" in given:  # one kind of damping: the flag replaces the scene's
-            base.update(rayleigh_alpha=0.0, rayleigh_beta=0.0)
-        elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
-            base.update(damping_ratio=0.0)
-        base.update(given)
-        from ..tissue.laws import LAWS, default_law
+    if not given:
+        return tissue
+    base = asdict(tissue) if isinstance(tissue, Material) else {}
+    if "youngs_modulus" not in given and not base:
+        flags = ", ".join(MATERIAL_FLAGS[d][0] for d in MATERIAL_FLAGS if getattr(args, d, None) is not None)
+        raise InputError(f"{flags} make the tissue a material, which needs --youngs-modulus-kpa "
+                         f"(the scene {scene.name!r} gives per-spring constants, not a material)")
+    if "damping_ratio" in given:  # one kind of damping: the flag replaces the scene's
+        base.update(rayleigh_alpha=0.0, rayleigh_beta=0.0)
+    elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
+        base.update(damping_ratio=0.0)
+    base.update(given)
+    from ..tissue.laws import LAWS, default_law
 
-        law = getattr(args, "law", None) or scene.law or default_law(True, Material(**base))
-        becomes_volume = getattr(args, "volume", "off") == "auto" and law in LAWS and LAWS[law].volumetric
-        if not mesh.is_volume and not becomes_volume and not base.get("thickness", 0.0) > 0.0:
-            raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0")
-        try:
-            tissue = Material(**base)
-        except (TypeError, ValueError) as exc:
-            flag = next((f"{f}: " for f, attr, *_r in MATERIAL_FLAGS.values() if f"Material.{attr} " in str(exc)), "")
-            raise InputError(f"{flag}{exc}") from None
-    law = scene.law if getattr(args, "law", None) is None else args.law
-    flag_z = getattr(args, "fixed_below_mm", None)
-    fixed_below = scene.fixed_below if flag_z is None else flag_z * 1e-3
-    if fixed_below is not None and not (mesh.vertices[:, 2] >= fixed_below).any():
-        where = f"--fixed-below-mm {flag_z:g}" if flag_z is not None else "the scene's [support] fixed_below_mm"
-        raise InputError(f"{where} is above every vertex of {mesh.name} (highest z {mesh.vertices[:, 2].max() * 1e3:.4g} mm): "
-                         f"nothing could move")
-    return replace(scene, tissue=tissue, fixed_below=fixed_below, law=law)
+    law = getattr(args, "law", None) or scene.law or default_law(True, Material(**base))
+    becomes_volume = getattr(args, "volume", "off") == "auto" and law in LAWS and LAWS[law].volumetric
+    if not mesh.is_volume and not becomes_volume and not base.get("thickness", 0.0) > 0.0:
+        raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0")
+    try:
+        return Material(**base)
+    except (TypeError, ValueError) as exc:
+        flag = next((f"{f}: " for f, attr, *_r in MATERIAL_FLAGS.values() if f"Material.{attr} " in str(exc)), "")
+        raise InputError(f"{flag}{exc}") from None

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..checks import check_limit, check_ring_count
+from ..checks import check_limit, check_ring_count, rings_text
 from .args import add_command, count_arg, get_device, int_list, quiet_warp
 
 
@@ -49,7 +49,7 @@ def cmd_bench(args) -> int:
         for rings in sorted({1, 2, 3, 4, args.rings}):  # --rings: the batch's, also single for the ratio
             row = measure(mesh, rings, integrator, device.alias, blocks, steps)
             single.append({k: row[k] for k in ("rings", "integrator", "steps_per_s", "step_us_median")})
-            print(f"  {rings} rings {integrator}: {row['step_us_median']:.2f} us/step, {row['steps_per_s']:,.0f} steps/s")
+            print(f"  {rings_text(rings)} {integrator}: {row['step_us_median']:.2f} us/step, {row['steps_per_s']:,.0f} steps/s")
     glob = []
     for integrator in INTEGRATORS:
         row = measure(mesh, "global", integrator, device.alias, max(blocks // 5, 1), max(steps // 10, 20))
@@ -63,7 +63,7 @@ def cmd_bench(args) -> int:
     for b in sizes:
         row = measure_batch(mesh, args.rings, b, device.alias, steps=(100 if device.is_cpu or args.quick else 1000), repeats=3, dt=dt)
         batch.append({"rings": row["rings"], "batch": b, "region_steps_per_s": row["region_steps_per_s"]})
-        print(f"  batch {b} x {args.rings} rings: {row['region_steps_per_s']:,.0f} region-steps/s (kernel {row['kernel']}, {row['threads']} threads per block, dt {dt * 1e3:g} ms)")
+        print(f"  batch {b} x {rings_text(args.rings)}: {row['region_steps_per_s']:,.0f} region-steps/s (kernel {row['kernel']}, {row['threads']} threads per block, dt {dt * 1e3:g} ms)")
     one = next(r for r in single if r["rings"] == args.rings and r["integrator"] == "explicit")["steps_per_s"]
     ratios = {
         "batch_best_over_single_explicit": max(r["region_steps_per_s"] for r in batch) / one,

@@ -6,7 +6,8 @@ import sys
 import time
 from pathlib import Path
 
-SPEC_DECIDES = ("scene", "rings", "tol_mm", "depth_mm", "ramp_s", "hold_s", "settle_s", "dt_ms", "scale_mm", "png", "ray", "law")
+SPEC_DECIDES = ("scene", "rings", "tol_mm", "depth_mm", "ramp_s", "hold_s", "settle_s", "dt_ms", "scale_mm", "png", "ray", "law", "tissue",
+                "support", "fixed_below_mm")
 """sweep's arguments that a dataset spec decides (an error beside --dataset, not silently ignored)."""
 
 

@@ -96,6 +96,14 @@ def signals_held():
         raise KeyboardInterrupt
 
 
+def require_usd() -> None:
+    """InputError, one line, where --usd is asked for and usd-core (the `usd` extra) is not installed."""
+    import importlib.util
+
+    if importlib.util.find_spec("pxr") is None:
+        raise InputError("--usd records a USD stage, which needs usd-core: pip install 'almsdm_warp[usd]'")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
     from .args import Parser
@@ -162,6 +170,8 @@ def _run(argv) -> int:
             from ..warp_init import start_devices
 
             start_devices(getattr(args, "device", None))
+        if getattr(args, "usd", None):
+            require_usd()
         with signals_held():
             for name in SHIELDED_IMPORTS + (SHIELDED_USD_IMPORTS if getattr(args, "usd", None) else ()):
                 importlib.import_module(name)

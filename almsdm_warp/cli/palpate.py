@@ -25,6 +25,7 @@ from .args import (
     count_arg,
     finite,
     get_device,
+    load_scene_and_mesh,
     mesh_json,
     number_arg,
     path_arg,
@@ -32,6 +33,7 @@ from .args import (
     probe_position,
     quiet_warp,
     rings_arg,
+    rings_text,
     scene_with_tissue_args,
 )
 from .volume_arg import add_volume_arg, needs_volume, volume_for_press
@@ -63,7 +65,7 @@ def add_parser(sub) -> None:
     palpate.add_argument("--settle-s", type=number_arg(">= 0"), default=None, metavar="S", help="settle window after release [s] (default: the scene's)")
     add_probe_radius_arg(palpate)
     palpate.add_argument("--presses", type=count_arg, default=1, metavar="N", help="presses at the same spot (default 1)")
-    palpate.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default 1; 10 for cm, 1000 for m)")
+    palpate.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default: guessed from its size, said where not 1; 10 for cm, 1000 for m)")
     where = palpate.add_mutually_exclusive_group()
     where.add_argument("--vertex", type=int, default=None, metavar="V", help="contact vertex (a surface vertex id)")
     where.add_argument("--probe-mm", type=float, nargs=3, metavar=("X", "Y", "Z"), help="probe position [mm]; the contact is its nearest surface vertex")
@@ -174,15 +176,9 @@ def cmd_palpate(args) -> int:
 
 def _resolve(args) -> _Run:
     """The device, scene, mesh, region, press protocol and contact that the arguments ask for."""
-    from ..scene.loader import resolve_scene_or_mesh
-
     quiet_warp()
     device = get_device(args.device)
-    scene = resolve_scene_or_mesh(args.scene, scale_mm=1.0 if args.scale_mm is None else args.scale_mm)
-    if args.scale_mm is not None and scene.path is not None:
-        raise InputError(f"--scale-mm is for a mesh file; the scene {scene.name!r} sets its own ([mesh] scale_mm)")
-    mesh = scene.load_mesh()
-    print_notes(mesh)
+    scene, mesh = load_scene_and_mesh(args)
     scene = scene_with_tissue_args(args, scene, mesh)
 
     rings = scene.rings if args.rings is None else args.rings
@@ -198,6 +194,7 @@ def _resolve(args) -> _Run:
     vertex, point, contact_extra = _contact(args, mesh, device)
     if needs_volume(args.volume, mesh, scene.tissue, scene.law):
         mesh, vertex, point, contact_extra = _volume(args, scene, mesh, point, depth, device)
+    scene = scene.with_support(mesh, float(mesh.vertices[vertex, 2]))  # a relative support, from this contact
     if scene.fixed_below is not None and mesh.vertices[vertex, 2] < scene.fixed_below:
         raise InputError(f"the contact vertex {vertex} (z {mesh.vertices[vertex, 2] * 1e3:.4g} mm) is supported: it lies below "
                          f"the support plane z = {scene.fixed_below * 1e3:g} mm and cannot be pressed")
@@ -210,12 +207,12 @@ def _resolve(args) -> _Run:
 
 def _build(args, run: _Run):
     """Say what is pressed, then make the palpation (adaptive for rings "auto") and touch the contact."""
-    from ..protocol.palpation import Palpation
+    from ..scene.press import build_palpation
     from ..tissue.material import holding_notes
 
     mesh, scene = run.mesh, run.scene
     print(mesh.summary())
-    support = f"; fixed below z = {scene.fixed_below * 1e3:g} mm" if scene.fixed_below is not None else ""
+    support = f"; support {scene.support_text()}" if scene.fixed_below is not None or scene.support else ""
     print(f"tissue: {scene.tissue_model} ({scene.tissue_text()}), law {scene.law}{support}")
     if scene.lesion is not None:
         les = scene.lesion.as_dict()
@@ -224,17 +221,9 @@ def _build(args, run: _Run):
         f"contact: vertex {run.vertex} at {np.round(run.point * 1e3, 2).tolist()} mm; press {run.depth * 1e3:g} mm "
         f"(ramp {run.ramp:g} s, hold {run.hold:g} s, settle {run.settle:g} s) x {args.presses}"
     )
-    scales = scene.lesion.model_scales(mesh, scene.tissue, scene.law) if scene.lesion is not None else {}
-    lesion = dict(scales, fixed_below=scene.fixed_below)
     try:
-        if run.tol is not None:
-            from ..protocol.adaptive import AdaptivePalpation
-
-            pal = AdaptivePalpation(mesh, scene.tissue, tol=run.tol, integrator=args.integrator, dt=run.dt, device=run.device,
-                                    probe_radius=run.probe_radius, law=scene.law, **lesion)
-        else:
-            pal = Palpation(mesh, scene.tissue, rings=run.rings, integrator=args.integrator, dt=run.dt, device=run.device,
-                            probe_radius=run.probe_radius, law=scene.law, **lesion)
+        pal = build_palpation(scene, mesh, rings="auto" if run.tol is not None else run.rings, tol=run.tol,
+                              integrator=args.integrator, dt=run.dt, device=run.device, probe_radius=run.probe_radius)
         if run.probe_radius > 0:
             pal.touch(run.vertex, run.depth)  # the region grown from the patch the sphere covers at this depth
         else:
@@ -255,10 +244,10 @@ def _report_model(args, run: _Run, pal):
     if tol is not None:
         what = (
             f"auto rings (tol {tol * 1e3:g} mm) around vertex {run.vertex}, grown from "
-            f"{pal.region.outer_ring} ring(s) of {pal.region_vertices} vertices"
+            f"{rings_text(pal.region.outer_ring)} of {pal.region_vertices} vertices"
         )
     elif pal.region is not None:
-        what = f"{rings} rings around vertex {run.vertex}, {pal.region_vertices} vertices ({free_count} free)"
+        what = f"{rings_text(rings)} around vertex {run.vertex}, {pal.region_vertices} vertices ({free_count} free)"
     else:
         kind = "anchored" if anchored else "free, no anchors"
         what = f"{rings} ({kind}), {free_count} of {pal.region_vertices} vertices free"
@@ -286,7 +275,7 @@ def _press(args, run: _Run, pal) -> list:
     presses = []
     original_step = pal.step
     deepest = PressSchedule.from_times(dt, ramp, hold).release_step  # the end of the first hold
-    label = f"{run.mesh.name}, {run.rings} {'rings' if pal.region is not None else 'model'}, {run.depth * 1e3:g} mm press"
+    label = f"{run.mesh.name}, {rings_text(run.rings) if pal.region is not None else f'{run.rings} model'}, {run.depth * 1e3:g} mm press"
     recording = Recording(args, pal, args.presses, per_press, deepest, label)
     with recording, Progress(args.presses * per_press, enabled=args.progress) as bar:
 
@@ -306,7 +295,7 @@ def _press(args, run: _Run, pal) -> list:
                     raise InputError(str(exc)) from exc
                 bar.done = (i + 1) * per_press
                 presses.append(result)
-                auto = f", {pal.rings_chosen} rings ({pal.auto_reason})" if run.tol is not None else ""
+                auto = f", {rings_text(pal.rings_chosen)} ({pal.auto_reason})" if run.tol is not None else ""
                 rt = result.recovery_time_s
                 rt_text = f"{rt:.3f} s" if math.isfinite(rt) else f"not within the {settle:g} s settle window"
                 bar.close()

@@ -12,8 +12,9 @@ import numpy as np
 from ..checks import LIMITS, check_limit, check_protocol, check_region_steps, check_ring_count
 from ..errors import InputError
 from .dataset import add_dataset_arg, cmd_dataset
-from .args import (auto_tol, add_integrator_arg, add_law_arg, add_tissue_args, check_law, count_arg, get_device, number_arg, print_notes,
-                   quiet_warp, rings_arg, scene_with_tissue_args)
+from .args import rings_text as words_for_rings
+from .args import (auto_tol, add_integrator_arg, add_law_arg, add_tissue_args, check_law, count_arg, get_device, load_scene_and_mesh,
+                   number_arg, quiet_warp, rings_arg, scene_with_tissue_args)
 
 
 def add_parser(sub) -> None:
@@ -37,7 +38,7 @@ def add_parser(sub) -> None:
     add_integrator_arg(p, batch=True)
     add_law_arg(p, "batch")
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=None, metavar="MS", help="frame [ms] (default 1); the explicit integrator takes it in substeps under 0.9 x the critical step")
-    p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file")
+    p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default: guessed from its size)")
     p.add_argument("--device", default="cpu", help="cpu, cuda:0, ..., a comma list, or 'all' (every CUDA device); default cpu")
     p.add_argument("--chunk", type=count_arg, default=None, metavar="N", help="points per batch and per resumable part (default 64 on the CPU; on GPUs, four chunks a device or more, 16384..65536 points each)")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS", help="run the chunks on Ray actors (one GPU each with a CUDA --device, else one CPU; one a GPU of the cluster); ADDRESS of a cluster, or a local one")
@@ -145,12 +146,8 @@ def _plan(args, devices, times):
     from ..batch.sweep import models_behind
     from ..batch.sweep_plan import SweepPlan, check_sphere_travel, default_chunk
     from ..batch.sweep_auto import rings_summary
-    from ..scene.loader import resolve_scene_or_mesh
-
-    scene = resolve_scene_or_mesh(args.scene, scale_mm=args.scale_mm or 1.0)
-    mesh = scene.load_mesh()
+    scene, mesh = load_scene_and_mesh(args)
     scene = scene_with_tissue_args(args, scene, mesh)
-    print_notes(mesh)
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings
     tol = auto_tol(args, rings, scene)
@@ -158,8 +155,6 @@ def _plan(args, devices, times):
     if tol is not None:
         check_law(scene, mesh, args.integrator, "adaptive", "--rings auto (each region sized by an adaptive press): ")
     radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
-    if radius > 0 and tol is not None:
-        raise InputError("a spherical probe (--probe-radius-mm, [probe] radius_mm) needs a ring count: --rings auto sizes the paper's probe's regions")
     depth = press.depth if args.depth_mm is None else args.depth_mm * 1e-3
     ramp = press.ramp if args.ramp_s is None else args.ramp_s
     hold = press.hold if args.hold_s is None else args.hold_s
@@ -189,10 +184,10 @@ def _plan(args, devices, times):
         substeps = _substeps(plan)
     cost = check_region_steps(len(vertices), frames, substeps, args.max_region_steps)
     if tol is not None:
-        plan.rings = _size(plan, scene, scales, tol, args.progress)
+        plan.rings = _size(plan, scales, tol, args.progress)
         rings_text = f"auto rings (tol {tol * 1e3:g} mm: {rings_summary(plan.rings)})"
     else:
-        rings_text = f"{rings} rings"
+        rings_text = words_for_rings(rings)
     lesion = f"; lesion {scene.lesion.as_dict()}" if scene.lesion is not None else ""
     distinct = "sampled while the first chunks press" if sampling is not None else f"{len(np.unique(vertices))} distinct vertices"
     where = f"Ray ({'GPU' if cuda else 'CPU'} tasks)" if args.ray else ", ".join(devices)
@@ -245,7 +240,7 @@ def _report(columns, left: int, steps: int, elapsed: float) -> None:
     )
 
 
-def _size(plan, scene, scales, tol, progress):
+def _size(plan, scales, tol, progress):
     """--rings auto: the ring count of each point (sweep_auto.size_regions, on the CPU), timed and said."""
     from ..solvers.stepper import SimulationDiverged
     from ..progress import Progress
@@ -255,9 +250,9 @@ def _size(plan, scene, scales, tol, progress):
     t0 = time.perf_counter()
     try:
         with Progress(distinct, enabled=progress, label="sizing regions") as bar:
-            rings = size_regions(plan.mesh, scene.tissue, plan.vertices, tol, depth=plan.depth, ramp=plan.ramp, hold=plan.hold,
-                                 integrator=plan.integrator, dt=plan.dt, edge_scale=scales.get("edge_scale"),
-                                 anchor_scale=scales.get("anchor_scale"), on_point=bar.advance)
+            rings = size_regions(plan.mesh, plan.tissue, plan.vertices, tol, depth=plan.depth, ramp=plan.ramp, hold=plan.hold,
+                                 integrator=plan.integrator, dt=plan.dt, on_point=bar.advance, probe_radius=plan.probe_radius,
+                                 fixed_below=plan.fixed_below, law=plan.law, **scales)
     except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
         raise InputError(str(exc)) from exc
     print(f"auto rings: {distinct} contacts sized to {tol * 1e3:g} mm in {time.perf_counter() - t0:.2f} s "

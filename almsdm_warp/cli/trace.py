@@ -3,7 +3,7 @@
 The path is the sphere centre's, read from a CSV (t_s, x_mm, y_mm, z_mm) or, without --path, the
 built-in stroke on the scene (touch down, press, slide across the surface, lift). It is sampled at
 each step of the simulation (linear interpolation in time) and the region follows the contact.
-With a virtual coupling (--coupling-stiffness-N-per-mm), the path is the haptic device's and the
+With a virtual coupling (--coupling-stiffness-n-per-mm), the path is the haptic device's and the
 tool follows it through a spring-damper (protocol/coupling.py); the trace then holds the tool's
 position and the force sent to the device.
 
@@ -14,18 +14,20 @@ device, step, send the force). The USD stage's time code k is the state after st
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import math
+import time
 from pathlib import Path
 
 import numpy as np
 
 from ..checks import check_ring_count
 from ..errors import InputError
-from ..export.tables import TableLayout
+from ..export.tables import TableLayout, millimetres
 from ..mesh.validate import MAX_COORDINATE_M
 from .args import add_command, add_integrator_arg, add_law_arg, add_probe_radius_arg, add_tissue_args, check_law, count_arg
-from .args import get_device, number_arg, path_arg, print_notes, quiet_warp, rings_arg, scene_with_tissue_args
+from .args import auto_tol, get_device, load_scene_and_mesh, number_arg, path_arg, quiet_warp, rings_arg, rings_text, scene_with_tissue_args
 
 PATH_COLUMNS = ("t_s", "x_mm", "y_mm", "z_mm")
 """The columns of a path file, in this order, after a header line that names them."""
@@ -47,6 +49,16 @@ MAX_PATH_STEPS = 10_000_000
 """Steps a path may take at dt (about 3 hours at 1 kHz); beyond, its times or dt are a mistake."""
 
 
+COUPLING_FLAGS = (
+    ("--coupling-stiffness-n-per-mm", "--coupling-stiffness-N-per-mm", "coupling_k", "> 0", None, "K", "coupling spring k_c [N/mm]"),
+    ("--coupling-damping-ns-per-m", "--coupling-damping-Ns-per-m", "coupling_b", ">= 0", 0.0, "B", "coupling damper b_c [N s/m] (default 0)"),
+    ("--device-damping-ns-per-m", "--device-damping-Ns-per-m", "device_b", ">= 0", None, "B",
+     "the haptic device's physical damping b [N s/m]; the coupling must meet b > k_c T / 2 + |b_c| (T = dt)"),
+)
+"""The virtual coupling's flags, lower case as every flag: (flag, its old spelling, still taken but not listed,
+dest, rule, default, metavar, help)."""
+
+
 def add_parser(sub) -> None:
     p = add_command(
         sub, "trace", "move the probe along a path (a CSV or the built-in stroke) and write the force trace",
@@ -54,22 +66,23 @@ def add_parser(sub) -> None:
         "the global model), and write the force at each reported step: " + ", ".join(COLUMNS) + ".")
     p.add_argument("scene", nargs="?", default=None, type=path_arg, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     p.add_argument("--path", dest="path_csv", default=None, type=path_arg, metavar="CSV", help="the sphere centre's path: a header t_s,x_mm,y_mm,z_mm, then rows with t_s increasing (default: the built-in stroke on the scene)")
-    p.add_argument("--rings", type=rings_arg(("global",)), default=None, metavar="{N,global}", help="rings of the local region, or the global model, anchored (default: the scene's)")
+    p.add_argument("--rings", type=rings_arg(("auto", "global")), default=None, metavar="{N,auto,global}", help="rings of the local region, auto (sized to --tol-mm by an adaptive press at the top, as palpate's), or the global model, anchored (default: the scene's)")
+    p.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
     add_integrator_arg(p)
     add_law_arg(p, "stroke")
     add_probe_radius_arg(p)
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="step [ms] at which the path is sampled (default 1: haptic rate)")
     p.add_argument("--report-every", type=count_arg, default=1, metavar="N", help="a trace row every Nth step, and the last (default 1)")
-    p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default 1)")
+    p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default: guessed from its size)")
     p.add_argument("--out", default=None, type=path_arg, metavar="PATH", help="the trace: .csv (a header line, then one row per reported step) or .npz")
     p.add_argument("--png", default=None, type=path_arg, metavar="PATH", help="a plot of the force against time")
     p.add_argument("--usd", default=None, type=path_arg, metavar="PATH", help="record the stroke to a USD stage (.usda, .usdc, .usd): the organ, the probe, the moving region")
     p.add_argument("--usd-every", type=count_arg, default=10, metavar="N", help="a USD frame every Nth step (default 10)")
     p.add_argument("--json", default=None, type=path_arg, metavar="PATH", help="a JSON summary: path, model, peak force, relocations")
     c = p.add_argument_group("virtual coupling (a haptic device: the path is the device's, the tool follows it)")
-    c.add_argument("--coupling-stiffness-N-per-mm", dest="coupling_k", type=number_arg("> 0"), default=None, metavar="K", help="coupling spring k_c [N/mm]")
-    c.add_argument("--coupling-damping-Ns-per-m", dest="coupling_b", type=number_arg(">= 0"), default=0.0, metavar="B", help="coupling damper b_c [N s/m] (default 0)")
-    c.add_argument("--device-damping-Ns-per-m", dest="device_b", type=number_arg(">= 0"), default=None, metavar="B", help="the haptic device's physical damping b [N s/m]; the coupling must meet b > k_c T / 2 + |b_c| (T = dt)")
+    for flag, old, dest, rule, default, metavar, text in COUPLING_FLAGS:
+        c.add_argument(flag, dest=dest, type=number_arg(rule), default=default, metavar=metavar, help=text)
+        c.add_argument(old, dest=dest, type=number_arg(rule), default=default, help=argparse.SUPPRESS)
     add_tissue_args(p)
     p.set_defaults(func=cmd_trace)
 
@@ -172,38 +185,34 @@ def cmd_trace(args) -> int:
     if coupling is not None:
         print(f"coupling: k_c {coupling.stiffness * 1e-3:g} N/mm, b_c {coupling.damping:g} N s/m, device damping "
               f"{coupling.device_damping:g} N s/m (passivity margin {coupling.device_damping - coupling.stiffness * dt / 2 - coupling.damping:.3g} N s/m)")
-    columns = run_trace(args, stroke, times, centres, coupling)
-    _finish(args, scene, mesh, stroke, columns, src)
+    columns, step_us = run_trace(args, stroke, times, centres, coupling)
+    print(f"step: p50 {step_us['p50_us']:.1f} us, p99 {step_us['p99_us']:.1f} us, max {step_us['max_us']:.1f} us over "
+          f"{step_us['steps']} steps after the first (wall clock, on {device}; the region's moves included)")
+    _finish(args, scene, mesh, stroke, columns, src, step_us)
     return 0
 
 
 def make_coupling(args, dt):
-    """The VirtualCoupling the flags ask for (None without --coupling-stiffness-N-per-mm); InputError
+    """The VirtualCoupling the flags ask for (None without --coupling-stiffness-n-per-mm); InputError
     for a device damping missing or too small for it."""
     if args.coupling_k is None:
         if args.device_b is not None or args.coupling_b:
-            raise InputError("--coupling-damping-Ns-per-m and --device-damping-Ns-per-m need --coupling-stiffness-N-per-mm")
+            raise InputError("--coupling-damping-ns-per-m and --device-damping-ns-per-m need --coupling-stiffness-n-per-mm")
         return None
     if args.device_b is None:
-        raise InputError("--coupling-stiffness-N-per-mm needs --device-damping-Ns-per-m: the haptic device's damping b, "
+        raise InputError("--coupling-stiffness-n-per-mm needs --device-damping-ns-per-m: the haptic device's damping b, "
                          "which the passivity condition b > k_c T / 2 + |b_c| is checked with")
     from ..protocol.coupling import VirtualCoupling
 
     try:
         return VirtualCoupling(args.coupling_k * 1e3, args.coupling_b, dt, args.device_b)
     except ValueError as exc:
-        raise InputError(f"--coupling-stiffness-N-per-mm {args.coupling_k:g}: {exc}") from None
+        raise InputError(f"--coupling-stiffness-n-per-mm {args.coupling_k:g}: {exc}") from None
 
 
 def _scene(args):
     """The scene (with the tissue flags) and its mesh."""
-    from ..scene.loader import resolve_scene_or_mesh
-
-    scene = resolve_scene_or_mesh(args.scene, scale_mm=1.0 if args.scale_mm is None else args.scale_mm)
-    if args.scale_mm is not None and scene.path is not None:
-        raise InputError(f"--scale-mm is for a mesh file; the scene {scene.name!r} sets its own ([mesh] scale_mm)")
-    mesh = scene.load_mesh()
-    print_notes(mesh)
+    scene, mesh = load_scene_and_mesh(args)
     return scene_with_tissue_args(args, scene, mesh), mesh
 
 
@@ -212,18 +221,38 @@ def _make_stroke(args, scene, mesh, dt, device):
     from ..protocol.stroke import ProbeStroke
 
     rings = scene.rings if args.rings is None else args.rings
-    if rings == "auto":  # the scene's [region] rings
-        raise InputError(f"the scene {scene.name!r} sizes its region automatically (rings = \"auto\"): almsdm trace "
-                         f"takes a ring count or the global model (--rings N or global)")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     scene = check_law(scene, mesh, args.integrator, "stroke")
     radius = _probe_radius(args, scene)
     scales = scene.lesion.model_scales(mesh, None, scene.law) if scene.lesion is not None else {}
+    tol = auto_tol(args, rings, scene)
+    if tol is not None:
+        rings = _auto_rings(args, scene, mesh, tol, radius, dt, scales)
     try:
         return ProbeStroke(mesh, scene.tissue, probe_radius=radius, rings=rings, integrator=args.integrator, dt=dt,
                            device=device, fixed_below=scene.fixed_below, law=scene.law, **scales)
     except ValueError as exc:  # a parameter the stroke rejects (an InputError passes through unchanged)
         raise InputError(str(exc)) from exc
+
+
+def _auto_rings(args, scene, mesh, tol, radius, dt, scales) -> int:
+    """--rings auto: the rings an adaptive region grows to under the scene's press at the top of the organ
+    (batch.sweep_auto.size_regions, as `almsdm palpate --rings auto` sizes it), said in one line."""
+    from ..batch.sweep_auto import size_regions
+    from ..region.contact import top_vertex
+    from ..solvers.stepper import SimulationDiverged
+
+    check_law(scene, mesh, args.integrator, "adaptive", "--rings auto (the region sized by an adaptive press): ")
+    vertex, p = top_vertex(mesh), scene.press
+    try:
+        rings = int(size_regions(mesh, scene.tissue, [vertex], tol, depth=p.depth, ramp=p.ramp, hold=p.hold,
+                                 integrator=args.integrator, dt=dt, probe_radius=radius, fixed_below=scene.fixed_below,
+                                 law=scene.law, **scales)[0])
+    except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
+        raise InputError(str(exc)) from exc
+    print(f"auto rings: {rings_text(rings)}, sized to {tol * 1e3:g} mm by the scene's {p.depth * 1e3:g} mm press at vertex {vertex} "
+          f"(the top), as almsdm palpate --rings auto sizes it")
+    return rings
 
 
 def _probe_radius(args, scene) -> float:
@@ -260,6 +289,7 @@ def run_trace(args, stroke, times, centres, coupling) -> dict:
     ints = np.zeros((count, 2), dtype=np.int64)
     recorder = _recorder(args, stroke)
     force = np.zeros(3)
+    step_s = np.zeros(n)  # each step's wall time, the region's relocations included
     if coupling is not None:
         coupling.reset(centres[0])
     r = 0
@@ -271,22 +301,35 @@ def run_trace(args, stroke, times, centres, coupling) -> dict:
                 coupling.update(centres[k], force)
                 tool = coupling.tool
             try:
-                force = np.array(stroke.step(tool), dtype=np.float64)
+                t0 = time.perf_counter()
+                felt_now = stroke.step(tool)
+                step_s[k] = time.perf_counter() - t0
+                force = np.array(felt_now, dtype=np.float64)
             except (SimulationDiverged, ValueError) as exc:
                 raise InputError(f"at t = {times[k]:.4g} s: {exc}") from exc
             if recorder is not None and (k % args.usd_every == 0 or k == n - 1):
                 recorder.frame(k, probe_center=tool, force=force)
             if k % every == 0 or k == n - 1:
                 felt = force if coupling is None else coupling.device_force
-                out[r] = (times[k], *(np.asarray(tool) * 1e3), *felt)
-                dev[r] = centres[k] * 1e3
+                out[r] = (times[k], *millimetres(tool), *felt)
+                dev[r] = millimetres(centres[k])
                 ints[r] = (stroke.region_vertices, stroke.relocations)
                 r += 1
     columns = {c: out[:, i] for i, c in enumerate(COLUMNS[:7])}
     columns.update(region_vertices=ints[:, 0], relocations=ints[:, 1])
     if coupling is not None:
         columns.update({c: dev[:, i] for i, c in enumerate(DEVICE_COLUMNS)})
-    return columns
+    return columns, step_percentiles(step_s[1:] if n > 1 else step_s)
+
+
+STEP_PERCENTILES = (("p50", 50.0), ("p99", 99.0), ("max", 100.0))
+"""The step-time figures a trace reports [us]: median, 99th percentile, worst."""
+
+
+def step_percentiles(step_s) -> dict:
+    """{"p50_us", "p99_us", "max_us", "steps"} of the step wall times `step_s` [s] (numpy's linear percentile)."""
+    us = np.asarray(step_s, dtype=np.float64) * 1e6
+    return {**{f"{name}_us": float(np.percentile(us, q)) for name, q in STEP_PERCENTILES}, "steps": int(len(us))}
 
 
 def _recorder(args, stroke):
@@ -298,7 +341,7 @@ def _recorder(args, stroke):
     return UsdRecorder(args.usd, stroke, every=args.usd_every, probe_radius=stroke.radius)
 
 
-def _finish(args, scene, mesh, stroke, columns, src) -> None:
+def _finish(args, scene, mesh, stroke, columns, src, step_us) -> None:
     """Print the summary; write the trace, the plot and the JSON."""
     f = np.column_stack([columns[f"force_{a}_N"] for a in "xyz"])
     mag = np.linalg.norm(f, axis=1)
@@ -314,7 +357,7 @@ def _finish(args, scene, mesh, stroke, columns, src) -> None:
     if args.png:
         from ..export.trace_png import plot_trace
 
-        plot_trace(columns, args.png, title=f"{mesh.name}, {stroke.rings} {'rings' if stroke.region is not None else 'model'}")
+        plot_trace(columns, args.png, title=f"{mesh.name}, {rings_text(stroke.rings) if stroke.region is not None else 'global model'}")
         print(f"wrote {args.png}")
     if args.json:
         from ..export.writers import write_output
@@ -332,6 +375,7 @@ def _finish(args, scene, mesh, stroke, columns, src) -> None:
             "peak_force_N": finite(mag[i]),
             "peak_force_t_s": finite(columns["t_s"][i]),
             "relocations": moves,
+            "step_us": step_us,
         }
         write_output(args.json, record, "record")
         print(f"wrote {args.json}")

@@ -81,6 +81,17 @@ def write_csv(tmp, columns: dict, layout: TableLayout) -> None:
             f.write("".join(line + "\n" for line in map(",".join, zip(*text))))
 
 
+MM_DECIMALS = 9
+"""Decimals a length in millimetres is written to (a picometre): below any mesh's float32 resolution, and
+above the noise of a unit's conversion (0.0232598 m x 1000 is -23.259800000000002 in binary)."""
+
+
+def millimetres(metres):
+    """`metres` [m] as millimetres for a table, rounded to MM_DECIMALS: the file's -23.2598, not the
+    -23.259800000000002 a conversion leaves (what a CSV writes is the shortest text of the value)."""
+    return np.round(np.asarray(metres, dtype=np.float64) * 1e3, MM_DECIMALS)
+
+
 def read_csv(path: Path, layout: TableLayout) -> dict:
     with open(path, encoding="utf-8") as f:
         header = f.readline().strip().split(",")

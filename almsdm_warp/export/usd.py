@@ -91,7 +91,10 @@ class UsdRecorder:
     """
 
     def __init__(self, path, palpation, *, every: int = 1, normals: str = "precomputed", probe_radius: float | None = None, flush_every: int | None = None, flush_mb: float = 64.0):
-        from pxr import Sdf, Usd, UsdGeom, Vt  # usd-core: only here
+        try:
+            from pxr import Sdf, Usd, UsdGeom, Vt  # usd-core (the `usd` extra): only here
+        except ImportError as exc:
+            raise ImportError("UsdRecorder needs usd-core: pip install 'almsdm_warp[usd]'") from exc
 
         from ..sim.normals import SurfaceNormals
 

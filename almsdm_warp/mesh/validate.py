@@ -82,12 +82,12 @@ def repair_arrays(vertices, triangles=None, tetrahedra=None, *, scale: float = 1
     inside = np.flatnonzero(np.abs(v).max(axis=1) <= min(MAX_COORDINATE_M / (scale * 1e-3), MAX_FILE_COORDINATE))
     remap = _merge_duplicates(v, inside, diag, notes)
     elements = remap[elements]
-    elements, ids = _drop_degenerate(v, elements, ids, diag, where, notes)
+    elements, ids, degenerate = _drop_degenerate(v, elements, ids, diag, where, notes)
     elements, ids = _drop_duplicates(elements, ids, notes)
 
     if volume:
-        elements = _reorient_tets(v, elements, ids, notes)
-        _report_tet_findings(v, elements, ids, notes)
+        elements, inverted = _reorient_tets(v, elements, ids, notes)
+        _report_tet_findings(v, elements, ids, notes, degenerate, inverted)
         surface = topo.tet_surface(elements)
     else:
         surface = elements
@@ -282,7 +282,7 @@ def _drop_degenerate(v, elements, ids, diag, where, notes):
         raise InputError(
             f"{where}: no {many} left: all {len(elements)} are degenerate ({what} ~0 or a repeated vertex)"
         )
-    return elements[~bad], ids[~bad]
+    return elements[~bad], ids[~bad], int(bad.sum())
 
 
 def _drop_duplicates(elements, ids, notes):
@@ -312,24 +312,31 @@ def _reorient_tets(v, tets, ids, notes):
         )
         tets = tets.copy()
         tets[inverted] = tets[inverted][:, [0, 1, 3, 2]]
-    return tets
+    return tets, int(inverted.sum())
 
 
-def _report_tet_findings(v, tets, ids, notes):
-    """Notes on the (oriented) tets: slivers, faces shared by more than two."""
-    _report_slivers(v, tets, ids, notes)
+def _report_tet_findings(v, tets, ids, notes, degenerate: int = 0, inverted: int = 0):
+    """Notes on the (oriented) tets: their quality in one line, faces shared by more than two."""
+    line = quality_line(v, tets, ids, degenerate, inverted)
+    if line:
+        notes.append(line)
     _report_shared_faces(tets, notes)
 
 
-def _report_slivers(v, tets, ids, notes):
+def quality_line(v, tets, ids, degenerate: int = 0, inverted: int = 0) -> str:
+    """One line on a tet mesh's quality (topology.tet_quality: 1 a regular tet, 0 a flat one) where it has
+    a fault, else "": the slivers (under SLIVER_QUALITY), the degenerate tets dropped and the inverted
+    ones reoriented, counted, the median quality and the worst tet, named."""
     q = topo.tet_quality(v, tets)
     slivers = int(np.count_nonzero(q < SLIVER_QUALITY))
-    if slivers:
-        j = int(np.argmin(q))
-        notes.append(
-            f"{slivers} sliver {_plural(slivers, 'tetrahedron', 'tetrahedra')} of {len(tets)} (quality under {SLIVER_QUALITY:g}, "
-            f"1 a regular tet; worst: tetrahedron {ids[j]}, vertices {tuple(int(x) for x in tets[j])}, quality {q[j]:.3g})"
-        )
+    if not (slivers or degenerate or inverted):
+        return ""
+    j = int(np.argmin(q))
+    head = (f"{slivers} sliver {_plural(slivers, 'tetrahedron', 'tetrahedra')} of {len(tets)} (quality under {SLIVER_QUALITY:g}, "
+            f"1 a regular tet)" if slivers else f"tet quality: no slivers among {len(tets)} (quality under {SLIVER_QUALITY:g}, 1 a regular tet)")
+    return (f"{head}, {degenerate} degenerate dropped, {inverted} inverted reoriented; median quality {np.median(q):.3g}; "
+            f"worst: tetrahedron {ids[j]}, vertices {tuple(int(x) for x in tets[j])}, quality {q[j]:.3g}"
+            + ("; slivers stiffen a volumetric law's step and dent under a press: remesh them" if slivers else ""))
 
 
 def _orient_closed_surface(v, tri, notes):

@@ -30,6 +30,7 @@ from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, PROBE_SPHERE
 from ..solvers.stepper import replayer
 from .palpation import Palpation
 from .schedule import PressSchedule
+from ..checks import rings_text
 
 MARGIN = 1.2
 """Safety factor on the fixed-ring estimate (it read 0.77-1.05 of the true value: docs/adaptive.md)."""
@@ -312,7 +313,7 @@ class AdaptivePalpation(Palpation):
         if self.region.vertex_count == size:
             self.free_outer_ring()
         else:
-            self.auto_reason = f"grew to {self.region.outer_ring} rings: ring {n} would have moved {est * 1e3:.3g} mm"
+            self.auto_reason = f"grew to {rings_text(self.region.outer_ring)}: ring {n} would have moved {est * 1e3:.3g} mm"
 
     def free_outer_ring(self) -> None:
         """The region covers its mesh component: free its outer ring too (every vertex of the component

@@ -29,6 +29,7 @@ from .palpation import PressResult
 from ..region.region import Region, check_rings
 from ..solvers import make_solver, solver_class
 from .schedule import PressSchedule, check_press
+from ..checks import rings_text
 
 
 class MultiRegion(Region):
@@ -346,7 +347,7 @@ class MultiPalpation:
             if patch.region.vertex_count == size:
                 self.max_rings = min(self.max_rings, patch.region.outer_ring)
             patch.rings_chosen = max(patch.rings_chosen, patch.region.outer_ring)
-            patch.reason = f"grew to {patch.region.outer_ring} rings: ring {n} would have moved {est * 1e3:.3g} mm"
+            patch.reason = f"grew to {rings_text(patch.region.outer_ring)}: ring {n} would have moved {est * 1e3:.3g} mm"
             patch.events.append({"step": self._steps, "event": f"+{grow}", "rings": int(patch.region.outer_ring),
                                  "estimate_mm": round(est * 1e3, 6) if math.isfinite(est) else None})
             grew = True

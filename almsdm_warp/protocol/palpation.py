@@ -20,7 +20,7 @@ from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE
 from ..region.patch import sphere_patches
 from ..region.region import Region
 from ..solvers import make_solver
-from ..solvers.stepper import SimulationDiverged, capture_step_pair, diverged, force_bound, plan_substeps
+from ..solvers.stepper import SimulationDiverged, capture_step_pair, diverged, force_bound, plan_substeps, remedies
 from ..checks import fixed_substeps
 from .schedule import PressSchedule, check_press
 
@@ -71,6 +71,11 @@ class PressResult:
         """The force at the end of the hold [N]: the last pressed frame's (force[release_step - 1]),
         as the batch's (BatchResult.hold_force); 0 for a press with no pressed frame."""
         return float(self.force[self.release_step - 1]) if self.release_step > 0 else 0.0
+
+    @property
+    def stiffness_N_per_mm(self) -> float:
+        """Hold force over depth [N/mm], as BatchResult.stiffness_N_per_mm."""
+        return self.hold_force_N / (self.depth * 1e3)
 
     @property
     def recovery_error_mm(self) -> float:
@@ -425,11 +430,11 @@ class Palpation:
                     f"(t = {step_index * self.dt:.4g} s): its step {self.step_dt * 1e3:.4g} ms exceeds the critical "
                     f"step of about {crit * 1e3:.4g} ms; use a smaller --dt-ms or --integrator implicit"
                 )
-            raise SimulationDiverged(  # not the step: the press (or the force) is more than the model holds
+            raise SimulationDiverged(  # under the critical step at rest: a deep press stiffens the tissue past it
                 f"the {self.solver.integrator} integrator ran away at step {step_index} "
                 f"(t = {step_index * self.dt:.4g} s): a vertex is not finite or more than twice the mesh's size "
                 f"({size * 1e3:.4g} mm) from rest, with a step of {self.step_dt * 1e3:.4g} ms under the critical step at rest "
-                f"(about {crit * 1e3:.4g} ms); the press is deeper, or its force larger, than the model holds"
+                f"(about {crit * 1e3:.4g} ms), which a deep press shortens; {remedies(self.solver.integrator)}"
             )
 
     # -- the press protocol --------------------------------------------------------------------

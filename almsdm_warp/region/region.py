@@ -8,6 +8,7 @@ import warp as wp
 from ..mesh.device_mesh import as_device_mesh, check_vertex
 from ..kernels.region import rings as rk
 from ..kernels.arrays import RegionArrays, struct_from
+from ..checks import rings_text
 
 
 def check_rings(rings) -> int:
@@ -200,7 +201,7 @@ class Region:
     def summary(self) -> str:
         sizes = np.diff(self.ring_offsets).tolist()
         return (
-            f"region at vertex {self.seed}: {self.rings} rings, {self.vertex_count} vertices "
+            f"region at vertex {self.seed}: {rings_text(self.rings)}, {self.vertex_count} vertices "
             f"(per ring {sizes}), {self.spring_count} springs, {self.boundary_count} fixed on ring {self.outer_ring}"
         )
 

@@ -12,17 +12,19 @@ from __future__ import annotations
 
 import difflib
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import InputError
-from ..checks import AUTO, check_rings, check_value, describe
+from ..checks import AUTO, check_rings, check_value, describe, rings_text
 from ..protocol.schedule import PressParams
 from ..tissue.laws import LAWS
 from ..tissue.material import Material, material_as_dict
 from ..tissue.params import TissueParams
+from ..tissue.presets import DEFAULT_PRESET, tissue_preset
 from .schema import DEFAULT_TISSUE_MODEL, SCHEMA, TISSUE_MODELS
+from .support import describe_support, parse_support, support_height
 
 try:
     import tomllib
@@ -80,6 +82,12 @@ class Scene:
     """The tissue law ([tissue] law, a key of tissue.laws.LAWS): "springs" (the paper's), "neo-hookean"
     (stable neo-Hookean tets) or "corotational" (corotational linear tets), both for a material on a
     tet mesh; None: the model's default (tissue.laws.default_law)."""
+    support: str | None = None
+    """A support given relative to the organ (scene.support: "far-side", "below:FRACTION", "none"), or
+    "auto" (far-side on a tet volume of a material, none otherwise), which `with_support` turns into
+    `fixed_below` once the mesh and the contact are known; None: `fixed_below` as given."""
+    preset: str | None = None
+    """The tissue preset the tissue came from (tissue.presets.PRESETS), or None (the scene's own)."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
@@ -94,6 +102,8 @@ class Scene:
         object.__setattr__(self, "probe_radius", check_value(self.probe_radius, float, ">= 0", "Scene.probe_radius"))
         if self.law is not None:
             check_law_name(self.law, "Scene.law")
+        if self.support not in (None, "auto"):
+            object.__setattr__(self, "support", parse_support(self.support))
         if self.tol is not None:
             object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
@@ -110,16 +120,49 @@ class Scene:
         """The scene file's stem, or the mesh file's for a bare mesh."""
         return (self.path or self.mesh_path).stem
 
+    def with_support(self, mesh, contact_z: float) -> "Scene":
+        """The scene with its relative support (`support`) made a plane (`fixed_below`) for `mesh` pressed
+        from above at a contact of height `contact_z` [m]; itself where it has none."""
+        rule = self.support
+        if rule is None:
+            return self
+        if rule == "auto":
+            rule = "far-side" if mesh.is_volume and isinstance(self.tissue, Material) else "none"
+        return replace(self, support=rule, fixed_below=support_height(rule, mesh.vertices, contact_z))
+
+    def support_text(self) -> str:
+        """The support in a few words: "far-side (fixed below z = -12.3 mm)", "none", ..."""
+        return describe_support(self.support, self.fixed_below)
+
     def load_mesh(self) -> TissueMesh:
         """Read, validate and repair the scene's mesh (metres); raises InputError."""
         from ..mesh.io import load_mesh
 
         return load_mesh(self.mesh_path, scale=self.scale_mm)
 
+    def load_mesh_guessing_units(self, guess: bool = True) -> tuple["Scene", TissueMesh, str]:
+        """(the scene at the unit guessed from its mesh's size, the mesh, one line saying so, "" where it is
+        millimetres as read): a bare mesh file's unit is unknown (mesh.units.guess_scale); a scene file's is
+        its own (no line). guess=False: the unit as given (--scale-mm), a line only where it makes no organ."""
+        from ..mesh.units import guess_scale, is_organ_size, mesh_span
+
+        mesh = self.load_mesh()
+        if self.path is not None:
+            return self, mesh, ""
+        if not guess:  # the unit given: a note only where it makes no organ
+            span = mesh_span(mesh.vertices) * 1e3
+            return self, mesh, "" if is_organ_size(span) else (
+                f"the mesh spans {span:.4g} mm at --scale-mm {self.scale_mm:g}: not an organ's size; is the unit right?")
+        scale, line = guess_scale(mesh_span(mesh.vertices) * 1e3 / self.scale_mm)
+        if scale == self.scale_mm:
+            return self, mesh, ("" if is_organ_size(mesh_span(mesh.vertices) * 1e3) else line)  # millimetres: no news
+        scene = replace(self, scale_mm=scale)
+        return scene, scene.load_mesh(), line
+
     def rings_text(self) -> str:
         """"4 rings", or "auto rings (tol 0.1 mm)" ("tol: the default" when the scene gives none)."""
         if self.rings != AUTO:
-            return f"{self.rings} rings"
+            return rings_text(self.rings)
         return f"auto rings (tol {self.tol * 1e3:g} mm)" if self.tol is not None else "auto rings (tol: the default)"
 
     def as_dict(self) -> dict:
@@ -137,6 +180,8 @@ class Scene:
                 elif factor != 1.0 and value is not None:
                     value = value * factor
                 out[section][key] = value
+        out["tissue"]["preset"] = self.preset
+        out["support"]["rule"] = None if self.support == "auto" else self.support
         if self.lesion is not None:
             out["lesion"] = self.lesion.as_dict()
         return out
@@ -150,9 +195,10 @@ class Scene:
     def tissue_text(self) -> str:
         """The tissue in a few words: the paper's k_ij and k_i, or the material's E and nu."""
         t = self.tissue
+        named = f"preset {self.preset}: " if self.preset else ""
         if isinstance(t, Material):
-            return f"E {t.youngs_modulus * 1e-3:g} kPa, nu {t.poisson_ratio:g}, rho {t.density:g} kg/m^3"
-        return f"k_ij {t.edge_stiffness:g} N/m, k_i {t.anchor_stiffness:g} N/m"
+            return f"{named}E {t.youngs_modulus * 1e-3:g} kPa, nu {t.poisson_ratio:g}, rho {t.density:g} kg/m^3"
+        return f"{named}k_ij {t.edge_stiffness:g} N/m, k_i {t.anchor_stiffness:g} N/m"
 
     def summary(self) -> str:
         """One line: the scene, its mesh and the parameters people ask about first."""
@@ -193,6 +239,8 @@ def load_scene(path) -> Scene:
     if "tol" in region and region.get("rings") != AUTO:
         rings = f"rings = {region['rings']!r}" if "rings" in region else f"rings is not given (default {Scene.rings})"
         raise InputError(f"{where}: [region] tol_mm is for rings = {AUTO!r} (the region sized to a tolerance), but {rings}")
+    if len(values["support"]) > 1:
+        raise InputError(f"{where}: [support] rule and fixed_below_mm both given: give one (a rule relative to the organ, or a height)")
     mesh_path = _mesh_path(values["mesh"].get("path"), p, where)
     law = values["tissue"].pop("law", DEFAULT_LAW)
     law = None if law is None else check_law_name(law, f"{where}: [tissue] law")
@@ -209,6 +257,7 @@ def load_scene(path) -> Scene:
             press=PressParams(**values["press"]),
             lesion=lesion,
             fixed_below=values["support"].get("fixed_below"),
+            support=values["support"].get("support"),
             probe_radius=values["probe"].get("probe_radius", 0.0),
             law=law,
         )
@@ -333,13 +382,14 @@ def default_scene_path(name: str = DEFAULT_SCENE) -> Path:
     return path
 
 
-def resolve_scene_or_mesh(arg=None, *, scale_mm: float = 1.0) -> Scene:
+def resolve_scene_or_mesh(arg=None, *, scale_mm: float = 1.0, tissue: str | None = None) -> Scene:
     """A scene from what a user typed.
 
     None: the default scene (stomach). A path ending in ``.toml``: that scene file. The name
     of a shipped scene (``liver``) that is not a file here: that scene. Anything else: a mesh
-    file, with the default tissue, region and press parameters, read at `scale_mm`
-    millimetres per file unit.
+    file, read at `scale_mm` millimetres per file unit, with the press defaults and the tissue
+    preset `tissue` (tissue.presets; default DEFAULT_PRESET): its material, probe and rings, and a
+    support chosen from the mesh (Scene.support "auto").
     """
     if arg is None:
         return load_scene(default_scene_path())
@@ -359,4 +409,15 @@ def resolve_scene_or_mesh(arg=None, *, scale_mm: float = 1.0) -> Scene:
     if p.is_dir():
         raise InputError(f"{arg}: is a directory, not a scene or mesh file")
     scale_mm = check_value(scale_mm, float, "> 0", "scale_mm")
-    return Scene(path=None, mesh_path=Path(os.path.abspath(p)), scale_mm=scale_mm)
+    return mesh_scene(Path(os.path.abspath(p)), scale_mm, tissue)
+
+
+def mesh_scene(mesh_path, scale_mm: float = 1.0, tissue: str | None = None) -> Scene:
+    """The scene of a bare mesh file: the tissue preset `tissue` (default DEFAULT_PRESET) with its probe and
+    rings, the press defaults, and the support chosen from the mesh ("auto"). InputError for an unknown preset."""
+    try:
+        preset = tissue_preset(DEFAULT_PRESET if tissue is None else tissue)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    return Scene(path=None, mesh_path=Path(mesh_path), scale_mm=scale_mm, tissue=preset.tissue, rings=preset.rings,
+                 probe_radius=preset.probe_radius, support="auto", preset=preset.name)

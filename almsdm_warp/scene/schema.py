@@ -32,6 +32,7 @@ SCHEMA: dict[str, dict[str, tuple[str, type, float, str]]] = {
     "press": PRESS_KEYS,
     "support": {
         "fixed_below_mm": ("fixed_below", float, 1000.0, "number"),  # vertices with z below it are fixed
+        "rule": ("support", str, 1.0, "path"),  # or relative to the organ: scene.support.RULES (--support)
     },
     "probe": {
         "radius_mm": ("probe_radius", float, 1000.0, ">= 0"),  # 0: the paper's probe, one driven vertex

@@ -72,10 +72,15 @@ def diverged(integrator: str, what: str, dt: float, substeps: int, critical_dt: 
     """The error for a run of `integrator` that diverged `what` (where, and what it read: a force not
     finite or past its bound), with its frame dt [s], substeps and critical step [s]."""
     crit = f", critical step {critical_dt * 1e3:.3g} ms" if math.isfinite(critical_dt) else ""
-    return SimulationDiverged(
-        f"the {integrator} integrator diverged{what} (dt {dt * 1e3:g} ms in {substeps} substep(s){crit}); the press is "
-        f"deeper, or its force larger, than the model holds: use a smaller dt or the {FALLBACK} integrator"
-    )
+    return SimulationDiverged(f"the {integrator} integrator diverged{what} (dt {dt * 1e3:g} ms in {substeps} substep(s){crit}); "
+                              f"{remedies(integrator)}")
+
+
+def remedies(integrator: str) -> str:
+    """What to try after a run of `integrator` diverged, most likely first (the flags of the command line)."""
+    other = f"--integrator {FALLBACK} (stable at any step), " if integrator != FALLBACK else ""
+    return (f"try {other}a smaller --dt-ms (more substeps), or a shallower --depth-mm; a mesh of slivers "
+            f"(see its quality note) or a tissue stiffer than the mesh resolves may need remeshing")
 
 
 def check_results(integrator: str, vertices, peak, recovery, bound: float, size: float, dt: float, substeps: int,

@@ -283,7 +283,7 @@ def holding_notes(tissue, is_volume: bool, supported: bool) -> list[str]:
         what = "a tet mesh" if is_volume else "a surface with no foundation"
         notes.append(f"{what} on a material has no anchors and no support: only the region's fixed outer ring "
                      "holds it, and the body may swing on that ring after a press; give a support "
-                     "([support] fixed_below_mm, --fixed-below-mm)")
+                     "(--support far-side, --fixed-below-mm, [support] fixed_below_mm)")
     undamped = tissue.damping_ratio <= 0.0 and tissue.rayleigh_beta <= 0.0
     if tissue.rayleigh_alpha <= 0.0 and (undamped or unheld):
         notes.append("the material has no mass-proportional damping (rayleigh_alpha_per_s, --rayleigh-alpha-per-s): "
