@@ -1,11 +1,12 @@
 """One palpation's CPU step with each tissue law on the same region, interleaved in one process.
 
-    python scripts/bench_laws.py [--rings 3] [--blocks 15] [--steps 1000]
+    python scripts/bench_laws.py [--rings 3] [--blocks 15] [--steps 1000] [--scene liver]
     valgrind --tool=callgrind --instr-atstart=no --callgrind-out-file=/tmp/cg.out python scripts/bench_laws.py --callgrind
         # instructions a step of each law (repeatable on a loaded host)
 
 A 25 mm tet ball of 3 mm edges (mesh.primitives.tet_ball), E 10 kPa, nu 0.45, the top vertex held
-1 mm in, dt 0.1 ms in one substep (under both laws' critical steps); blocks of `steps`
+1 mm in, dt 0.1 ms in one substep (under both laws' critical steps); --scene: a shipped scene's mesh,
+material, support and ring count instead (its top vertex held 1 mm in); blocks of `steps`
 `Palpation.step()` calls alternate between the laws. Prints each law's median and best
 microseconds a step and their ratio. A benchmark, not a test.
 """
@@ -22,6 +23,7 @@ def main(argv=None):
     ap.add_argument("--rings", type=int, default=3)
     ap.add_argument("--blocks", type=int, default=15)
     ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--scene", default=None, help="a shipped scene (liver) in place of the tet ball")
     ap.add_argument("--callgrind", action="store_true", help="run under valgrind's callgrind: instrument one block of each law, print instructions a step")
     args = ap.parse_args(argv)
     from almsdm_warp.warp_init import init_warp
@@ -34,10 +36,16 @@ def main(argv=None):
 
     mesh = tet_ball(25.0, 3.0)
     material = Material(youngs_modulus=10e3, poisson_ratio=0.45, density=1000.0, rayleigh_alpha=60.0)
+    fixed_below = None
+    if args.scene:
+        from almsdm_warp.scene.loader import default_scene_path, load_scene
+
+        scene = load_scene(default_scene_path(args.scene))
+        mesh, material, fixed_below, args.rings = scene.load_mesh(), scene.tissue, scene.fixed_below, scene.rings
     top = int(np.argmax(mesh.vertices[:, 2]))
     pals = {}
     for law in LAWS:
-        p = Palpation(mesh, material, rings=args.rings, law=law, dt=1e-4, device="cpu", substeps=1)
+        p = Palpation(mesh, material, rings=args.rings, law=law, dt=1e-4, device="cpu", substeps=1, fixed_below=fixed_below)
         p.touch(top)
         p.set_probe(1, p.rest_position() + p.inward_normal() * 0.001)
         for _ in range(300):

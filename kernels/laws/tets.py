@@ -127,6 +127,17 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float):
     SHEAR, ELEMENT_BULK = float(shear), float(element_bulk)
 
     @wp.func
+    def tet_term(q: Any, t: wp.vec4i, p: TetEntry, pressure: Any):
+        # the tet's dJ/dF and its element force on the corner p.corner, at positions q
+        F, dJ = tet_state(q, t, p)
+        return dJ, corner_force(F, dJ, p, tet_pressure(t, pressure))
+
+    @wp.func
+    def block(p: TetEntry, g_a: wp.vec3, b_a: wp.vec3, b_c: wp.vec3, g_c: wp.vec3):
+        # the Gauss-Newton block K_ac of the tet (b: rest barycentric gradients, g = dJ b)
+        return p.volume * ((SHEAR * p.mu) * wp.dot(b_a, b_c) * wp.identity(n=3, dtype=float) + (ELEMENT_BULK * p.mu + p.bulk) * wp.outer(g_a, g_c))
+
+    @wp.func
     def vertex_force(
         x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float,
         begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, qd: Any, pressure: Any,
@@ -136,12 +147,9 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float):
         # data params[k + shift]; corner positions from q, nodal pressures from `pressure`, indexed as q)
         f = anchor_force(x, u, x_rest, ka, kda, scale)
         for k in range(begin, end):
-            t = topology[k]
-            p = params[k + shift]
-            F, dJ = tet_state(q, t, p)
-            f += corner_force(F, dJ, p, tet_pressure(t, pressure))
+            dJ, fc = tet_term(q, topology[k], params[k + shift], pressure)
+            f += fc
         return f
-
 
     @wp.func
     def implicit_row(
@@ -151,7 +159,7 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float):
         csr_block: Any, csr_local: Any, out_shift: int, pressure: Any,
     ):
         # one vertex's row of (M + dt C + dt^2 K) dv = dt (f0 - dt K v0) - A_ic dv_c (the springs law's
-            # implicit_row says what each argument is): the anchor's terms, then each incident tet's force
+        # implicit_row says what each argument is): the anchor's terms, then each incident tet's force
         # and Gauss-Newton blocks (this module's docstring), the blocks of its other corners added into
         # the row's CSR entries (row_begin..row_end of row_neighbour), which start from zero.
         f, D, Kv = anchor_row(x, u, x_rest, ka, kda, scale, m, dt)
@@ -162,14 +170,12 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float):
         for k in range(begin, end):
             t = topology[k]
             p = params[k + shift]
-            F, dJ = tet_state(q, t, p)
-            f += corner_force(F, dJ, p, tet_pressure(t, pressure))
-            b_a = p.gradient
-            g_a = dJ * b_a
-            volumetric = ELEMENT_BULK * p.mu + p.bulk
+            dJ, fc = tet_term(q, t, p, pressure)
+            f += fc
+            g_a = dJ * p.gradient
             for c in range(4):
                 b_c = corner_gradient(p.dm_inv, c)
-                K = p.volume * ((SHEAR * p.mu) * wp.dot(b_a, b_c) * wp.identity(n=3, dtype=float) + volumetric * wp.outer(g_a, dJ * b_c))
+                K = block(p, g_a, p.gradient, b_c, dJ * b_c)
                 vc = t[c]
                 Kv += K * qd[vc]
                 if c == p.corner:
@@ -182,7 +188,6 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float):
                         correction -= dt * dt * K * dv_driven
         return f, D, Kv, correction
 
-
     @wp.func
     def static_row(x: wp.vec3, x_rest: wp.vec3, ka: float, begin: int, end: int, topology: Any, params: Any, shift: int, q: Any,
                    pressure: Any):
@@ -193,13 +198,11 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float):
         f = anchor_force(x, zero, x_rest, ka, 0.0, 1.0)
         D = ka * wp.identity(n=3, dtype=float)
         for k in range(begin, end):
-            t = topology[k]
             p = params[k + shift]
-            F, dJ = tet_state(q, t, p)
-            f += corner_force(F, dJ, p, tet_pressure(t, pressure))
-            b_a = p.gradient
-            g_a = dJ * b_a
-            D += p.volume * ((SHEAR * p.mu) * wp.dot(b_a, b_a) * wp.identity(n=3, dtype=float) + (ELEMENT_BULK * p.mu + p.bulk) * wp.outer(g_a, g_a))
+            dJ, fc = tet_term(q, topology[k], p, pressure)
+            f += fc
+            g_a = dJ * p.gradient
+            D += block(p, g_a, p.gradient, p.gradient, g_a)
         return f, D
 
     return vertex_force, implicit_row, static_row
