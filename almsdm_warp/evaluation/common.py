@@ -76,9 +76,10 @@ class DepthSettings:
     """Ring counts of each law's local region on the deep press, beside its global model."""
     fem_steps_per_mm: float = 2.0
     """The reference's load steps a millimetre of depth (at least 4)."""
-    fem_rtol: float = 1e-9
-    """The reference's Newton tolerance, relative to the largest internal force."""
-    fem_gap_rtol: float = 1e-6
+    fem_rtol: float = 1e-6
+    """The reference's Newton tolerance, relative to the largest internal force (fem_nonlinear's 1e-9 stalls
+    on some meshes: the contact's kinks hold Newton's steps at ~1e-4 of the force)."""
+    fem_gap_rtol: float = 1e-4
     """The reference's contact tolerance: the largest penetration left, relative to the depth."""
 
 
