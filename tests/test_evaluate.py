@@ -1,4 +1,4 @@
-"""`almsdm evaluate --quick`: every part runs once (module fixture, ~20-30 s on 2 CPU cores), and
+"""`almsdm evaluate --quick`: every part runs once (module fixture, about a minute of CPU), and
 what it writes holds against independent answers: region sizes against scipy breadth-first
 distances, the explicit stability boundary against the linearized critical step, the unanchored
 global model never recovering, the global reference's zero error, non-blank figures, and a

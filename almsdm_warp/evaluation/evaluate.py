@@ -1,5 +1,6 @@
 """`almsdm evaluate`: the paper's experiments reproduced, speed charted against accuracy, stability
-mapped, real anatomy; one command regenerates docs/results.md and its figures.
+mapped, real anatomy, the continuum references (continuum.py; every tissue law deep, over bone and
+over a lesion: depth_layers.py); one command regenerates docs/results.md and its figures.
 
     run_evaluation(out_dir, settings=SETTINGS["full"], device="cpu")
 

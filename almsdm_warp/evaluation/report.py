@@ -423,12 +423,13 @@ def _depth_verdicts(d) -> list[str]:
 
 
 def _depth_meshes() -> str:
-    """The full settings' meshes and the quick ones', in words."""
-    full, quick = SETTINGS["full"].depth, SETTINGS["quick"].depth
-    return (f"The full settings press slabs of {', '.join(f'{h:g}' for h in full.slab_edges_mm)} mm edges and a ball of "
-            f"{full.ball_edge_mm:g} mm edges; --quick slabs of {', '.join(f'{h:g}' for h in quick.slab_edges_mm)} mm and a ball of "
-            f"{quick.ball_edge_mm:g} mm, the reference to looser tolerances (Newton {quick.fem_rtol:g}, contact {quick.fem_gap_rtol:g} "
-            f"of the depth, against {full.fem_rtol:g} and {full.fem_gap_rtol:g}).")
+    """The full settings' meshes and reference, and the quick ones', in words."""
+    def words(d):
+        return (f"slabs of {', '.join(f'{h:g}' for h in d.slab_edges_mm)} mm edges and a ball of {d.ball_edge_mm:g} mm edges, "
+                f"the reference loaded in a step every {1 / d.fem_steps_per_mm:g} mm of depth (4 at least), Newton to {d.fem_rtol:g} of the "
+                f"largest internal force, contact to {d.fem_gap_rtol:g} of the depth")
+
+    return f"The full settings press {words(SETTINGS['full'].depth)}; --quick {words(SETTINGS['quick'].depth)}."
 
 
 def _depth_layers(r) -> list[str]:
