@@ -1,21 +1,24 @@
-"""The depth, layers and lesions section (evaluation/depth_layers.py) on a tiny slab: its reference is the
-neo-Hookean FEM of the same tets (recomputed here from the geometry alone), the neo-Hookean law holds
-within 5% of it, and every registered law is pressed. CPU; about 5 s."""
+"""The depth, layers and lesions section (evaluation/depth_layers.py) on a tiny slab at nu 0.2 (where P1
+tets do not lock): its references are the neo-Hookean FEM and the P2/P0 solve of the same tets
+(recomputed here from the geometry alone), the neo-Hookean law holds within 15% of the former, and
+every registered law is pressed. CPU; about 8 s."""
 
 import numpy as np
 import pytest
 
 from almsdm_warp.evaluation import depth_layers as dl
+from almsdm_warp.evaluation import fem
 from almsdm_warp.evaluation import fem_nonlinear as nl
 from almsdm_warp.tissue.laws import LAWS
 
 EDGE_MM = 4.0  # a 30 x 30 x 10 mm slab of 243 vertices, 768 tets
+NU = 0.2
 
 
 @pytest.fixture(scope="module")
 def slab():
-    case = dl.slab_case(EDGE_MM)
-    return case, dl.press_laws(case)
+    case = dl.slab_case(EDGE_MM, poisson=NU)
+    return case, dl.press_laws(case, linear=True)
 
 
 def test_the_slab_is_the_stated_geometry(slab):
@@ -32,16 +35,22 @@ def test_reference_is_the_neo_hookean_fem_of_the_same_tets(slab):
     case, row = slab
     x, tets = case.mesh.vertices, case.mesh.tetrahedra
     fixed = np.repeat((x[:, 2] < 1e-9)[:, None], 3, axis=1)  # the rigid base: the bottom face
-    ref = nl.solve(x, tets, young=10e3, poisson=0.45, fixed=fixed, sphere=nl.Sphere(0.005, 0.002), steps=4)
+    ref = nl.solve(x, tets, young=10e3, poisson=NU, fixed=fixed, sphere=nl.Sphere(0.005, 0.002), steps=4)
     assert row["fem_N"] == pytest.approx(ref.force, rel=1e-6)
-    assert 0.1 < ref.force < 0.2  # docs/calibration.md: 0.157-0.174 N on 1-2 mm edges
+    assert 0.05 < ref.force < 0.2  # measured 0.112 N (nu 0.45 on 1-2 mm edges: 0.157-0.174 N, docs/calibration.md)
+    linear = fem.sphere_press(x, tets, young=10e3, poisson=NU, sphere_radius=0.005, depth=0.002,
+                              fixed=lambda n: n[:, 2:3].repeat(3, axis=1) < 1e-9, mixed=True)
+    assert row["p2p0_N"] == pytest.approx(linear.force, rel=1e-9)
 
 
-def test_neo_hookean_law_holds_within_5_percent_of_the_fem(slab):
+def test_neo_hookean_law_holds_within_15_percent_of_the_fem(slab):
+    """The law against the FEM on a mesh this coarse (two tets through the slab's thickness): measured 0.90
+    (its nodal-averaged volume term is softer on coarse tets); the springs law, 0.58, would fail it."""
     _, row = slab
     press = row["laws"]["neo-hookean"]
     assert press["of_fem"] == pytest.approx(press["force_N"] / row["fem_N"])
-    assert abs(press["of_fem"] - 1.0) < 0.05  # measured 0.961
+    assert press["of_p2p0"] == pytest.approx(press["force_N"] / row["p2p0_N"])
+    assert abs(press["of_fem"] - 1.0) < 0.15
     assert press["inverted_tets"] == 0
 
 

@@ -8,7 +8,7 @@ scripts/law_vs_fem.py, which prints the same presses at other sizes.
 The cases (E 10 kPa, nu 0.45; a rigid frictionless sphere pressed along -z at the top vertex):
 - **layers** (slab_case): tissue over bone, a slab 10 mm thick on a rigid base (its bottom fixed),
   30 x 30 mm, tets of the given edge under the probe graded to 3x that at its sides, a sphere R 5 mm
-  pressed 2 mm at the top face's centre;
+  pressed 2 mm at the top face's centre; also against the locking-free linear P2/P0 solve (p2p0_force);
 - **depth** (ball_case): a sphere R 10 mm pressed 10 mm into a tet ball R 25 mm (graded x 2 toward
   the top) resting on a support (vertices below -15 mm fixed): about 20% strain under the probe;
 - **lesion** (with_lesion): the ball pressed 5 mm over a lesion 5x as stiff, R 10 mm, its centre
@@ -153,6 +153,19 @@ def fem_force(case: Case, steps_per_mm: float = FEM_TIGHT["steps_per_mm"], rtol:
     return {"fem_N": None, "fem_s": time.perf_counter() - t0, "fem_error": error}
 
 
+def p2p0_force(case: Case) -> dict:
+    """The locking-free linear reference (fem.sphere_press: quadratic tets with a constant pressure, P2/P0,
+    exact frictionless contact along z; small strain, no lesion): {p2p0_N, p2p0_s}. Beside the neo-Hookean
+    P1 reference, which locks as nu -> 1/2 on coarse tets, it tells locking from a law's own error."""
+    from . import fem
+
+    x, tets = case.mesh.vertices, case.mesh.tetrahedra.astype(np.int64)
+    t0 = time.perf_counter()
+    ref = fem.sphere_press(x, tets, young=E, poisson=case.poisson, sphere_radius=case.sphere, depth=case.depth,
+                           centre_xy=tuple(x[case.vertex, :2]), fixed=lambda n: fem.clamped_below(n, case.fixed_below), mixed=True)
+    return {"p2p0_N": ref.force, "p2p0_s": time.perf_counter() - t0}
+
+
 def law_integrator(law: str) -> str:
     """The integrator a law is pressed with: implicit where it has one, else its first."""
     entry = law_entry(law)
@@ -185,16 +198,22 @@ def law_press(case: Case, law: str, device="cpu", rings="global", timing_budget_
             "region_vertices": simulated, "seconds": seconds, "step_us": step_us}
 
 
-def press_laws(case: Case, device="cpu", fem: dict | None = None, timing_budget_s: float | None = None, tasks=None) -> dict:
-    """`case` under the reference (fem_force with `fem`'s keywords) and every law's global model:
-    {case, label, vertices, tets, fem_N, fem_s, laws: {law: law_press's dict + of_fem (force / FEM)}}."""
+def press_laws(case: Case, device="cpu", fem: dict | None = None, timing_budget_s: float | None = None, tasks=None,
+               linear: bool = False) -> dict:
+    """`case` under the reference (fem_force with `fem`'s keywords; with `linear`, p2p0_force too) and every
+    law's global model: {case, label, vertices, tets, fem_N, fem_s, [p2p0_N, p2p0_s,] laws: {law: law_press's
+    dict + of_fem (force / FEM) [+ of_p2p0]}}."""
     _step(tasks, f"depth, layers and lesions: FEM, {case.label}", 3)
     row = {"case": case.name, "label": case.label, "vertices": case.mesh.vertex_count, "tets": case.mesh.tet_count,
            "sphere_mm": case.sphere * 1e3, "depth_mm": case.depth * 1e3, **fem_force(case, **(fem or {})), "laws": {}}
+    if linear:
+        row.update(p2p0_force(case))
     for law in LAWS:
         _step(tasks, f"depth, layers and lesions: {law}, {case.label}")
         press = law_press(case, law, device, timing_budget_s=timing_budget_s)
         press["of_fem"] = _ratio(press.get("force_N"), row["fem_N"])
+        if linear:
+            press["of_p2p0"] = _ratio(press.get("force_N"), row["p2p0_N"])
         row["laws"][law] = press
     return row
 
@@ -231,13 +250,14 @@ def summarise(cases: list[dict]) -> dict:
     spread (max / min - 1 of its force across resolutions; the FEM's beside it), the most tets it
     leaves inverted, and the cases it misses TARGETS on (a case it could not run counts as missed)."""
     slabs = [c for c in cases if c["case"] == "slab"]
-    out = {"fem_slab_spread": _spread([c["fem_N"] for c in slabs])}
+    out = {"fem_slab_spread": _spread([c["fem_N"] for c in slabs]), "p2p0_slab_spread": _spread([c.get("p2p0_N") for c in slabs])}
     for law in LAWS:
         pick = {name: [c["laws"][law] for c in cases if c["case"] == name] for name in TARGETS}
         missed = {c["case"] for c in cases if not _within(c, law)}
         misses = [name for name in TARGETS if name in missed]
         out[law] = {
             "slab_of_fem": [p.get("of_fem") for p in pick["slab"]],
+            "slab_of_p2p0": [p.get("of_p2p0") for p in pick["slab"]],
             "slab_spread": _spread([p.get("force_N") for p in pick["slab"]]),
             "deep_of_fem": next((p.get("of_fem") for p in pick["deep"]), None),
             "lesion_ratio_of_fem": next((p.get("ratio_of_fem") for p in pick["lesion"]), None),
@@ -266,7 +286,7 @@ def run_depth_layers(settings, device, tasks) -> dict:
     against the reference of settings.depth's load steps and tolerances."""
     d = settings.depth
     fem = dict(steps_per_mm=d.fem_steps_per_mm, rtol=d.fem_rtol, gap_rtol=d.fem_gap_rtol)
-    cases = [press_laws(slab_case(h), device, fem, tasks=tasks) for h in d.slab_edges_mm]
+    cases = [press_laws(slab_case(h), device, fem, tasks=tasks, linear=True) for h in d.slab_edges_mm]
     deep_case = ball_case(d.ball_edge_mm)
     deep = press_laws(deep_case, device, fem, settings.timing_budget_s, tasks)
     regions = region_rows(deep_case, deep, d.rings, device, settings.timing_budget_s, tasks)

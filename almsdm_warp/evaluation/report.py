@@ -364,6 +364,8 @@ def _law_cell(press: dict, lesion: bool) -> str:
         return f"failed: {press['error']}"
     if lesion:
         head = f"x{fmt(press['ratio'], 3)}: {fmt(press['ratio_of_fem'], 3)} of FEM's"
+    elif "of_p2p0" in press:
+        head = f"{fmt(press['of_fem'], 3)}; {fmt(press['of_p2p0'], 3)} of P2/P0"
     else:
         head = fmt(press["of_fem"], 3)
     inverted = press.get("inverted_tets")
@@ -382,11 +384,14 @@ def _depth_cases(d) -> list[str]:
             fem = f"x{fmt(c['fem_ratio'], 3)} ({fmt(c['fem_N_without'], 4)} -> {fmt(c['fem_N'], 4)} N, {c['fem_s']:.0f} s)"
         else:
             fem = f"{fmt(c['fem_N'], 4)} N ({c['fem_s']:.0f} s)"
+        if "p2p0_N" in c:
+            fem += f"; P2/P0 {fmt(c['p2p0_N'], 4)} N ({c['p2p0_s']:.0f} s)"
         cells = " | ".join(_law_cell(c["laws"][law], lesion) for law in laws)
         lines.append(f"| {c['label']} | {c['vertices']} / {c['tets']} | {fem} | {cells} |")
     summary = d["summary"]
     if summary.get("fem_slab_spread") is not None:
-        lines.append(f"| slab: spread across resolutions (max / min - 1) | | {100 * summary['fem_slab_spread']:.1f}% | "
+        lines.append(f"| slab: spread across resolutions (max / min - 1) | | {100 * summary['fem_slab_spread']:.1f}%; "
+                     f"P2/P0 {fmt(_pct_or_none(summary.get('p2p0_slab_spread')), 1)}% | "
                      + " | ".join(f"{fmt(_pct_or_none(summary[law]['slab_spread']), 1)}%" for law in laws) + " |")
     lines.append("| misses a bound | | | " + " | ".join(", ".join(summary[law]["misses"]) or "none" for law in laws) + " |")
     return lines
@@ -415,7 +420,8 @@ def _depth_verdicts(d) -> list[str]:
     out = []
     for law in d["laws"]:
         s = d["summary"][law]
-        numbers = (f"slab {', '.join(fmt(x, 3) for x in s['slab_of_fem'])} of FEM, deep press {fmt(s['deep_of_fem'], 3)}, "
+        numbers = (f"slab {', '.join(fmt(x, 3) for x in s['slab_of_fem'])} of FEM ({', '.join(fmt(x, 3) for x in s['slab_of_p2p0'])} "
+                   f"of P2/P0), deep press {fmt(s['deep_of_fem'], 3)}, "
                    f"lesion ratio {fmt(s['lesion_ratio_of_fem'], 3)} of FEM's; at most {s['inverted_tets']} tets inverted")
         verdict = f"misses {', '.join(s['misses'])}" if s["misses"] else "within every bound"
         out.append(f"- **{law}**: {verdict} ({numbers}).")
@@ -443,7 +449,9 @@ def _depth_layers(r) -> list[str]:
         f"{d['press']['dt'] * 1e3:g} ms frames, the force at the end of a {d['press']['hold']:g} s hold. Cases (evaluation/depth_layers.py): "
         "a slab 10 mm thick on a rigid base (tissue over bone, its bottom fixed, 30 x 30 mm, graded to 3x the edge at its sides); "
         "a deep press into a tet ball resting on a support (fixed below 0.6 R); the ball pressed 5 mm over a lesion 5x as stiff, "
-        "and its force ratio with and without it. A cell: force / FEM (a lesion: the law's ratio and that over the FEM's), "
+        "and its force ratio with and without it. A cell: force / FEM (a slab also over the locking-free linear P2/P0 solve of the "
+        "same mesh, evaluation/fem.py: P1 tets lock as nu -> 1/2, so a law without locking can sit below the neo-Hookean FEM "
+        "and near P2/P0; a lesion: the law's ratio and that over the FEM's), "
         "tets inverted at the end of the hold, the law's wall time (model and press). Bounds (issue 22, here on the same tets): "
         f"slab {100 * t['slab']:g}%, deep press {100 * t['deep']:g}%, lesion ratio {100 * t['lesion']:g}%. "
         + _depth_meshes()
