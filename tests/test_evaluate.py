@@ -240,6 +240,7 @@ def test_depth_layers_detect_the_springs_failure_and_hold_the_neo_hookean_law(qu
     assert neo["of_fem"] > 0.7 and neo["of_fem"] > 3 * springs["of_fem"] and neo["inverted_tets"] == 0  # measured 0.82
     assert "deep" in d["summary"]["springs"]["misses"]
     assert "- **springs**: misses slab, deep" in md
+    assert f"springs misses slab, deep, lesion (deep press {springs['of_fem']:.2f} of the FEM" in md  # the summary's point
     assert cases["lesion"]["fem_ratio"] > 1.2  # E x5 under the probe: measured 1.50
     assert cases["lesion"]["laws"]["neo-hookean"]["ratio_of_fem"] == pytest.approx(1.0, abs=0.10)  # measured 0.93
 
