@@ -82,3 +82,20 @@ def test_lesion_row_ratios():
     assert out["fem_ratio"] == 1.5 and out["fem_N_without"] == 2.0
     assert out["laws"]["a"]["ratio"] == pytest.approx(1.2) and out["laws"]["a"]["ratio_of_fem"] == pytest.approx(0.8)
     assert out["laws"]["b"]["ratio"] is None and out["laws"]["b"]["ratio_of_fem"] is None  # a law that failed: no ratio
+
+
+def test_summary_judges_each_case_against_its_bound():
+    """TARGETS applied to made-up rows: a law 10% under the P1 FEM on a slab misses it (8%) though within 2% of
+    P2/P0; 9% under on the deep press is within (10%); a lesion ratio 6% off misses (5%); a failed press misses."""
+    def press(of_fem, **kw):
+        return {"of_fem": of_fem, "force_N": of_fem, "inverted_tets": 0, **kw}
+
+    laws = list(LAWS)
+    slab = {"case": "slab", "fem_N": 1.0, "p2p0_N": 0.9, "laws": {law: press(0.90, of_p2p0=0.98) for law in laws}}
+    deep = {"case": "deep", "fem_N": 1.0, "laws": {law: press(0.91) for law in laws}}
+    lesion = {"case": "lesion", "fem_N": 1.0, "laws": {law: press(1.0, ratio_of_fem=0.94) for law in laws}}
+    deep["laws"][laws[0]] = {"error": "RuntimeError: ran away"}
+    out = dl.summarise([slab, deep, lesion])
+    for law in laws:
+        assert out[law]["misses"] == (["slab", "deep", "lesion"] if law == laws[0] else ["slab", "lesion"])
+        assert out[law]["slab_within_p2p0"] and out[law]["slab_of_p2p0"] == [0.98]

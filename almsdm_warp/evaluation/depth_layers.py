@@ -246,9 +246,10 @@ def region_rows(case: Case, deep: dict, rings, device, timing_budget_s, tasks=No
 
 
 def summarise(cases: list[dict]) -> dict:
-    """Per law: its force / FEM on each case (slabs in order), the lesion's ratio over the FEM's, the slabs'
-    spread (max / min - 1 of its force across resolutions; the FEM's beside it), the most tets it
-    leaves inverted, and the cases it misses TARGETS on (a case it could not run counts as missed)."""
+    """Per law: its force / FEM on each case (slabs in order; over P2/P0 too), the lesion's ratio over the FEM's,
+    the slabs' spread (max / min - 1 of its force across resolutions; the references' beside it), the most
+    tets it leaves inverted, the cases it misses TARGETS on against the neo-Hookean FEM (a case it could not
+    run counts as missed), and whether every slab is within the slab's bound of the locking-free P2/P0."""
     slabs = [c for c in cases if c["case"] == "slab"]
     out = {"fem_slab_spread": _spread([c["fem_N"] for c in slabs]), "p2p0_slab_spread": _spread([c.get("p2p0_N") for c in slabs])}
     for law in LAWS:
@@ -257,14 +258,20 @@ def summarise(cases: list[dict]) -> dict:
         misses = [name for name in TARGETS if name in missed]
         out[law] = {
             "slab_of_fem": [p.get("of_fem") for p in pick["slab"]],
-            "slab_of_p2p0": [p.get("of_p2p0") for p in pick["slab"]],
+            "slab_of_p2p0": _of_p2p0(pick["slab"]),
             "slab_spread": _spread([p.get("force_N") for p in pick["slab"]]),
             "deep_of_fem": next((p.get("of_fem") for p in pick["deep"]), None),
             "lesion_ratio_of_fem": next((p.get("ratio_of_fem") for p in pick["lesion"]), None),
             "inverted_tets": max((c["laws"][law].get("inverted_tets") or 0 for c in cases), default=0),
             "misses": misses,
+            "slab_within_p2p0": all(x is not None and abs(x - 1.0) <= TARGETS["slab"] for x in _of_p2p0(pick["slab"])),
         }
     return out
+
+
+def _of_p2p0(slabs: list[dict]) -> list:
+    """A law's force over the P2/P0 solve's on each slab (None where either is missing)."""
+    return [p.get("of_p2p0") for p in slabs]
 
 
 def _within(case_row: dict, law: str) -> bool:

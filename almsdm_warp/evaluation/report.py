@@ -424,6 +424,9 @@ def _depth_verdicts(d) -> list[str]:
                    f"of P2/P0), deep press {fmt(s['deep_of_fem'], 3)}, "
                    f"lesion ratio {fmt(s['lesion_ratio_of_fem'], 3)} of FEM's; at most {s['inverted_tets']} tets inverted")
         verdict = f"misses {', '.join(s['misses'])}" if s["misses"] else "within every bound"
+        if "slab" in s["misses"] and s.get("slab_within_p2p0"):
+            verdict += (f" (the slab against the P1 FEM, which locks; within {100 * d['targets']['slab']:g}% of the "
+                        "locking-free P2/P0 on every slab)")
         out.append(f"- **{law}**: {verdict} ({numbers}).")
     return out
 
