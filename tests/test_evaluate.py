@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import shortest_path
 from almsdm_warp.cli.main import main
 from almsdm_warp.errors import InputError
 from almsdm_warp.evaluation.accuracy import join_extra_points, read_extra_points
+from almsdm_warp.evaluation.common import SETTINGS
 from almsdm_warp.mesh import primitives
 from almsdm_warp.evaluation.stability import DIVERGED, NOT_RECOVERED, OSCILLATING, STABLE, classify
 from almsdm_warp.protocol.palpation import PressResult
@@ -255,7 +256,7 @@ def test_every_registered_law_is_in_the_depth_layers_section(quick, law):
     for case in d["cases"]:
         assert law in case["laws"]
     rows = [r for r in d["regions"] if r["law"] == law]
-    assert [r["rings"] for r in rows] == [2, 4, "global"]  # --quick
+    assert [r["rings"] for r in rows] == [*SETTINGS["quick"].depth.rings, "global"]
     glob = rows[-1]
     if "error" not in glob:
         assert glob["error_vs_global_pct"] == 0.0 and glob["step_us"] > 0
