@@ -159,7 +159,7 @@ def plot_force_displacement(rec, table1, path):
 
 def plot_speed_accuracy(acc, extra, path, against_fem=None, depth=None):
     plt = _plt()
-    axes = _speed_accuracy_axes(plt, 2 + bool(against_fem) + bool(depth))
+    axes, title_y = _speed_accuracy_axes(plt, 2 + bool(against_fem) + bool(depth))
     fig = axes[0].figure
     rows = acc["rows"] + list(extra)
     notes = []  # (axes, text, point): written apart once the limits are final
@@ -193,20 +193,21 @@ def plot_speed_accuracy(acc, extra, path, against_fem=None, depth=None):
         notes += _law_panel(axes[-1], depth)
     fig.suptitle(
         "Speed against accuracy: rings 1..N against the global anchored reference\n"
-        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})", y=1.07
+        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})", y=title_y
     )
     _annotate_apart(fig, notes)
     return _save(fig, path)
 
 
 def _speed_accuracy_axes(plt, panels: int):
-    """The speed-accuracy figure's axes, flat: one row of up to three panels, two rows of two for four."""
+    """The speed-accuracy figure's axes, flat (one row of up to three panels, two rows of two for four),
+    and the height of its two-line title in figure coordinates."""
     if panels == 4:
         fig, axes = plt.subplots(2, 2, figsize=(12, 9.0))
-        fig.subplots_adjust(hspace=0.35)
-        return list(axes.ravel())
+        fig.subplots_adjust(hspace=0.35, top=0.9)
+        return list(axes.ravel()), 0.99
     fig, axes = plt.subplots(1, panels, figsize=(5.5 * panels, 4.4))
-    return list(axes)
+    return list(axes), 1.07
 
 
 def _law_panel(ax, depth) -> list:
