@@ -88,17 +88,18 @@ def overlap_radius(mesh: TissueMesh, point, normal, radius, depth) -> float:
 
 
 def hold_force(mesh, tissue, vertex, depth, *, rings="global", probe_radius=0.0, fixed_below=None, dt=1e-3,
-               ramp=0.05, hold=0.1, device="cpu", timing_budget_s=None):
+               ramp=0.05, hold=0.1, device="cpu", timing_budget_s=None, law="springs"):
     """A press held until steady: (hold force [N], change over the hold's last 10% as a fraction,
     vertices simulated, seconds, median step [us] or None).
 
     timing_budget_s: time the step with the probe held at the press's depth for about that long.
-    Raises RuntimeError when the hold is not steady (STEADY)."""
+    law: the tissue law (springs: these sections measure the spring model; a tet mesh's default law is
+    another, depth_layers.py presses every law). Raises RuntimeError when the hold is not steady (STEADY)."""
     from ..protocol.palpation import Palpation
 
     start = time.perf_counter()
     pal = Palpation(mesh, tissue, rings=rings, integrator="implicit", dt=dt, device=device,
-                    probe_radius=probe_radius, fixed_below=fixed_below)
+                    probe_radius=probe_radius, fixed_below=fixed_below, law=law)
     pal.touch(vertex)
     result = pal.press(depth, ramp=ramp, hold=hold, settle=dt)
     force = result.force[: result.release_step]
