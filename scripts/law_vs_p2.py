@@ -44,7 +44,7 @@ def case_meshes(args):
             top = int(np.argmax(mesh.vertices[:, 2]))
             yield f"ball {h:g} mm", mesh, top, BALL["z_fix"], BALL["sphere"], (args.depth_mm or 2.0) * 1e-3
         else:
-            from law_vs_fem import graded  # the slab's grading, one copy
+            from almsdm_warp.evaluation.depth_layers import graded  # the slab's grading, one copy
 
             zs = np.linspace(0.0, 10.0, max(int(round(10.0 / h)), 2) + 1)
             vertices, tets = tet_grid_arrays(graded(h, 15.0), graded(h, 15.0), zs)

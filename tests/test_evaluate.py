@@ -1,4 +1,4 @@
-"""`almsdm evaluate --quick`: every part runs once (module fixture, ~20-30 s on 2 CPU cores), and
+"""`almsdm evaluate --quick`: every part runs once (module fixture, about a minute of CPU), and
 what it writes holds against independent answers: region sizes against scipy breadth-first
 distances, the explicit stability boundary against the linearized critical step, the unanchored
 global model never recovering, the global reference's zero error, non-blank figures, and a
@@ -19,9 +19,11 @@ from scipy.sparse.csgraph import shortest_path
 from almsdm_warp.cli.main import main
 from almsdm_warp.errors import InputError
 from almsdm_warp.evaluation.accuracy import join_extra_points, read_extra_points
+from almsdm_warp.evaluation.common import SETTINGS
 from almsdm_warp.mesh import primitives
 from almsdm_warp.evaluation.stability import DIVERGED, NOT_RECOVERED, OSCILLATING, STABLE, classify
 from almsdm_warp.protocol.palpation import PressResult
+from almsdm_warp.tissue.laws import LAWS
 
 GPU_STEP_US = 1.25  # an input of the test: a made-up GPU time that must reach the table as given
 
@@ -68,7 +70,7 @@ def test_results_md_names_machine_date_and_command(quick):
     if model:
         assert model in md
     for section in ("## 1. Recovery", "## 2. Table 1", "## 3. Force against displacement", "## 4. Table 2", "## 5. Speed against accuracy", "## 6. Stability map", "## 7. Real anatomy",
-                    "## 8. Mesh convergence", "## 9. Against finite elements"):
+                    "## 8. Mesh convergence", "## 9. Against finite elements", "## 10. Depth, layers and lesions"):
         assert section in md
 
 
@@ -220,6 +222,48 @@ def test_convergence_and_against_fem_sections(quick):
     local = [r for r in f["rows"] if r["rings"] != "global"]
     assert [abs(r["error_vs_global_pct"]) for r in local] == sorted((abs(r["error_vs_global_pct"]) for r in local), reverse=True)
     assert f"| global | {glob['region_vertices']} | {glob['force_N']:.4f} |" in md
+
+
+def test_depth_layers_detect_the_springs_failure_and_hold_the_neo_hookean_law(quick):
+    """The known answers of issue 22 against the section's neo-Hookean FEM of the same tets: a deep press
+    (a sphere R 10 mm 10 mm into a ball R 25 mm) gives the springs law far less than the FEM, with tets
+    inverted; the neo-Hookean law holds several times more, none inverted; a stiff lesion raises the
+    force (the FEM's ratio above 1), the neo-Hookean law's within 10% of that; the summary and results.md
+    say which law misses what."""
+    _, results, md, _ = quick
+    d = results["depth_layers"]
+    cases = {c["case"]: c for c in d["cases"]}
+    assert set(cases) == {"slab", "deep", "lesion"}
+    deep = cases["deep"]
+    assert (deep["sphere_mm"], deep["depth_mm"]) == (10.0, 10.0) and deep["fem_N"] > 1.0  # about 1.45 N
+    springs, neo = deep["laws"]["springs"], deep["laws"]["neo-hookean"]
+    assert springs["of_fem"] < 0.5 and springs["inverted_tets"] > 0  # measured 0.20, 28 inverted
+    assert neo["of_fem"] > 0.7 and neo["of_fem"] > 3 * springs["of_fem"] and neo["inverted_tets"] == 0  # measured 0.82
+    assert "deep" in d["summary"]["springs"]["misses"]
+    assert "- **springs**: misses slab, deep" in md
+    assert f"springs misses slab, deep, lesion (deep press {springs['of_fem']:.2f} of the FEM" in md  # the summary's point
+    assert cases["lesion"]["fem_ratio"] > 1.2  # E x5 under the probe: measured 1.50
+    assert cases["lesion"]["laws"]["neo-hookean"]["ratio_of_fem"] == pytest.approx(1.0, abs=0.10)  # measured 0.93
+
+
+@pytest.mark.parametrize("law", list(LAWS))
+def test_every_registered_law_is_in_the_depth_layers_section(quick, law):
+    """Every law of tissue.laws.LAWS: a cell in each case, its local regions and global model on the deep press
+    (the speed-accuracy figure's points; the global model against itself exact), a column of results.md."""
+    _, results, md, _ = quick
+    d = results["depth_layers"]
+    assert law in d["laws"] and law in d["summary"]
+    for case in d["cases"]:
+        assert law in case["laws"]
+    rows = [r for r in d["regions"] if r["law"] == law]
+    assert [r["rings"] for r in rows] == [*SETTINGS["quick"].depth.rings, "global"]
+    glob = rows[-1]
+    if "error" not in glob:
+        assert glob["error_vs_global_pct"] == 0.0 and glob["step_us"] > 0
+        assert glob["force_N"] == pytest.approx((1 + glob["error_vs_fem_pct"] / 100) * next(c for c in d["cases"] if c["case"] == "deep")["fem_N"])
+    header = next(line for line in md.splitlines() if line.startswith("| case | vertices / tets | FEM |"))
+    assert f" {law} |" in header
+    assert f"- **{law}**: " in md
 
 
 def _press(displacement, release_step, depth=0.01, dt=1e-3):

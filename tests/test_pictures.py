@@ -264,7 +264,8 @@ def labelled_ticks(axis) -> int:
 EVALUATE_FIGURES = {
     "recovery": lambda p, r: p.plot_recovery(r["recovery"], "recovery.png"),
     "force_displacement": lambda p, r: p.plot_force_displacement(r["recovery"], r["table1"], "fd.png"),
-    "speed_accuracy": lambda p, r: p.plot_speed_accuracy(r["accuracy"], r["accuracy"].get("extra", []), "sa.png", r["against_fem"]),
+    "speed_accuracy": lambda p, r: p.plot_speed_accuracy(r["accuracy"], r["accuracy"].get("extra", []), "sa.png", r["against_fem"],
+                                                         r.get("depth_layers")),
     "stability": lambda p, r: p.plot_stability(r["stability"], "stability.png"),
     "anatomy_cost": lambda p, r: p.plot_anatomy_cost(r["anatomy"], "cost.png"),
     "anatomy_force": lambda p, r: p.plot_anatomy_force(r["anatomy"], "force.png"),

@@ -1,6 +1,7 @@
 """`almsdm evaluate`: regenerate docs/results.md and its figures (the paper's experiments, speed
 against accuracy, the stability map, real anatomy, mesh convergence and the ball against finite
-elements: evaluation/continuum.py)."""
+elements: evaluation/continuum.py; every tissue law on a slab, deep and over a lesion:
+evaluation/depth_layers.py)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ def add_parser(sub) -> None:
         "run the evaluation and write results.md and its figures",
         "Run the paper's experiments (recovery, Table 1, force against displacement, Table 2), speed against "
         "accuracy, the stability map, the real-anatomy runs, mesh convergence (the same press at three resolutions) "
-        "and the ball against finite elements (P2 and Hertz); write OUT/results.md, OUT/results.json and "
+        "the ball against finite elements (P2 and Hertz) and every tissue law against a neo-Hookean FEM on a slab over bone, "
+        "a deep press and a lesion; write OUT/results.md, OUT/results.json and "
         "OUT/figures/*.png (nothing is written until every experiment has run).",
     )
     p.add_argument("--quick", action="store_true", help="reduced versions of every part (under 2 minutes on 2 CPU cores)")

@@ -65,6 +65,25 @@ class ContinuumSettings:
 
 
 @dataclass(frozen=True)
+class DepthSettings:
+    """How much of the "depth, layers and lesions" section a run does (evaluation/depth_layers)."""
+
+    slab_edges_mm: tuple = (2.0, 1.4, 1.0)
+    """Edges [mm] under the probe of the slab on a rigid base, one row each (1014, 2312, 3971 vertices)."""
+    ball_edge_mm: float = 4.0
+    """Edge [mm] of the tet ball of the deep press and the lesion (1435 vertices)."""
+    rings: tuple = (2, 4, 6)
+    """Ring counts of each law's local region on the deep press, beside its global model."""
+    fem_steps_per_mm: float = 2.0
+    """The reference's load steps a millimetre of depth (at least 4)."""
+    fem_rtol: float = 1e-6
+    """The reference's Newton tolerance, relative to the largest internal force (fem_nonlinear's 1e-9 stalls
+    on some meshes: the contact's kinks hold Newton's steps at ~1e-4 of the force)."""
+    fem_gap_rtol: float = 1e-4
+    """The reference's contact tolerance: the largest penetration left, relative to the depth."""
+
+
+@dataclass(frozen=True)
 class Settings:
     """How much of each experiment a run does: "full" (docs/results.md), "quick" (< 2 min on 2
     CPU cores) or "tiny" (the test's: every part, the least work that still shows each effect)."""
@@ -89,6 +108,8 @@ class Settings:
     """The unanchored global model is run on real meshes up to this many vertices."""
     continuum: ContinuumSettings = ContinuumSettings()
     """The mesh-convergence and against-FEM sections."""
+    depth: DepthSettings = DepthSettings()
+    """The depth, layers and lesions section."""
 
 
 _ANATOMY_FULL = (
@@ -135,6 +156,7 @@ SETTINGS = {
         ),
         anatomy_free_max_vertices=1100,
         continuum=ContinuumSettings((4, 5), (10.0, 8.0), fem_edge_mm=12.0, fem_rings=(2, 4), hertz_block=False),
+        depth=DepthSettings((3.0,), 8.0, (2, 4), fem_steps_per_mm=1.0, fem_rtol=1e-6, fem_gap_rtol=1e-3),
     ),
     "tiny": Settings(
         name="tiny",
@@ -149,6 +171,7 @@ SETTINGS = {
         anatomy=(("mor_liverTinyMesh.vtu", 30.0), ("mor_liverVeryCOARSE.vtu", 30.0)),
         anatomy_free_max_vertices=100,
         continuum=ContinuumSettings((3, 4), (16.0, 12.0), fem_edge_mm=16.0, fem_rings=(1, 2), hertz_block=False),
+        depth=DepthSettings((4.0,), 8.0, (2,), fem_steps_per_mm=1.0, fem_rtol=1e-6, fem_gap_rtol=1e-3),
     ),
 }
 

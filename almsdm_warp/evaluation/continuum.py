@@ -88,34 +88,40 @@ def overlap_radius(mesh: TissueMesh, point, normal, radius, depth) -> float:
 
 
 def hold_force(mesh, tissue, vertex, depth, *, rings="global", probe_radius=0.0, fixed_below=None, dt=1e-3,
-               ramp=0.05, hold=0.1, device="cpu", timing_budget_s=None):
+               ramp=0.05, hold=0.1, device="cpu", timing_budget_s=None, law="springs"):
     """A press held until steady: (hold force [N], change over the hold's last 10% as a fraction,
     vertices simulated, seconds, median step [us] or None).
 
     timing_budget_s: time the step with the probe held at the press's depth for about that long.
-    Raises RuntimeError when the hold is not steady (STEADY)."""
+    law: the tissue law (springs: these sections measure the spring model; a tet mesh's default law is
+    another, depth_layers.py presses every law). Raises RuntimeError when the hold is not steady (STEADY)."""
     from ..protocol.palpation import Palpation
-    from ..protocol.timing import time_palpation
-    from ..sim.model import PROBE_DISPLACEMENT, PROBE_SPHERE
 
     start = time.perf_counter()
     pal = Palpation(mesh, tissue, rings=rings, integrator="implicit", dt=dt, device=device,
-                    probe_radius=probe_radius, fixed_below=fixed_below)
+                    probe_radius=probe_radius, fixed_below=fixed_below, law=law)
     pal.touch(vertex)
     result = pal.press(depth, ramp=ramp, hold=hold, settle=dt)
     force = result.force[: result.release_step]
     change = steady_change(force, hold, dt)
     simulated = mesh.vertex_count if pal.region is None else pal.region_vertices
     seconds = time.perf_counter() - start
-    step_us = None
-    if timing_budget_s:
-        rest, inward = pal.rest_position(), pal.inward_normal()
-        if probe_radius > 0:
-            pal.set_probe(PROBE_SPHERE, rest - inward * probe_radius + inward * depth)
-        else:
-            pal.set_probe(PROBE_DISPLACEMENT, rest + inward * depth)
-        step_us = time_palpation(pal, 9, read_force=True, warmup=10, budget_s=timing_budget_s, max_steps=5000).median * 1e6
+    step_us = held_step_us(pal, depth, timing_budget_s) if timing_budget_s else None
     return float(force[-1]), change, simulated, seconds, step_us
+
+
+def held_step_us(pal, depth, budget_s) -> float:
+    """The median step [us] of a palpation with its probe held `depth` [m] in along the inward normal (a
+    sphere of pal.probe_radius, or the driven vertex), over about `budget_s` of stepping."""
+    from ..protocol.timing import time_palpation
+    from ..sim.model import PROBE_DISPLACEMENT, PROBE_SPHERE
+
+    rest, inward = pal.rest_position(), pal.inward_normal()
+    if pal.probe_radius > 0:
+        pal.set_probe(PROBE_SPHERE, rest - inward * pal.probe_radius + inward * depth)
+    else:
+        pal.set_probe(PROBE_DISPLACEMENT, rest + inward * depth)
+    return time_palpation(pal, 9, read_force=True, warmup=10, budget_s=budget_s, max_steps=5000).median * 1e6
 
 
 def steady_change(force, hold, dt) -> float:

@@ -1,5 +1,6 @@
 """`almsdm evaluate`: the paper's experiments reproduced, speed charted against accuracy, stability
-mapped, real anatomy; one command regenerates docs/results.md and its figures.
+mapped, real anatomy, the continuum references (continuum.py; every tissue law deep, over bone and
+over a lesion: depth_layers.py); one command regenerates docs/results.md and its figures.
 
     run_evaluation(out_dir, settings=SETTINGS["full"], device="cpu")
 
@@ -21,6 +22,7 @@ from pathlib import Path
 from . import accuracy as evaluate_accuracy
 from . import anatomy as evaluate_anatomy
 from . import continuum as evaluate_continuum
+from . import depth_layers as evaluate_depth
 from . import paper as evaluate_paper
 from . import stability as evaluate_stability
 from .common import SETTINGS, Settings, Tasks
@@ -94,7 +96,7 @@ def run_evaluation(out_dir, settings: Settings | str = "full", device="cpu", *, 
     normals = evaluate_paper.find_normals_strategies() if normals is None else normals
     auto_factory = evaluate_accuracy.find_auto_factory() if auto_factory is None else auto_factory
     started = time.perf_counter()
-    total = sum(m.count_tasks(settings) for m in (evaluate_paper, evaluate_accuracy, evaluate_stability, evaluate_anatomy, evaluate_continuum))
+    total = sum(m.count_tasks(settings) for m in (evaluate_paper, evaluate_accuracy, evaluate_stability, evaluate_anatomy, evaluate_continuum, evaluate_depth))
     results = {
         "settings": settings.name,
         "command": command or f"almsdm evaluate --device {device}",
@@ -112,6 +114,7 @@ def run_evaluation(out_dir, settings: Settings | str = "full", device="cpu", *, 
             ("anatomy", lambda: evaluate_anatomy.run_anatomy(settings, device, tasks, meshes_dir)),
             ("convergence", lambda: evaluate_continuum.run_convergence(settings, device, tasks)),
             ("against_fem", lambda: evaluate_continuum.run_against_fem(settings, device, tasks)),
+            ("depth_layers", lambda: evaluate_depth.run_depth_layers(settings, device, tasks)),
         )
         results["part_s"] = {}
         for name, run in parts:
@@ -128,7 +131,8 @@ def run_evaluation(out_dir, settings: Settings | str = "full", device="cpu", *, 
     written = {}
     written["recovery"] = plot_recovery(results["recovery"], figures / FIGURES["recovery"])
     written["force_displacement"] = plot_force_displacement(results["recovery"], results["table1"], figures / FIGURES["force_displacement"])
-    written["speed_accuracy"] = plot_speed_accuracy(results["accuracy"], extra, figures / FIGURES["speed_accuracy"], results["against_fem"])
+    written["speed_accuracy"] = plot_speed_accuracy(results["accuracy"], extra, figures / FIGURES["speed_accuracy"], results["against_fem"],
+                                                   results["depth_layers"])
     written["stability"] = plot_stability(results["stability"], figures / FIGURES["stability"])
     if results["anatomy"]["rows"]:
         written["anatomy_cost"] = plot_anatomy_cost(results["anatomy"], figures / FIGURES["anatomy_cost"])

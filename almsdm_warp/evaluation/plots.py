@@ -157,9 +157,10 @@ def plot_force_displacement(rec, table1, path):
     return _save(fig, path)
 
 
-def plot_speed_accuracy(acc, extra, path, against_fem=None):
+def plot_speed_accuracy(acc, extra, path, against_fem=None, depth=None):
     plt = _plt()
-    fig, axes = plt.subplots(1, 3 if against_fem else 2, figsize=(16.5 if against_fem else 11, 4.4))
+    axes, title_y = _speed_accuracy_axes(plt, 2 + bool(against_fem) + bool(depth))
+    fig = axes[0].figure
     rows = acc["rows"] + list(extra)
     notes = []  # (axes, text, point): written apart once the limits are final
     groups = {}
@@ -188,12 +189,49 @@ def plot_speed_accuracy(acc, extra, path, against_fem=None):
         _label_axes(ax, "time per step [us] (paper: per rendered frame)", label, log="xy", loc="upper right")
     if against_fem:
         notes += _fem_reference_panel(axes[2], against_fem)
+    if depth:
+        notes += _law_panel(axes[-1], depth)
     fig.suptitle(
         "Speed against accuracy: rings 1..N against the global anchored reference\n"
-        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})", y=1.07
+        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})", y=title_y
     )
     _annotate_apart(fig, notes)
     return _save(fig, path)
+
+
+def _speed_accuracy_axes(plt, panels: int):
+    """The speed-accuracy figure's axes, flat (one row of up to three panels, two rows of two for four),
+    and the height of its two-line title in figure coordinates."""
+    if panels == 4:
+        fig, axes = plt.subplots(2, 2, figsize=(12, 9.0))
+        fig.subplots_adjust(hspace=0.35, top=0.9)
+        return list(axes.ravel()), 0.99
+    fig, axes = plt.subplots(1, panels, figsize=(5.5 * panels, 4.4))
+    return list(axes), 1.07
+
+
+def _law_panel(ax, depth) -> list:
+    """Every tissue law on the deep press (evaluation/depth_layers): each local region's and the global
+    model's force error against the neo-Hookean FEM of the same tets (filled, solid) and against the
+    law's own global model (open, dashed), over its step time. Returns the notes (rings at each point)
+    for _annotate_apart."""
+    deep = next(c for c in depth["cases"] if c["case"] == "deep")
+    notes = []
+    for i, law in enumerate(depth["laws"]):
+        rows = [r for r in depth["regions"] if r["law"] == law and r.get("step_us") and r.get("force_N") is not None]
+        if not rows:
+            continue
+        x = [r["step_us"] for r in rows]
+        for key, style, fill, against in (("error_vs_fem_pct", "o-", None, "FEM"), ("error_vs_global_pct", "o--", "none", "its global model")):
+            y = [max(abs(r[key]), 100 * FLOOR) if r[key] is not None else math.nan for r in rows]
+            ax.plot(x, y, style, color=f"C{i}", mfc=fill, ms=4, label=f"{law} against {against}")
+        notes += [(ax, str(r["rings"]), (r["step_us"], max(abs(r["error_vs_fem_pct"] or 0.0), 100 * FLOOR))) for r in rows]
+    fem = f"FEM {deep['fem_N']:.3f} N" if deep.get("fem_N") is not None else "no FEM"
+    _label_axes(ax, "time per step [us]", "force error [%] (|error|)",
+                f"every tissue law, deep press ({deep['vertices']} vertices, sphere R {deep['sphere_mm']:g} mm "
+                f"{deep['depth_mm']:g} mm in)\nagainst the neo-Hookean FEM ({fem}) and against its own global model",
+                log="xy", loc="lower center", legend=6, title_size=9)  # between the laws: each falls to its floor at its own step time
+    return notes
 
 
 def plot_stability(stab, path):

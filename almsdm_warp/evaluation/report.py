@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from .common import PAPER, fmt
+from .common import PAPER, SETTINGS, fmt
 from .continuum import BALL
 from .stability import OSCILLATING, STABLE, explicit_boundary
 from .summary import header_lines, stability_verdicts, summary_lines
@@ -358,8 +358,115 @@ def _against_fem(r) -> list[str]:
     return lines + _paragraphs(*text)
 
 
+def _law_cell(press: dict, lesion: bool) -> str:
+    """One law on one case: force / FEM (the lesion: its force ratio and that over the FEM's), tets inverted, seconds."""
+    if "error" in press:
+        return f"failed: {press['error']}"
+    if lesion:
+        head = f"x{fmt(press['ratio'], 3)}: {fmt(press['ratio_of_fem'], 3)} of FEM's"
+    elif "of_p2p0" in press:
+        head = f"{fmt(press['of_fem'], 3)}; {fmt(press['of_p2p0'], 3)} of P2/P0"
+    else:
+        head = fmt(press["of_fem"], 3)
+    inverted = press.get("inverted_tets")
+    return f"{head} ({'-' if inverted is None else inverted} inverted, {press['seconds']:.1f} s)"
+
+
+def _depth_cases(d) -> list[str]:
+    """The cases' table: a row a case, a column a law."""
+    laws = d["laws"]
+    lines = ["| case | vertices / tets | FEM | " + " | ".join(laws) + " |", "|" + "---|" * (3 + len(laws))]
+    for c in d["cases"]:
+        lesion = c["case"] == "lesion"
+        if c.get("fem_N") is None:
+            fem = f"failed: {c.get('fem_error', '')}"
+        elif lesion:
+            fem = f"x{fmt(c['fem_ratio'], 3)} ({fmt(c['fem_N_without'], 4)} -> {fmt(c['fem_N'], 4)} N, {c['fem_s']:.0f} s)"
+        else:
+            fem = f"{fmt(c['fem_N'], 4)} N ({c['fem_s']:.0f} s)"
+        if "p2p0_N" in c:
+            fem += f"; P2/P0 {fmt(c['p2p0_N'], 4)} N ({c['p2p0_s']:.0f} s)"
+        cells = " | ".join(_law_cell(c["laws"][law], lesion) for law in laws)
+        lines.append(f"| {c['label']} | {c['vertices']} / {c['tets']} | {fem} | {cells} |")
+    summary = d["summary"]
+    if summary.get("fem_slab_spread") is not None:
+        lines.append(f"| slab: spread across resolutions (max / min - 1) | | {100 * summary['fem_slab_spread']:.1f}%; "
+                     f"P2/P0 {fmt(_pct_or_none(summary.get('p2p0_slab_spread')), 1)}% | "
+                     + " | ".join(f"{fmt(_pct_or_none(summary[law]['slab_spread']), 1)}%" for law in laws) + " |")
+    lines.append("| misses a bound | | | " + " | ".join(", ".join(summary[law]["misses"]) or "none" for law in laws) + " |")
+    return lines
+
+
+def _pct_or_none(x):
+    return None if x is None else 100 * x
+
+
+def _depth_regions(d) -> list[str]:
+    """The deep press's local regions, law by law, against the FEM and against the law's own global model."""
+    lines = ["| law | integrator | model | vertices simulated | hold force [N] | against FEM [%] | against its global model [%] | "
+             "tets inverted | step [us] |", "|---|---|---|---|---|---|---|---|---|"]
+    for row in d["regions"]:
+        if "error" in row:
+            lines.append(f"| {row['law']} | {row['integrator']} | {_rings_label(row['rings'])} | failed: {row['error']} | | | | | |")
+            continue
+        lines.append(f"| {row['law']} | {row['integrator']} | {_rings_label(row['rings'])} | {row['region_vertices']} | "
+                     f"{row['force_N']:.4f} | {fmt(row['error_vs_fem_pct'], 1)} | {fmt(row['error_vs_global_pct'], 2)} | "
+                     f"{row['inverted_tets']} | {fmt(row['step_us'], 1)} |")
+    return lines
+
+
+def _depth_verdicts(d) -> list[str]:
+    """A sentence a law: where it holds and where it misses, with the numbers."""
+    out = []
+    for law in d["laws"]:
+        s = d["summary"][law]
+        numbers = (f"slab {', '.join(fmt(x, 3) for x in s['slab_of_fem'])} of FEM ({', '.join(fmt(x, 3) for x in s['slab_of_p2p0'])} "
+                   f"of P2/P0), deep press {fmt(s['deep_of_fem'], 3)}, "
+                   f"lesion ratio {fmt(s['lesion_ratio_of_fem'], 3)} of FEM's; at most {s['inverted_tets']} tets inverted")
+        verdict = f"misses {', '.join(s['misses'])}" if s["misses"] else "within every bound"
+        if "slab" in s["misses"] and s.get("slab_within_p2p0"):
+            verdict += (f" (the slab against the P1 FEM, which locks; within {100 * d['targets']['slab']:g}% of the "
+                        "locking-free P2/P0 on every slab)")
+        out.append(f"- **{law}**: {verdict} ({numbers}).")
+    return out
+
+
+def _depth_meshes() -> str:
+    """The full settings' meshes and reference, and the quick ones', in words."""
+    def words(d):
+        return (f"slabs of {', '.join(f'{h:g}' for h in d.slab_edges_mm)} mm edges and a ball of {d.ball_edge_mm:g} mm edges, "
+                f"the reference loaded in a step every {1 / d.fem_steps_per_mm:g} mm of depth (4 at least), Newton to {d.fem_rtol:g} of the "
+                f"largest internal force, contact to {d.fem_gap_rtol:g} of the depth")
+
+    return f"The full settings press {words(SETTINGS['full'].depth)}; --quick {words(SETTINGS['quick'].depth)}."
+
+
+def _depth_layers(r) -> list[str]:
+    d = r["depth_layers"]
+    t = d["targets"]
+    intro = (
+        f"Every tissue law the product registers ({', '.join(d['laws'])}) where palpation happens, against a neo-Hookean "
+        "finite-element solve of the same tets (evaluation/fem_nonlinear.py: P1, the classic compressible energy, "
+        "augmented-Lagrangian sphere contact, static, one modulus a tet for the lesion; it shares no code with the product). "
+        f"E {d['young_Pa'] * 1e-3:g} kPa, nu {d['poisson']:g}. The laws: global model, implicit where the law has it, "
+        f"{d['press']['dt'] * 1e3:g} ms frames, the force at the end of a {d['press']['hold']:g} s hold. Cases (evaluation/depth_layers.py): "
+        "a slab 10 mm thick on a rigid base (tissue over bone, its bottom fixed, 30 x 30 mm, graded to 3x the edge at its sides); "
+        "a deep press into a tet ball resting on a support (fixed below 0.6 R); the ball pressed 5 mm over a lesion 5x as stiff, "
+        "and its force ratio with and without it. A cell: force / FEM (a slab also over the locking-free linear P2/P0 solve of the "
+        "same mesh, evaluation/fem.py: P1 tets lock as nu -> 1/2, so a law without locking can sit below the neo-Hookean FEM "
+        "and near P2/P0; a lesion: the law's ratio and that over the FEM's), "
+        "tets inverted at the end of the hold, the law's wall time (model and press). Bounds (issue 22, here on the same tets): "
+        f"slab {100 * t['slab']:g}%, deep press {100 * t['deep']:g}%, lesion ratio {100 * t['lesion']:g}%. "
+        + _depth_meshes()
+    )
+    lines = ["## 10. Depth, layers and lesions", "", intro, "", *_depth_cases(d), ""]
+    lines += ["Each law's local regions on the deep press (the speed-accuracy figure, section 5, draws both errors against the step "
+              "time; the step timed with the sphere held at the depth):", "", *_depth_regions(d), ""]
+    return lines + _depth_verdicts(d) + [""]
+
+
 def render_results(r) -> str:
     lines = (header_lines(r) + summary_lines(r) + _recovery(r) + _table1(r) + _fig10(r) + _table2(r) + _accuracy(r) + _stability(r)
-             + _anatomy(r) + _convergence(r) + _against_fem(r))
+             + _anatomy(r) + _convergence(r) + _against_fem(r) + _depth_layers(r))
     return "\n".join(lines).rstrip() + "\n"
 

@@ -96,7 +96,20 @@ def summary_lines(r) -> list[str]:
         "only the anchored global model matches it, so the paper's global volume model presumably kept its anchors. "
         + "".join(f"({i}) {text} " for i, text in enumerate(_more_differences(r, missing), start=4)).rstrip()
     )
+    if r.get("depth_layers"):
+        lines.append(depth_layers_line(r["depth_layers"]))
     return lines + [""]
+
+
+def depth_layers_line(d) -> str:
+    """The summary's point on every tissue law deep, over bone and over a lesion (section 10)."""
+    parts = []
+    for law in d["laws"]:
+        s = d["summary"][law]
+        misses = f"misses {', '.join(s['misses'])}" if s["misses"] else "within every bound"
+        parts.append(f"{law} {misses} (deep press {fmt(s['deep_of_fem'], 2)} of the FEM, {s['inverted_tets']} tets inverted at most)")
+    return ("- **Depth, layers and lesions** (section 10: each tissue law against a neo-Hookean FEM of the same tets on a slab "
+            "over bone, a deep press and a stiff lesion): " + "; ".join(parts) + ".")
 
 
 def stability_verdicts(s):
