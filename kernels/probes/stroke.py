@@ -22,7 +22,7 @@ import warp as wp
 
 from ..arrays import struct_of
 from ..implicit.step import CONTACT_SLACK
-from ..laws import LAWS
+from ..laws import LAWS, pressure_pass
 from .sphere import onto_sphere_from, sphere_contact_reaction, sphere_normal
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
@@ -61,8 +61,7 @@ def held_centre(spheres: StrokeSpheres, p: int, alpha: float):
 @functools.cache
 def reactions_kernel(law: str):
     """The stroke's contact reactions at the end of an implicit step, of tissue law `law` (kernels.laws.LAWS)."""
-    vertex_force, nodal_pressure, Entries = LAWS[law].vertex_force, LAWS[law].nodal_pressure, LAWS[law].Entries
-    VOLUMETRIC = LAWS[law].VOLUMETRIC
+    vertex_force, Entries, region_pressure = LAWS[law].vertex_force, LAWS[law].Entries, pressure_pass(law)
 
     @wp.kernel(module="unique", enable_backward=False)
     def sum_stroke_reactions(
@@ -74,11 +73,7 @@ def reactions_kernel(law: str):
         # internal force at the end of the step, eqs. (3)-(6), summed in local order (a volumetric
         # law's nodal pressures first, at the end of the step)
         free_count = counts[0]
-        if wp.static(VOLUMETRIC):
-            for i in range(counts[1]):
-                v = region_vertex[i]
-                entries.pressure[v] = nodal_pressure(entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0,
-                                                     q_out, q_out)
+        region_pressure(region_vertex, counts[1], entries, q_out)
         for i in range(counts[1]):
             v = region_vertex[i]
             if surface[v] == 0 or vertex_local[v] >= free_count:

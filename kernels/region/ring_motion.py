@@ -10,7 +10,7 @@ import functools
 import warp as wp
 
 from ..arrays import RegionArrays, TissueArrays
-from ..laws import LAWS
+from ..laws import LAWS, pressure_pass
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -19,8 +19,7 @@ wp.set_module_options({"enable_backward": False})
 @functools.cache
 def motion_kernel(law: str):
     """The ring-motion check of tissue law `law` (a key of kernels.laws.LAWS)."""
-    static_row, nodal_pressure, Entries = LAWS[law].static_row, LAWS[law].nodal_pressure, LAWS[law].Entries
-    VOLUMETRIC = LAWS[law].VOLUMETRIC
+    static_row, Entries, region_pressure = LAWS[law].static_row, LAWS[law].Entries, pressure_pass(law)
 
     @wp.kernel(module="unique", enable_backward=False)
     def eval_ring_motion(
@@ -34,10 +33,7 @@ def motion_kernel(law: str):
         for s in range(slots):
             motion[s] = 0.0
         energy = float(0.0)
-        if wp.static(VOLUMETRIC):  # the nodal pressures at q (outside the region 0: at rest)
-            for i in range(count):
-                v = region.region_vertex[i]
-                entries.pressure[v] = nodal_pressure(entries.offsets[v], entries.offsets[v + 1], entries.topology, entries.params, 0, q, q)
+        region_pressure(region.region_vertex, count, entries, q)  # a tet law's nodal pressures at q (outside the region 0: at rest)
         for i in range(count):
             v = region.region_vertex[i]
             x = q[v]
