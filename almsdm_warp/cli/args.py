@@ -57,18 +57,19 @@ def rings_arg(words=("auto", *GLOBAL_RINGS)):
 
 
 def number_arg(rule):
-    """An argparse type: a finite float that is "> 0" or ">= 0"."""
+    """An argparse type: a float that is "> 0", ">= 0" or any "number", and 0 or of the magnitude every
+    physical parameter is held to wherever it enters (checks.check_value: a flag, a scene, a spec, the API)."""
+    from ..checks import check_value
 
     def parse(text):
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-        if (rule == "> 0" and not value > 0) or (rule == ">= 0" and not value >= 0):
-            raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
-        return value
+        try:
+            return check_value(value, float, rule, "")
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc).strip()) from None
 
     parse.__name__ = "number"
     return parse

@@ -136,7 +136,7 @@ class ProbeStroke(Palpation):
     def __init__(self, mesh, tissue=None, *, probe_radius, rings=4, integrator="explicit", dt=1e-3, device=None,
                  fixed_below=None, probes=1, lead=None, margin=2, guard=None, tol=1e-5, capture=True, substeps="auto",
                  edge_scale=None, anchor_scale=None, **solver_kw):
-        radius = check_probe_radius(probe_radius)
+        radius = check_probe_radius(probe_radius, mesh)
         if radius <= 0:
             raise ValueError(f"a stroke drives rigid spheres: probe_radius must be > 0 m, got {probe_radius}")
         if isinstance(rings, str) and rings != "global":
