@@ -17,6 +17,10 @@ from .args import (auto_tol, add_integrator_arg, add_law_arg, add_tissue_args, c
                    number_arg, quiet_warp, rings_arg, scene_with_tissue_args)
 
 
+DEFAULT_POINTS = 200
+"""--points when not given."""
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser(
         "sweep",
@@ -28,7 +32,7 @@ def add_parser(sub) -> None:
     )
     p.add_argument("scene", nargs="?", default=None, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     p.add_argument("--out", required=True, metavar="FILE", help="output table: .csv or .npz")
-    p.add_argument("--points", type=count_arg, default=200, metavar="N", help="points to press (default 200)")
+    p.add_argument("--points", type=count_arg, default=None, metavar="N", help=f"points to press (default {DEFAULT_POINTS})")
     p.add_argument("--rings", type=rings_arg(("auto",)), default=None, metavar="{K,auto}", help="rings of each local region, or auto: each point's sized to --tol-mm as almsdm palpate --rings auto sizes it (default: the scene's)")
     p.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
     p.add_argument("--depth-mm", "--depth", dest="depth_mm", type=number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
@@ -50,7 +54,7 @@ def add_parser(sub) -> None:
     p.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
     add_tissue_args(p)
     add_dataset_arg(p)
-    p.set_defaults(func=cmd_sweep, start_devices=True)
+    p.set_defaults(func=cmd_sweep, start_devices=True, integrator=None)  # None: not given (a dataset's spec decides it)
 
 
 def _devices(text: str) -> list[str]:
@@ -73,8 +77,14 @@ def cmd_sweep(args) -> int:
 
     if args.dataset:  # several scenes and a lesion grid: cli/dataset.py
         return cmd_dataset(args, _devices(args.device))
+    args.points = DEFAULT_POINTS if args.points is None else args.points
+    args.integrator = args.integrator or "explicit"
     out = Path(args.out)
     check_output(out, "table", "--out")
+    if args.ray:  # before OUT.parts/ is made
+        from ..batch.sweep import require_ray
+
+        require_ray()
     if args.png:
         check_output(args.png, "image", "--png")
     quiet_warp()
@@ -218,6 +228,8 @@ def _resume(out: Path, plan):
 
     parts = Parts(out, plan)
     done = parts.open()
+    if parts.dropped:
+        print(f"note: the chunks in {parts.dir} {parts.dropped}: pressed again", file=sys.stderr)
     if parts.damaged:
         print(f"note: {len(parts.damaged)} chunk(s) in {parts.dir} did not match their checksum (damaged): pressed again", file=sys.stderr)
     done = set(done)
