@@ -434,11 +434,22 @@ def resume_cases(tree):
 
 
 def usd_cases(tree):
-    def leftover(folder):  # a killed trace --usd leaves .t.usdc.XXXX.tmp; a later run removes it
-        (folder / ".t.usdc.abc123.tmp.usdc").write_bytes(b"PXR-USDC" + b"\0" * 100)
-        os.utime(folder / ".t.usdc.abc123.tmp.usdc", (time.time() - 7200, time.time() - 7200))
+    def leftover(folder):  # trace --usd killed (SIGKILL) while it records; a later run removes its temporary
         top, _zmin, _c = stomach_top(tree)
-        p = write_path(folder, press_rows(top))
+        rows = press_rows(top, seconds=20.0, n=50)
+        p = write_path(folder, rows)
+        env = dict(os.environ, PYTHONPATH=str(tree), WARP_CACHE_PATH=str(ROOT / ".warp_cache"))
+        proc = subprocess.Popen([sys.executable, "-m", "almsdm_warp.cli.main", "trace", "stomach", "--path", p, "--usd", "t.usdc"],
+                                cwd=folder, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.time() + LIMIT_S
+        while time.time() < deadline and proc.poll() is None and not list(folder.glob(".t.usdc.*")):
+            time.sleep(0.05)
+        time.sleep(0.5)
+        proc.kill()
+        proc.wait()
+        if not list(folder.glob(".t.usdc.*")):
+            return "harness: no temporary seen"
+        write_path(folder, press_rows(top))
         code, o, e = run(["trace", "stomach", "--path", p, "--usd", "t.usdc"], folder, tree)
         if code != 0:
             return classify(code, o, e)
@@ -447,7 +458,7 @@ def usd_cases(tree):
 
 
 def disk_cases(tree):
-    """Every output kind on a 256 KiB tmpfs (root only): one line, exit 2, nothing left."""
+    """Every output kind on a full 256 KiB tmpfs (root only): one line, exit 2, nothing left."""
     if os.geteuid() != 0:
         return []
     top, _zmin, _c = stomach_top(tree)
@@ -463,7 +474,13 @@ def disk_cases(tree):
             if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(disk)]).returncode:
                 return "skipped"
             try:
-                (disk / "fill").write_bytes(b"\0" * 200_000)
+                fd = os.open(disk / "fill", os.O_WRONLY | os.O_CREAT)
+                try:  # every block taken
+                    while os.write(fd, b"\0" * 4096):
+                        pass
+                except OSError:
+                    pass
+                os.close(fd)
                 p = write_path(folder, press_rows(top))
                 (folder / "spec.toml").write_text(SPEC)
                 args = [a.format(p=p, d=str(disk), s="spec.toml") for a in argv]

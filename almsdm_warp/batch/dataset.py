@@ -401,8 +401,12 @@ class DatasetFolder:
         if self.dir.exists() and any(self.dir.iterdir()):
             self._check_manifest()
         self.created = not self.dir.exists()
-        (self.dir / "items").mkdir(parents=True, exist_ok=True)
-        self._write_manifest()
+        try:
+            (self.dir / "items").mkdir(parents=True, exist_ok=True)
+            self._write_manifest()
+        except (OSError, InputError) as exc:  # a full disk: a folder made here goes, and one line says why
+            self.discard_if_new()
+            raise exc if isinstance(exc, InputError) else InputError(f"{self.dir}: cannot write: {exc.strerror or exc}") from None
         return [item for item in self.items if not self._finished(item)]
 
     def _check_manifest(self) -> None:

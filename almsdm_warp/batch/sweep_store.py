@@ -41,6 +41,8 @@ class Parts:
         self.plan = plan
         self._key = None
         self._base_key = None
+        self.created = False
+        """Whether open() made the folder (a run refused before its first chunk then removes it)."""
         self.dropped: str | None = None
         """Why open() removed every chunk it found (None: it kept those that matched)."""
         self._manifest_due = False  # a new folder's plan.json: written with its first chunk
@@ -108,6 +110,7 @@ class Parts:
                 self._clear()
                 return []
         else:
+            self.created = not self.dir.exists()
             self.dir.mkdir(exist_ok=True)
             self._manifest_due = True
             return []
@@ -175,6 +178,11 @@ class Parts:
             except (OSError, ValueError, KeyError, zipfile.BadZipFile, InputError) as exc:
                 raise InputError(f"{path}: damaged ({exc}); run the same command again to press that chunk again") from exc
         return {c: np.concatenate([p[c] for p in parts]) for c in COLUMNS}
+
+    def discard_if_new(self) -> None:
+        """Remove the folder where open() made it and no chunk is done (a run refused before any result)."""
+        if self.created and not self.sums:
+            self.remove()
 
     def remove(self) -> None:
         """Remove the folder: the chunks first, plan.json last, so that a run killed on the way leaves a

@@ -352,26 +352,27 @@ def _material_from_flags(args, scene, mesh):
     given = {attr: getattr(args, dest) / factor for dest, (_f, attr, factor, *_rest) in MATERIAL_FLAGS.items()
              if getattr(args, dest, None) is not None}
     tissue = scene.tissue
-    if not given:
-        return tissue
-    base = asdict(tissue) if isinstance(tissue, Material) else {}
-    if "youngs_modulus" not in given and not base:
-        flags = ", ".join(MATERIAL_FLAGS[d][0] for d in MATERIAL_FLAGS if getattr(args, d, None) is not None)
-        raise InputError(f"{flags} make the tissue a material, which needs --youngs-modulus-kpa "
-                         f"(the scene {scene.name!r} gives per-spring constants, not a material)")
-    if "damping_ratio" in given:  # one kind of damping: the flag replaces the scene's
-        base.update(rayleigh_alpha=0.0, rayleigh_beta=0.0)
-    elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
-        base.update(damping_ratio=0.0)
-    base.update(given)
-    from ..tissue.laws import LAWS, default_law
+    if given:
+        base = asdict(tissue) if isinstance(tissue, Material) else {}
+        if "youngs_modulus" not in given and not base:
+            flags = ", ".join(MATERIAL_FLAGS[d][0] for d in MATERIAL_FLAGS if getattr(args, d, None) is not None)
+            raise InputError(f"{flags} make the tissue a material, which needs --youngs-modulus-kpa "
+                             f"(the scene {scene.name!r} gives per-spring constants, not a material)")
+        if "damping_ratio" in given:  # one kind of damping: the flag replaces the scene's
+            base.update(rayleigh_alpha=0.0, rayleigh_beta=0.0)
+        elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
+            base.update(damping_ratio=0.0)
+        base.update(given)
+        try:
+            tissue = Material(**base)
+        except (TypeError, ValueError) as exc:
+            flag = next((f"{f}: " for f, attr, *_r in MATERIAL_FLAGS.values() if f"Material.{attr} " in str(exc)), "")
+            raise InputError(f"{flag}{exc}") from None
+    if isinstance(tissue, Material) and not mesh.is_volume and not tissue.thickness > 0.0:  # from the flags or the scene
+        from ..tissue.laws import LAWS, default_law
 
-    law = getattr(args, "law", None) or scene.law or default_law(True, Material(**base))
-    becomes_volume = getattr(args, "volume", "off") == "auto" and law in LAWS and LAWS[law].volumetric
-    if not mesh.is_volume and not becomes_volume and not base.get("thickness", 0.0) > 0.0:
-        raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0")
-    try:
-        return Material(**base)
-    except (TypeError, ValueError) as exc:
-        flag = next((f"{f}: " for f, attr, *_r in MATERIAL_FLAGS.values() if f"Material.{attr} " in str(exc)), "")
-        raise InputError(f"{flag}{exc}") from None
+        law = getattr(args, "law", None) or scene.law or default_law(True, tissue)
+        if not (getattr(args, "volume", "off") == "auto" and law in LAWS and LAWS[law].volumetric):
+            raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0 "
+                             f"(or the scene's [tissue] thickness_mm)")
+    return tissue

@@ -59,7 +59,7 @@ def cmd_dataset(args, devices: list[str]) -> int:
     except KeyboardInterrupt:
         print(f"almsdm: interrupted; the items done are in {folder.dir}: run the same command again to resume", file=sys.stderr)
         return 130
-    except SimulationDiverged as exc:  # a rerun would diverge again: a folder this run made is removed
+    except (SimulationDiverged, InputError) as exc:  # diverged, or a write refused: a folder this run made with no item goes
         folder.discard_if_new()
         raise InputError(str(exc)) from exc
     columns = ds.finish_dataset(folder)

@@ -98,6 +98,9 @@ def cmd_sweep(args) -> int:
     parts.rows_file = SWEEP_TABLE.rows(out, len(plan.vertices))
     try:
         return _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo)
+    except InputError:  # a write refused (a full disk): a parts folder this run made with nothing in it goes
+        parts.discard_if_new()
+        raise
     finally:
         if parts.rows_file is not None:
             parts.rows_file.discard()  # after finish(): nothing left to remove
