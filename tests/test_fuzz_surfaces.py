@@ -164,6 +164,18 @@ def test_the_facade_names_every_bad_argument(ball):
             check_press(depth=bad, ramp=0.1, hold=0.1, settle=0.1)
 
 
+def test_a_lesions_factors_and_a_far_probe_are_refused(ball):
+    from almsdm_warp.region.contact import find_contacts
+    from almsdm_warp.sim.model import Model
+
+    for name, n in (("edge_scale", ball.edge_count), ("anchor_scale", ball.vertex_count)):
+        for bad in (np.nan, 1e300, -1.0, 0.0):
+            with pytest.raises(ValueError, match=f"{name} must be finite factors"):
+                Model(ball, None, "cpu", **{name: np.full(n, bad)})
+    with pytest.raises(ValueError, match="more than 1000 m from the origin"):
+        find_contacts(ball, [1e30, 0.0, 0.0])
+
+
 def test_a_batch_names_its_bad_arguments(ball):
     from almsdm_warp.batch.batch_palpation import BatchPalpation
 

@@ -41,6 +41,21 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
+def check_factors(values, count: int, name: str, each: str) -> np.ndarray:
+    """`values` as `count` float64 factors (a lesion's multipliers), each finite, > 0 and within
+    LIMITS["lesion_factor"] of 1 either way; else ValueError naming `name`, the first bad one and its value."""
+    from ..checks import LIMITS
+
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if len(v) != count:
+        raise ValueError(f"{name} must be {count} factors (one {each}), got {len(v)}")
+    limit = LIMITS["lesion_factor"]
+    bad = np.flatnonzero(~(np.isfinite(v) & (v >= 1.0 / limit) & (v <= limit)))
+    if len(bad):
+        raise ValueError(f"{name} must be finite factors from {1 / limit:g} to {limit:g}: {name}[{int(bad[0])}] = {float(v[bad[0]])!r}")
+    return v
+
+
 class Model:
     """The static tissue model on one device: rest shape, topology, masses, springs, anchors."""
 
@@ -83,8 +98,8 @@ class Model:
         if np.any(mass <= 0):
             bad = int(np.flatnonzero(mass <= 0)[0])
             raise ValueError(f"vertex {bad} has mass {mass[bad]:.3g} kg: it belongs to no element with area or volume")
-        es = np.ones(e) if edge_scale is None else np.asarray(edge_scale, dtype=np.float64)
-        an = np.ones(n) if anchor_scale is None else np.asarray(anchor_scale, dtype=np.float64)
+        es = np.ones(e) if edge_scale is None else check_factors(edge_scale, e, "edge_scale", "an edge")
+        an = np.ones(n) if anchor_scale is None else check_factors(anchor_scale, n, "anchor_scale", "a vertex")
         if isinstance(t, Material):  # the dampers follow the scaled springs by the material's law
             ke, ka = ke * es, ka * an
             kd, da = damping(t, self.mesh.edges, ke, ka, mass)
@@ -129,10 +144,7 @@ class Model:
         if element_scale is not None:
             if not volumetric:
                 raise ValueError(f"element_scale scales a volumetric law's tets; the {self.law} law takes edge_scale and anchor_scale")
-            element_scale = np.asarray(element_scale, dtype=np.float64).reshape(-1)
-            if len(element_scale) != self.mesh.tet_count or not np.all(np.isfinite(element_scale) & (element_scale > 0)):
-                raise ValueError(f"element_scale must be {self.mesh.tet_count} finite factors > 0 (one a tet), "
-                                 f"got {len(element_scale)} (smallest {element_scale.min(initial=np.inf):.3g})")
+            element_scale = check_factors(element_scale, self.mesh.tet_count, "element_scale", "a tet")
         self.element_scale = element_scale
         """Each tet's modulus factor (a volumetric law's lesion), or None."""
         self.entry_offsets, self.entry_topology, self.entry_params = self.law_entry.entries(self)
