@@ -287,11 +287,28 @@ def dataset_cases(tree):
         "dt 1e-300": SPEC.replace("dt_ms = 0.5", "dt_ms = 1e-300"),
     }
     for name, text in specs.items():
-        def case(folder, text=text):
+        if name == "10,000 items":
+            text = text + "\n"  # with a cost limit under its cost: refused before any planning
+            name = "10,000 items over --max-region-steps 1e5"
+
+        def case(folder, text=text, name=name):
             (folder / "spec.toml").write_text(text)
-            code, o, e = run(["sweep", "--dataset", "spec.toml", "--out", "ds"], folder, tree, timeout=40)
+            extra = ["--max-region-steps", "1e5"] if "max-region-steps" in name else []
+            code, o, e = run(["sweep", "--dataset", "spec.toml", "--out", "ds", *extra], folder, tree, timeout=40)
             return classify(code, o, e, left=listing(folder) - {"spec.toml"} if code == 2 else ())
         out.append((f"dataset spec: {name}", case))
+    def many_items(folder):  # 10,000 items: a long run, which must say at once what it plans (it was silent for minutes)
+        (folder / "spec.toml").write_text(specs["10,000 items"])
+        env = dict(os.environ, PYTHONPATH=str(tree), WARP_CACHE_PATH=str(ROOT / ".warp_cache"))
+        proc = subprocess.Popen([sys.executable, "-m", "almsdm_warp.cli.main", "sweep", "--dataset", "spec.toml", "--out", "ds"],
+                                cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, preexec_fn=_limits)
+        try:
+            out, _ = proc.communicate(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            out, _ = proc.communicate()
+        return "sane" if b"10001 item(s)" in out else "hang"
+    out.append(("dataset spec: 10,000 items, said within 20 s", many_items))
     for flags in (["--points", "9"], ["--probe-radius-mm", "3"], ["--fixed-below-mm", "0"], ["--integrator", "implicit"],
                   ["--youngs-modulus-kpa", "5"], ["--depth-mm", "5"]):
         def case(folder, flags=flags):
@@ -306,7 +323,7 @@ def dataset_cases(tree):
     out.append(("sweep --ray without Ray", ray))
 
     def cost(folder):  # refused by the cost check, then the corrected spec into the same folder
-        (folder / "spec.toml").write_text(SPEC.replace("points = 4", "points = 4000").replace("settle_s = 0.02", "settle_s = 100"))
+        (folder / "spec.toml").write_text(SPEC.replace("points = 4", "points = 4000").replace("settle_s = 0.02", "settle_s = 1000"))
         code, o, e = run(["sweep", "--dataset", "spec.toml", "--out", "ds"], folder, tree)
         first = classify(code, o, e, left=listing(folder) - {"spec.toml"} if code == 2 else ())
         if first != "clean":
@@ -507,9 +524,9 @@ except (ValueError, TypeError) as exc:
 
 FACADE_CASES = {
     "Palpation(probe_radius=1e9)": ("probe_radius", "p = a.Palpation(mesh, scene.tissue, rings=2, probe_radius=1e9); p.touch(0); r = p.press(0.005, 0.05, 0.05, 0.05); print('VALUE', r.peak_force_N)"),
-    "BatchPalpation(probe_radius=1e9)": ("probe_radius", "b = a.BatchPalpation(mesh, scene.tissue, rings=2, probe_radius=1e9); b.touch([0, 5]); r = b.press(0.005, 0.05, 0.05, 0.05); print('VALUE', float(np.min(r.peak_force_N)))"),
+    "BatchPalpation(probe_radius=1e9)": ("probe_radius", "b = a.BatchPalpation(mesh, scene.tissue, rings=2, probe_radius=1e9); b.touch([0, 5]); r = b.press(0.005, 0.05, 0.05, 0.05); print('VALUE', float(np.min(r.peak_force)))"),
     "BatchPalpation.press(depth=0)": ("depth", "b = a.BatchPalpation(mesh, scene.tissue, rings=2); b.touch([0, 5]); r = b.press(0.0, 0.05, 0.05, 0.05); print('VALUE', float(np.max(r.stiffness_N_per_mm)))"),
-    "BatchPalpation.press(depth=nan)": ("depth", "b = a.BatchPalpation(mesh, scene.tissue, rings=2); b.touch([0, 5]); r = b.press(float('nan'), 0.05, 0.05, 0.05); print('VALUE', float(np.max(r.peak_force_N)))"),
+    "BatchPalpation.press(depth=nan)": ("depth", "b = a.BatchPalpation(mesh, scene.tissue, rings=2); b.touch([0, 5]); r = b.press(float('nan'), 0.05, 0.05, 0.05); print('VALUE', float(np.max(r.peak_force)))"),
     "Palpation.press(depth=0)": ("depth", "p = a.Palpation(mesh, scene.tissue, rings=2); p.touch(0); r = p.press(0.0, 0.05, 0.05, 0.05); print('VALUE', r.peak_force_N)"),
     "Palpation.press(depth=1e-308)": ("depth", "p = a.Palpation(mesh, scene.tissue, rings=2); p.touch(0); r = p.press(1e-308, 0.05, 0.05, 0.05); print('VALUE', r.peak_force_N / 1e-305)"),
     "Palpation.set_probe(99, ...)": ("mode", "p = a.Palpation(mesh, scene.tissue, rings=2); p.touch(0); p.set_probe(99, [0.0, 0.0, 0.0]); f = p.step(); print('VALUE', 'accepted')"),

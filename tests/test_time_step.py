@@ -12,7 +12,6 @@ from conftest import SHARED_MESHES
 from almsdm_warp.batch.batch_palpation import BatchPalpation
 from almsdm_warp.checks import LIMITS, substeps_for
 from almsdm_warp.cli.main import main
-from almsdm_warp.errors import InputError
 from almsdm_warp.protocol.palpation import Palpation
 from almsdm_warp.solvers.stepper import SimulationDiverged
 from almsdm_warp.region.contact import top_vertex
