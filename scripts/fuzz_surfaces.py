@@ -108,16 +108,22 @@ def press_rows(top, radius=10.0, depth=5.0, seconds=0.2, n=5, start=2.0):
     return [(seconds * i / (n - 1), x, y, zz) for i, zz in enumerate(zs)]
 
 
-def trace_force(folder):
-    """A check: the trace's peak force is finite and above 1 mN (the path presses 5 mm)."""
+def table_check(path, column, ok):
+    """A check: the CSV table at `path` is there, and ok(values) of column(table), all finite."""
     def check(out):
         try:
-            data = np.genfromtxt(folder / "t.csv", delimiter=",", names=True)
+            data = np.genfromtxt(path, delimiter=",", names=True)
         except OSError:
             return False
-        f = np.sqrt(data["force_x_N"] ** 2 + data["force_y_N"] ** 2 + data["force_z_N"] ** 2)
-        return bool(np.all(np.isfinite(f)) and f.max() > 1e-3)
+        values = column(data)
+        return bool(np.all(np.isfinite(values)) and ok(values))
     return check
+
+
+def trace_force(folder):
+    """The trace's force is finite, its peak above 1 mN (the path presses 5 mm)."""
+    return table_check(folder / "t.csv", lambda d: np.sqrt(d["force_x_N"] ** 2 + d["force_y_N"] ** 2 + d["force_z_N"] ** 2),
+                       lambda f: f.max() > 1e-3)
 
 
 def finite_json(folder, name="o.json"):
@@ -244,33 +250,12 @@ def _walk(d):
 
 
 def _sweep_sane(folder):
-    def check(out):
-        try:
-            data = np.genfromtxt(folder / "s.csv", delimiter=",", names=True)
-        except OSError:
-            return False
-        k = data["stiffness_N_per_mm"]
-        return bool(np.all(np.isfinite(k)) and np.all(k > 0) and np.all(k < 1e3))
-    return check
+    """The sweep's stiffness is finite, > 0 and under 1 kN/mm at every point."""
+    return table_check(folder / "s.csv", lambda d: d["stiffness_N_per_mm"], lambda k: bool(np.all(k > 0) and np.all(k < 1e3)))
 
 
-SPEC = """
-[dataset]
-scenes = ["stomach"]
-points = 4
-dt_ms = 0.5
-chunk = 2
-maps = "none"
-[press]
-ramp_s = 0.02
-hold_s = 0.02
-settle_s = 0.02
-[lesions]
-count = 1
-depth_mm = 5.0
-radii_mm = [15.0]
-stiffness_factors = [3.0]
-"""
+SPEC = (ROOT / "scenes" / "datasets" / "tiny.toml").read_text()
+"""The smallest dataset: the stomach's baseline and one lesion, 3 points each."""
 
 
 def dataset_cases(tree):
@@ -281,8 +266,8 @@ def dataset_cases(tree):
         "lesion count 1e9": SPEC.replace("count = 1", "count = 1000000000"),
         "10,000 items": SPEC.replace("count = 1", "count = 100").replace("radii_mm = [15.0]", "radii_mm = [" + ",".join(str(10 + i) for i in range(10)) + "]")
                              .replace("stiffness_factors = [3.0]", "stiffness_factors = [" + ",".join(str(2 + i) for i in range(10)) + "]"),
-        "points 2**63-1": SPEC.replace("points = 4", "points = 9223372036854775807"),
-        "depth 1e-308": SPEC.replace("[press]", "[press]\ndepth_mm = 1e-308"),
+        "points 2**63-1": SPEC.replace("points = 3", "points = 9223372036854775807"),
+        "depth 1e-308": SPEC.replace("depth_mm = 5.0\nramp", "depth_mm = 1e-308\nramp"),
         "radius 1e300": SPEC.replace("radii_mm = [15.0]", "radii_mm = [1e300]"),
         "dt 1e-300": SPEC.replace("dt_ms = 0.5", "dt_ms = 1e-300"),
     }
@@ -323,7 +308,7 @@ def dataset_cases(tree):
     out.append(("sweep --ray without Ray", ray))
 
     def cost(folder):  # refused by the cost check, then the corrected spec into the same folder
-        (folder / "spec.toml").write_text(SPEC.replace("points = 4", "points = 4000").replace("settle_s = 0.02", "settle_s = 1000"))
+        (folder / "spec.toml").write_text(SPEC.replace("points = 3", "points = 4000").replace("settle_s = 0.02", "settle_s = 1000"))
         code, o, e = run(["sweep", "--dataset", "spec.toml", "--out", "ds"], folder, tree)
         first = classify(code, o, e, left=listing(folder) - {"spec.toml"} if code == 2 else ())
         if first != "clean":

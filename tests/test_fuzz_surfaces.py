@@ -187,24 +187,8 @@ def test_a_batch_names_its_bad_arguments(ball):
 
 
 # -- sweeps and datasets ---------------------------------------------------------------------------
-SPEC = """
-[dataset]
-scenes = ["stomach"]
-points = 3
-dt_ms = 0.5
-chunk = 2
-maps = "none"
-[press]
-depth_mm = 5.0
-ramp_s = 0.02
-hold_s = 0.02
-settle_s = 0.02
-[lesions]
-count = 1
-depth_mm = 5.0
-radii_mm = [15.0]
-stiffness_factors = [3.0]
-"""
+SPEC = (ROOT / "scenes" / "datasets" / "tiny.toml").read_text()
+"""The smallest dataset (a baseline and one lesion of 3 points each)."""
 
 
 def dataset(tmp_path, text=SPEC, *extra):
