@@ -169,7 +169,7 @@ def test_a_lesions_factors_and_a_far_probe_are_refused(ball):
     from almsdm_warp.sim.model import Model
 
     for name, n in (("edge_scale", ball.edge_count), ("anchor_scale", ball.vertex_count)):
-        for bad in (np.nan, 1e300, -1.0, 0.0):
+        for bad in (np.nan, 1e300, -1.0, 1e-300):
             with pytest.raises(ValueError, match=f"{name} must be finite factors"):
                 Model(ball, None, "cpu", **{name: np.full(n, bad)})
     with pytest.raises(ValueError, match="more than 1000 m from the origin"):

@@ -41,18 +41,22 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
-def check_factors(values, count: int, name: str, each: str) -> np.ndarray:
-    """`values` as `count` float64 factors (a lesion's multipliers), each finite, > 0 and within
-    LIMITS["lesion_factor"] of 1 either way; else ValueError naming `name`, the first bad one and its value."""
-    from ..checks import LIMITS
+def check_factors(values, count: int, name: str, each: str, rule: str = ">= 0") -> np.ndarray:
+    """`values` as `count` float64 multipliers (a lesion's, an anchor's area), each finite, `rule` (">= 0" or
+    "> 0") and 0 or of the magnitude every parameter is held to (checks.MAGNITUDE); else ValueError naming
+    `name`, the first bad one and its value."""
+    from ..checks import MAGNITUDE
 
     v = np.asarray(values, dtype=np.float64).reshape(-1)
     if len(v) != count:
         raise ValueError(f"{name} must be {count} factors (one {each}), got {len(v)}")
-    limit = LIMITS["lesion_factor"]
-    bad = np.flatnonzero(~(np.isfinite(v) & (v >= 1.0 / limit) & (v <= limit)))
+    lo, hi = MAGNITUDE
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(v) & ((v > 0) if rule == "> 0" else (v >= 0)) & ((v == 0) | ((np.abs(v) >= lo) & (np.abs(v) <= hi)))
+    bad = np.flatnonzero(~ok)
     if len(bad):
-        raise ValueError(f"{name} must be finite factors from {1 / limit:g} to {limit:g}: {name}[{int(bad[0])}] = {float(v[bad[0]])!r}")
+        raise ValueError(f"{name} must be finite factors {rule}, 0 or of magnitude {lo:g} to {hi:g}: "
+                         f"{name}[{int(bad[0])}] = {float(v[bad[0]])!r}")
     return v
 
 
@@ -144,7 +148,7 @@ class Model:
         if element_scale is not None:
             if not volumetric:
                 raise ValueError(f"element_scale scales a volumetric law's tets; the {self.law} law takes edge_scale and anchor_scale")
-            element_scale = check_factors(element_scale, self.mesh.tet_count, "element_scale", "a tet")
+            element_scale = check_factors(element_scale, self.mesh.tet_count, "element_scale", "a tet", "> 0")
         self.element_scale = element_scale
         """Each tet's modulus factor (a volumetric law's lesion), or None."""
         self.entry_offsets, self.entry_topology, self.entry_params = self.law_entry.entries(self)
