@@ -2,6 +2,7 @@
 probe magnitudes, the Python facade's arguments, interrupted and damaged datasets, full disks.
 
     python scripts/fuzz_surfaces.py [--tree PATH] [--only WORD] [--json out.json]
+    python scripts/fuzz_surfaces.py --table before.json after.json    # docs/reliability.md's table
 
 Every case runs in a fresh process (the tree's package on PYTHONPATH, a 60 s limit, 4 GiB of address
 space) in a folder of its own, and is counted as one of:
@@ -146,6 +147,9 @@ def trace_cases(tree):
             cases.append((f"trace {flag} {value}", "press", [flag, value]))
     for k in ("1e300", "1e13"):
         cases.append((f"trace coupling k {k}", "press", ["--coupling-stiffness-N-per-mm", k, "--device-damping-Ns-per-m", "1e300"]))
+    for flag, value in (("--youngs-modulus-kpa", "1e9"), ("--youngs-modulus-kpa", "1e-9"), ("--thickness-mm", "1e-3"),
+                        ("--rayleigh-alpha-per-s", "1e6"), ("--density-kg-m3", "1e-9"), ("--damping-ratio", "10")):
+        cases.append((f"trace {flag} {value} (legal)", "press", [flag, value]))  # a result, or a clean "diverged"
     cases.append(("trace --probe-radius-mm 1e12", "press", ["--probe-radius-mm", "1e12"]))
     cases.append(("trace --probe-radius-mm 1e-300", "press", ["--probe-radius-mm", "1e-300"]))
     out = []
@@ -211,6 +215,11 @@ def magnitude_cases(tree):
                 check = finite_json(folder) if cmd == "palpate" else _sweep_sane(folder)
                 return classify(code, o, e, left=left, sane=check)
             out.append((f"{cmd} {flag} {value}", case))
+    for flag, value in (("--youngs-modulus-kpa", "1e9"), ("--thickness-mm", "1e-3"), ("--depth-mm", "1e-3"), ("--probe-radius-mm", "1000")):
+        def case(folder, flag=flag, value=value):
+            code, o, e = run(["palpate", "stomach", flag, value, "--json", "o.json"], folder, tree)
+            return classify(code, o, e, left=listing(folder) if code == 2 else (), sane=finite_json(folder))
+        out.append((f"palpate {flag} {value} (legal)", case))
     for key, value in (("radius_mm", "1e12"), ("radius_mm", "1e9")):
         def case(folder, key=key, value=value):
             text = (ROOT / "scenes" / "stomach.toml").read_text().replace("radius_mm = 10.0", f"{key} = {value}")
@@ -570,13 +579,32 @@ GROUPS = {"trace": trace_cases, "magnitude": magnitude_cases, "dataset": dataset
 OUTCOMES = ("clean", "sane", "traceback", "hang", "silent", "noisy", "stuck")
 
 
+def table(before: str, after: str) -> str:
+    """A Markdown table: per group of cases, the runs and each outcome's count before -> after."""
+    runs = [json.loads(Path(p).read_text())["cases"] for p in (before, after)]
+    rows = ["| cases | runs | " + " | ".join(OUTCOMES) + " |", "|---" * (len(OUTCOMES) + 2) + "|"]
+    groups = {name: group for group, make in GROUPS.items() for name, _case in make(ROOT)}
+    for group in [*GROUPS, "all"]:
+        names = [n for n in runs[1] if group == "all" or groups.get(n) == group]
+        if not names:
+            continue
+        counts = [collections.Counter(r.get(n, "not run") for n in names) for r in runs]
+        cells = [f"{c0[o]} -> {c1[o]}" if c0[o] or c1[o] else "0" for o in OUTCOMES for c0, c1 in [counts]]
+        rows.append(f"| {group} | {len(names)} | " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tree", default=str(ROOT), help="the checkout whose package runs the cases (default: this one)")
     ap.add_argument("--only", default=None, help="only the cases whose name holds this text")
     ap.add_argument("--json", default=None, help="write every case's outcome here")
     ap.add_argument("--why", action="store_true", help="print each case's last command's code and last lines")
+    ap.add_argument("--table", nargs=2, metavar=("BEFORE", "AFTER"), help="print the counts of two campaigns' --json by group")
     args = ap.parse_args(argv)
+    if args.table:
+        print(table(*args.table))
+        return 0
     tree = Path(args.tree).resolve()
     results, counts = {}, collections.Counter()
     with tempfile.TemporaryDirectory(prefix="fuzz_surfaces_") as tmp:
