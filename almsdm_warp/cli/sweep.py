@@ -17,10 +17,6 @@ from .args import (auto_tol, add_integrator_arg, add_law_arg, add_tissue_args, c
                    number_arg, quiet_warp, rings_arg, scene_with_tissue_args)
 
 
-DEFAULT_POINTS = 200
-"""--points when not given."""
-
-
 def add_parser(sub) -> None:
     p = sub.add_parser(
         "sweep",
@@ -69,6 +65,10 @@ def _devices(text: str) -> list[str]:
     if not names:
         raise InputError(f"--device: no device in {text!r}")
     return list(dict.fromkeys(get_device(n).alias for n in names))
+
+
+DEFAULT_POINTS = 200
+"""--points when not given (None in the parser: a dataset's spec decides, and refuses it given)."""
 
 
 def cmd_sweep(args) -> int:
