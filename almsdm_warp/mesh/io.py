@@ -85,13 +85,14 @@ def _check_suffix(suffix: str, where: str) -> None:
         raise InputError(f"{where}: unknown mesh format {suffix or '(no suffix)'!r}; known: {known}")
 
 
-def read_bounded(path, where: str, before_reading=None, what: str = "mesh file", limit: int = MAX_FILE_BYTES) -> bytes:
-    """The bytes of a regular file (a `what`) of at most `limit` bytes (MAX_FILE_BYTES), else InputError before reading.
+def read_bounded(path, where: str, before_reading=None, what: str = "mesh file", limit: int | None = None) -> bytes:
+    """The bytes of a regular file (a `what`) of at most `limit` bytes (default MAX_FILE_BYTES), else InputError before reading.
 
     The file is opened without blocking and checked on the open descriptor (fstat), so a path that
     names a FIFO, a device (/dev/zero, /dev/urandom) or a socket is refused instead of read without
     end; `before_reading` runs once the path is known to be a regular file (a check of its name).
     """
+    limit = MAX_FILE_BYTES if limit is None else limit
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
     except FileNotFoundError as exc:
