@@ -17,6 +17,7 @@ import warp as wp
 from ..kernels.probes.press import hold_probe
 from ..kernels.region.state import reset_vertices_left_behind
 from ..mesh.topology import inverted_tets
+from ..mesh.validate import MAX_COORDINATE_M
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE, Model
 from ..region.patch import sphere_patches
 from ..region.region import Region
@@ -59,11 +60,10 @@ def check_probe_radius(radius, mesh=None) -> float:
 def check_point(value, name: str):
     """`value` where it is 3 finite numbers within the +-1 km meshes are held to (a position [m], a force
     [N]), else ValueError naming `name` and the value (cheap: set_probe calls it every step)."""
-    from ..mesh.validate import MAX_COORDINATE_M as m
-
+    m = MAX_COORDINATE_M
     try:
         x, y, z = value
-        ok = -m <= float(x) <= m and -m <= float(y) <= m and -m <= float(z) <= m
+        ok = -m <= x <= m and -m <= y <= m and -m <= z <= m  # NaN compares False
     except (TypeError, ValueError):
         ok = False
     if not ok:
