@@ -272,8 +272,9 @@ def lesion_centers(mesh, count: int, depth: float) -> np.ndarray:
     return points - depth * vertex_normals(mesh.vertices, mesh.triangles)[vertices]
 
 
-def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
-    """Every item of the spec, in order: per scene its baseline, then each centre x radius x factor."""
+def plan_items(spec: DatasetSpec, cuda: bool = False, on_item=None) -> list[DatasetItem]:
+    """Every item of the spec, in order: per scene its baseline, then each centre x radius x factor;
+    on_item() after each item is planned (a progress bar: each lesion takes a pass over the whole mesh)."""
     from ..tissue.lesion import Lesion
 
     items, seen = [], {}
@@ -288,6 +289,8 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
             centers = lesion_centers(mesh, spec.count, spec.depth) if spec.count else np.zeros((0, 3))
         if spec.baseline:
             items.append(DatasetItem(name, 0, None, base, scene))
+            if on_item is not None:
+                on_item()
         grid = [(c, r, f) for c in centers for r in spec.radii for f in spec.factors]
         for k, (c, r, f) in enumerate(grid, start=1):
             lesion = Lesion(tuple(float(x) for x in c), r, f)
@@ -297,6 +300,8 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
                                  f"holds no vertex, spring or tet of the mesh (a lesion there changes nothing): "
                                  f"give a larger radius or a smaller [lesions] depth_mm")
             items.append(DatasetItem(name, k, lesion, replace(base, **scales), scene))
+            if on_item is not None:
+                on_item()
     return items
 
 

@@ -38,8 +38,10 @@ def cmd_dataset(args, devices: list[str]) -> int:
     for scene in spec.scenes:
         if scene.lesion is not None:
             print(f"note: the scene {scene.name!r}'s own [lesion] is left out: the dataset's lesion grid decides")
-    print(f"planning {ds.spec_cost(spec)[0]} item(s) of {len(spec.scenes)} scene(s)", flush=True)
-    items = ds.plan_items(spec, cuda=devices[0] != "cpu")
+    count = ds.spec_cost(spec)[0]
+    print(f"planning {count} item(s) of {len(spec.scenes)} scene(s)", flush=True)
+    with Progress(count, enabled=args.progress, label="planning") as bar:
+        items = ds.plan_items(spec, cuda=devices[0] != "cpu", on_item=bar.advance)
     from ..batch.sweep_plan import press_steps
 
     check_region_steps(sum(len(i.plan.vertices) * press_steps(i.plan) for i in items), 1, 1, args.max_region_steps)
