@@ -309,6 +309,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     """(The scene's mesh, its baseline plan (no lesion), the scene with its support made a plane for a
     press from above, as a sweep's), after the checks a sweep makes."""
     from ..checks import check_ring_count
+    from ..protocol.palpation import check_probe_radius
     from ..region.contact import top_vertex
 
     rings = spec.rings if spec.rings is not None else scene.rings
@@ -324,6 +325,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     press = {k: spec.press.get(k, getattr(scene.press, k)) for k in ("depth", "ramp", "hold", "settle")}
     check_protocol(press["depth"], spec.dt, press["ramp"], press["hold"], press["settle"], 1, float(np.ptp(mesh.vertices, axis=0).max()))
     check_limit(spec.points, "points", "[dataset] points")
+    check_probe_radius(scene.probe_radius, mesh)  # before any work, as the batch checks it again
     check_sphere_travel(scene.probe_radius, press["depth"], spec.dt, press["ramp"])
     points, vertices = pressable_points(mesh, spec.points, scene.fixed_below)
     chunk = spec.chunk or (len(vertices) if cuda else 64)

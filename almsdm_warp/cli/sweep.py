@@ -158,6 +158,7 @@ def _plan(args, devices, times):
     from ..batch.sampling import pressable_points, start_sampling
     from ..batch.sweep import models_behind
     from ..batch.sweep_plan import SweepPlan, check_sphere_travel, default_chunk
+    from ..protocol.palpation import check_probe_radius
     from ..batch.sweep_auto import rings_summary
     scene, mesh = load_scene_and_mesh(args)
     scene = scene_with_tissue_args(args, scene, mesh)
@@ -174,6 +175,7 @@ def _plan(args, devices, times):
     settle = press.settle if args.settle_s is None else args.settle_s
     dt = 1e-3 if args.dt_ms is None else args.dt_ms * 1e-3
     frames = check_protocol(depth, dt, ramp, hold, settle, 1, float(np.ptp(mesh.vertices, axis=0).max()))
+    check_probe_radius(radius, mesh)  # before any work, as the batch checks it again
     check_sphere_travel(radius, depth, dt, ramp)
     check_limit(args.points, "points", "--points")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
