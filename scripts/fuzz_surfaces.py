@@ -16,7 +16,8 @@ space) in a folder of its own, and is counted as one of:
   noisy      a refusal whose stderr is more than one line (Warp's banner, warnings)
   stuck      a resume that does not reach the uninterrupted table
 
---tree runs the cases against another checkout (the "before" counts: --tree /work/main).
+--tree runs the cases against another checkout (the "before" counts: --tree /work/main). The flags are
+spelt as they were before issue 23's renaming (the old spellings are still taken), so both trees read them.
 """
 
 from __future__ import annotations

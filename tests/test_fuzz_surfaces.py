@@ -88,8 +88,8 @@ def test_a_trace_at_a_magnitude_no_tissue_has_is_refused_not_all_zero(tmp_path, 
     for flag in ("--youngs-modulus-kpa", "--thickness-mm", "--rayleigh-alpha-per-s", "--damping-ratio", "--probe-radius-mm"):
         one_line(capsys, main(["trace", "stomach", "--path", str(path), flag, "1e300", "--out", str(tmp_path / "t.csv")]),
                  f"{flag}: must be 0 or of magnitude 1e-12 to 1e+12, got 1e+300")
-    one_line(capsys, main(["trace", "stomach", "--path", str(path), "--coupling-stiffness-N-per-mm", "1e300",
-                           "--device-damping-Ns-per-m", "1", "--out", str(tmp_path / "t.csv")]), "--coupling-stiffness-N-per-mm")
+    one_line(capsys, main(["trace", "stomach", "--path", str(path), "--coupling-stiffness-n-per-mm", "1e300",
+                           "--device-damping-ns-per-m", "1", "--out", str(tmp_path / "t.csv")]), "--coupling-stiffness-n-per-mm")
     # and a sane one presses: a force where the path presses 5 mm
     assert main(["trace", "stomach", "--path", str(path), "--out", str(tmp_path / "t.csv")]) == 0
     table = trace.TRACE_TABLE.read(tmp_path / "t.csv")
