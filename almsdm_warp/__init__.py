@@ -48,6 +48,10 @@ def __getattr__(name):
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     import importlib
 
+    if _PUBLIC[name] != "errors":  # Warp started quietly (warp_init: ALMSDM_VERBOSE=1 shows its messages)
+        from .warp_init import init_warp
+
+        init_warp()
     value = getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
     globals()[name] = value
     return value

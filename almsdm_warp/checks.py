@@ -61,10 +61,10 @@ def check_value(value, kind: type, rule: str, name: str):
         if not value.strip():
             raise InputError(f"{name} must not be empty")
         return value
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise InputError(f"{name} must be {_TOML_TYPE[kind]}, got {describe(value)}")
     if kind is int:
-        if not isinstance(value, int):
+        if not isinstance(value, numbers.Integral):
             raise InputError(f"{name} must be an integer, got {describe(value)}")
     else:
         value = float(value)

@@ -1,5 +1,6 @@
-"""Initialize Warp once, quietly: no banner, and no C-level warning about a missing CUDA driver
-(the CPU device needs none); anything else Warp prints at start-up is kept."""
+"""Initialize Warp once, quietly: no banner, no module-load lines, no Warp warning (a CUDA driver the
+CPU device does not need, say), unless asked for with ALMSDM_VERBOSE=1 (or the command line's
+--verbose): the command line's every error is then one line, and the Python API prints nothing."""
 
 from __future__ import annotations
 
@@ -7,18 +8,34 @@ import os
 import sys
 import tempfile
 
-_NO_DRIVER = "Could not find or load the NVIDIA CUDA driver"
+VERBOSE_ENV = "ALMSDM_VERBOSE"
+"""Set to 1 to see Warp's banner, module loads and warnings (the command line's --verbose sets it)."""
 
 
-def init_warp(quiet: bool = True) -> None:
+def verbose() -> bool:
+    """True when ALMSDM_VERBOSE asks for Warp's own messages (1, true, yes)."""
+    return os.environ.get(VERBOSE_ENV, "").strip().lower() in ("1", "true", "yes")
+
+
+def init_warp(quiet: bool | None = None) -> None:
+    """Initialize Warp (once: later calls do nothing). Quiet (the default, unless verbose()): Warp's
+    log level is set to errors only and what its native library prints to stderr while it starts is
+    dropped. A Warp the caller started already keeps its own settings."""
     import warp as wp
+    import warp._src.context as wpc
 
+    if wpc.runtime is not None:
+        return
+    if quiet is None:
+        quiet = not verbose()
     if quiet:
-        wp.config.log_level = wp.LOG_WARNING
+        wp.config.log_level = wp.LOG_ERROR
     sys.stderr.flush()
     try:
-        saved = os.dup(2)
+        saved = os.dup(2) if quiet else None
     except OSError:  # no stderr to redirect
+        saved = None
+    if saved is None:
         wp.init()
         return
     with tempfile.TemporaryFile(mode="w+b") as captured:
@@ -28,10 +45,6 @@ def init_warp(quiet: bool = True) -> None:
         finally:
             os.dup2(saved, 2)
             os.close(saved)
-        captured.seek(0)
-        for line in captured.read().decode(errors="replace").splitlines():
-            if line.strip() and _NO_DRIVER not in line:
-                print(line, file=sys.stderr)
 
 
 _device_start = None  # the thread of start_devices, while it runs

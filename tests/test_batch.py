@@ -331,7 +331,7 @@ def test_batch_sphere_on_anchors_is_winklers_foundation(device, anchor_bed):
 
 def test_batch_sphere_and_support_errors(stomach, supported):
     material, z, contacts = supported
-    with pytest.raises(ValueError, match="probe_radius must be >= 0"):
+    with pytest.raises(ValueError, match=r"probe_radius \[m\] must be >= 0"):
         BatchPalpation(stomach, rings=2, device="cpu", probe_radius=-0.001)
     low = int(np.argmin(stomach.vertices[:, 2]))
     with pytest.raises(ValueError, match=f"vertex {low} \\(palpation 1\\) is held by the support"):

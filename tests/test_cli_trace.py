@@ -82,7 +82,7 @@ def test_local_and_global_models_give_close_forces_on_a_short_stroke(tmp_path, t
 @pytest.mark.parametrize(
     "text, message",
     [
-        ("", "empty path file"),
+        ("", "empty file (0 bytes)"),
         ("t,x,y,z\n0,0,0,0\n1,0,0,0\n", "line 1: the header must be t_s,x_mm,y_mm,z_mm"),
         ("t_s,x_mm,y_mm,z_mm\n0,0,0,0\n", "at least 2 rows, got 1"),
         ("t_s,x_mm,y_mm,z_mm\n0,0,0,0\n1,0,0\n", "line 3: 3 values, expected 4"),
@@ -107,7 +107,7 @@ def test_a_bad_path_file_is_one_line_and_exit_2_with_nothing_written(tmp_path, c
 
 def test_a_path_file_that_is_not_there_or_not_text_is_exit_2(tmp_path, capsys):
     assert main(["trace", "--path", str(tmp_path / "none.csv")]) == 2
-    assert "cannot read the path" in capsys.readouterr().err
+    assert "no such file" in capsys.readouterr().err
     (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00")
     assert main(["trace", "--path", str(tmp_path / "bin.csv")]) == 2
     assert "not a text file" in capsys.readouterr().err
@@ -206,7 +206,9 @@ BAD_FLAGS = {
     "--usd t.txt": "unknown USD suffix",
     "--out t.json": "unknown table suffix",
     "--coupling-damping-ns-per-m 1": "need --coupling-stiffness-n-per-mm",
-    "--dt-ms 1e-308": "the built-in stroke lasts 3.9 s: inf steps",
+    "--dt-ms 1e-308": "--dt-ms: must be 0 or of magnitude 1e-12 to 1e+12, got 1e-308",
+    "--dt-ms 1e-9": "the built-in stroke lasts 3.9 s: 3.9e+12 steps",
+    "--youngs-modulus-kpa 1e300": "must be 0 or of magnitude 1e-12 to 1e+12, got 1e+300",
     "--rings 1000000": "--rings 1000000 is more than the mesh's 1002 vertices",
 }
 """Flags a trace refuses -> what its one line says."""

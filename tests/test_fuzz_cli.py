@@ -127,14 +127,19 @@ def test_cli_extreme_parameters(command, flags, probe, scene, json_kind):
         (["--hold-s", "1e12"], "--hold-s 1e+12 is more than the largest duration [s]"),
         (["--presses", "100000000"], "more than the 10,000,000"),
         # OverflowError: int(round(inf)) steps
-        (["--ramp-s", "1e300", "--dt-ms", "1e-300"], "--ramp-s 1e+300 is more than the largest duration [s]"),
-        (["--dt-ms", "1e-308"], "the run would take inf steps"),
-        (["--dt-ms", "1e-322"], "--dt-ms underflows"),
+        (["--ramp-s", "1e300", "--dt-ms", "1e-300"], "--ramp-s: must be 0 or of magnitude 1e-12 to 1e+12, got 1e+300"),
+        (["--ramp-s", "1e9", "--dt-ms", "1e-9"], "--ramp-s 1e+09 is more than the largest duration [s]"),
+        # the magnitude every physical parameter is held to (checks.check_value), as a scene's
+        (["--dt-ms", "1e-308"], "--dt-ms: must be 0 or of magnitude 1e-12 to 1e+12, got 1e-308"),
+        (["--dt-ms", "1e-322"], "--dt-ms: must be 0 or of magnitude"),
+        (["--youngs-modulus-kpa", "1e300"], "--youngs-modulus-kpa: must be 0 or of magnitude"),
+        (["--youngs-modulus-kpa", "1e11"], "--youngs-modulus-kpa: Material.youngs_modulus must be 0 or of magnitude"),
         # a dt longer than the ramp: the implicit run "diverged ... dt exceeds the critical step"
         (["--dt-ms", "1e9", "--integrator", "implicit"], "is longer than the ramp"),
         # a 1 m press into a 13 cm stomach: "diverged: dt = 1 ms exceeds the critical step of 1.6 ms"
         (["--depth-mm", "1e3", "--integrator", "implicit"], "more than the mesh's extent"),
-        (["--depth-mm", "1e300"], "more than the mesh's extent"),  # also a RuntimeWarning on stderr
+        (["--depth-mm", "1e300"], "--depth-mm/--depth: must be 0 or of magnitude"),  # was a RuntimeWarning on stderr
+        (["--depth-mm", "1e9"], "more than the mesh's extent"),
         # a probe beyond the contact query's reach: "seed vertex -1 is outside the mesh"
         (["--probe-mm", "1e30", "0", "0"], "more than 1e+06 mm from the origin"),
         (["touch", "--probe-mm", "1e38", "1e38", "1e38"], "more than 1e+06 mm from the origin"),  # was a ValueError traceback
@@ -153,15 +158,18 @@ def test_impossible_parameters_are_one_line_errors(argv, message, tmp_path):
 # sweep and bench check what palpate checks (checks.py): each of these was a traceback, and the
 # sweep's ones left OUT.parts/plan.json behind, which refused the corrected rerun
 CRAFTED = [
-    (["sweep", "--ramp-s", "1e308"], "--ramp-s 1e+308 is more than the largest duration [s]"),
-    (["sweep", "--settle-s", "1e308"], "--settle-s 1e+308 is more than the largest duration [s]"),
-    (["sweep", "--dt-ms", "1e-308"], "the run would take inf steps"),
+    (["sweep", "--ramp-s", "1e308"], "--ramp-s: must be 0 or of magnitude 1e-12 to 1e+12, got 1e+308"),
+    (["sweep", "--settle-s", "1e9"], "--settle-s 1e+09 is more than the largest duration [s]"),
+    (["sweep", "--dt-ms", "1e-308"], "--dt-ms: must be 0 or of magnitude"),
+    (["sweep", "--dt-ms", "1e-11"], "the run would take 1.3e+14 steps"),
+    (["sweep", "--depth-mm", "1e-308"], "--depth-mm/--depth: must be 0 or of magnitude"),  # was a stiffness of 2e298
+    (["sweep", "--probe-radius-mm", "1e12"], "probe_radius 1e+09 m is more than 100 x the mesh's extent"),
     (["sweep", "--rings", "1000000"], "--rings 1000000 is more than the mesh's 1002 vertices"),
     (["sweep", "--points", "100000000000"], "--points 1e+11 is more than the largest points"),
     (["sweep", "--points", "10", "--max-region-steps", "1000"], "more than the 1e+03 allowed; give --max-region-steps"),
     (["bench", "--rings", "5000"], "--rings 5000 is more than the mesh's 1002 vertices"),
     (["bench", "--batch", "10000000000"], "--batch 1e+10 is more than the largest batch"),
-    (["palpate", "--png", "{tmp}/p.png", "--png-at-s", "1e308"], "--png-at-s 1e+308 is after the last step"),
+    (["palpate", "--png", "{tmp}/p.png", "--png-at-s", "1e9"], "--png-at-s 1e+09 is after the last step"),
     (["sweep", "{tmp}/lesion.toml"], "[lesion] stiffness_factor 1e+308 is more than the largest lesion stiffness factor"),
 ]
 

@@ -24,8 +24,12 @@ def test_a_press_of_100_ms_ramp_at_1_ms():
 
 
 def test_bad_press_values_name_the_first():
-    check_press(depth=0.0, ramp=0.1)
+    check_press(depth=0.01, ramp=0.0)
+    with pytest.raises(ValueError, match=r"press depth must be > 0, got 0.0"):  # a press of depth 0 has no stiffness
+        check_press(depth=0.0, ramp=0.1)
     with pytest.raises(ValueError, match=r"press hold must be >= 0, got -1"):
         check_press(depth=0.01, ramp=0.1, hold=-1, settle=float("nan"))
-    with pytest.raises(ValueError, match=r"press force must be >= 0, got nan"):
+    with pytest.raises(ValueError, match=r"press force must be finite, got nan"):
         check_press(force=float("nan"), ramp=-1)
+    with pytest.raises(ValueError, match=r"press ramp must be 0 or of magnitude 1e-12 to 1e\+12, got 1e\+300"):
+        check_press(depth=0.01, ramp=1e300)

@@ -22,6 +22,7 @@ from ..kernels.explicit import batch as bk
 from ..kernels.explicit import batch_fast as bkf
 from ..kernels.region import batch_rings as br
 from ..checks import fixed_substeps, substeps_for
+from ..checks import check_value
 from ..protocol.palpation import PATCH_DEPTH, check_probe_radius
 from ..solvers import integrators, solver_class
 from ..solvers.stepper import check_results, force_bound, plan_substeps
@@ -249,8 +250,9 @@ class BatchPalpation:
         kernel=None, threads=None, capacity=None,
         cg_max_iterations=200, cg_tolerance=1e-6, substeps="auto", probe_radius=0.0, **model_kw,
     ):
-        self.probe_radius = check_probe_radius(probe_radius)
+        check_probe_radius(probe_radius)  # its type and magnitude before the model is made
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
+        self.probe_radius = check_probe_radius(probe_radius, self.model.mesh)
         self.device = self.model.device
         held = self.model.support_mask if self.model.support_count else np.zeros(1, dtype=bool)
         self.support = wp.array(held.astype(np.int32), dtype=wp.int32, device=self.device)
@@ -266,9 +268,7 @@ class BatchPalpation:
         self.rings = check_rings(rings)
         if self.rings < 1:
             raise ValueError(f"rings must be >= 1, got {rings}")
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be > 0, got {dt}")
-        self.frame_dt = float(dt)
+        self.frame_dt = check_value(dt, float, "> 0", "dt [s]")
         """The frame [s]: the dt asked for; the kernels step `dt`, the frame over its substeps."""
         if integrator not in integrators(batch=True):
             solver_class(integrator)  # an unknown name: the registry's error

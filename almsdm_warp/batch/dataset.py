@@ -22,6 +22,8 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import shutil
+import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -37,11 +39,6 @@ from .sampling import pressable_points, sample_points
 from .sweep import run_local
 from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, check_sphere_travel
 from .sweep_store import Parts, file_sha256
-
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
 
 FORMAT = "almsdm dataset 1"
 """The manifest's format tag: a folder of another format is not resumed into."""
@@ -74,6 +71,8 @@ DATASET_TABLE = TableLayout("dataset table", {c: SCHEMA[c][0] for c in DATASET_C
 {dtype, unit, meaning}; np.load reads it without pickle) or .csv (a header row); a table written before the
 hold_force_N column has none."""
 MAPS = ("scene", "items", "none")
+OWN = ("dataset.json", "items", "maps", "table.npz", "table.csv")
+"""What a dataset folder holds (and temporary files starting with a dot): a folder with anything else is not resumed into."""
 SPEC_KEYS = {
     "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "chunk"),
     "press": ("depth_mm", "ramp_s", "hold_s", "settle_s"),
@@ -118,16 +117,11 @@ class DatasetSpec:
 
 def load_spec(path) -> DatasetSpec:
     """Read and check a dataset spec (TOML); InputError naming the file and key for anything wrong."""
-    from ..mesh.io import read_bounded
+    from ..scene.loader import read_toml
 
     where = str(path)
     p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{where}: no such dataset spec")
-    try:
-        data = tomllib.loads(read_bounded(p, where, what="dataset spec").decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{where}: not a TOML dataset spec: {exc}") from exc
+    data = read_toml(p, where, "dataset spec")
     for section, table in data.items():
         if section not in SPEC_KEYS or not isinstance(table, dict):
             raise InputError(f"{where}: unknown section {section!r}; allowed: {', '.join(f'[{s}]' for s in SPEC_KEYS)}")
@@ -188,6 +182,7 @@ def _lesion_grid(spec: DatasetSpec, lesions: dict, where: str) -> None:
     spec.radii = tuple(float(r) / 1000.0 for r in radii)  # mm -> m, correctly rounded
     spec.factors = tuple(float(f) for f in factors)
     spec.count = _int(lesions, "count", where, "[lesions]", 0, rule=">= 0")
+    check_limit(spec.count, "points", f"{where}: [lesions] count")
     spec.depth = _number(lesions, "depth_mm", where, "[lesions]", 10.0, ">= 0") / 1000.0
     if "centers_mm" in lesions:
         spec.centers = _centers(lesions["centers_mm"], spec.scenes, where)
@@ -277,8 +272,9 @@ def lesion_centers(mesh, count: int, depth: float) -> np.ndarray:
     return points - depth * vertex_normals(mesh.vertices, mesh.triangles)[vertices]
 
 
-def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
-    """Every item of the spec, in order: per scene its baseline, then each centre x radius x factor."""
+def plan_items(spec: DatasetSpec, cuda: bool = False, on_item=None) -> list[DatasetItem]:
+    """Every item of the spec, in order: per scene its baseline, then each centre x radius x factor;
+    on_item() after each item is planned (a progress bar: each lesion takes a pass over the whole mesh)."""
     from ..tissue.lesion import Lesion
 
     items, seen = [], {}
@@ -293,6 +289,8 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
             centers = lesion_centers(mesh, spec.count, spec.depth) if spec.count else np.zeros((0, 3))
         if spec.baseline:
             items.append(DatasetItem(name, 0, None, base, scene))
+            if on_item is not None:
+                on_item()
         grid = [(c, r, f) for c in centers for r in spec.radii for f in spec.factors]
         for k, (c, r, f) in enumerate(grid, start=1):
             lesion = Lesion(tuple(float(x) for x in c), r, f)
@@ -302,6 +300,8 @@ def plan_items(spec: DatasetSpec, cuda: bool = False) -> list[DatasetItem]:
                                  f"holds no vertex, spring or tet of the mesh (a lesion there changes nothing): "
                                  f"give a larger radius or a smaller [lesions] depth_mm")
             items.append(DatasetItem(name, k, lesion, replace(base, **scales), scene))
+            if on_item is not None:
+                on_item()
     return items
 
 
@@ -309,6 +309,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     """(The scene's mesh, its baseline plan (no lesion), the scene with its support made a plane for a
     press from above, as a sweep's), after the checks a sweep makes."""
     from ..checks import check_ring_count
+    from ..protocol.palpation import check_probe_radius
     from ..region.contact import top_vertex
 
     rings = spec.rings if spec.rings is not None else scene.rings
@@ -324,6 +325,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     press = {k: spec.press.get(k, getattr(scene.press, k)) for k in ("depth", "ramp", "hold", "settle")}
     check_protocol(press["depth"], spec.dt, press["ramp"], press["hold"], press["settle"], 1, float(np.ptp(mesh.vertices, axis=0).max()))
     check_limit(spec.points, "points", "[dataset] points")
+    check_probe_radius(scene.probe_radius, mesh)  # before any work, as the batch checks it again
     check_sphere_travel(scene.probe_radius, press["depth"], spec.dt, press["ramp"])
     points, vertices = pressable_points(mesh, spec.points, scene.fixed_below)
     chunk = spec.chunk or (len(vertices) if cuda else 64)
@@ -338,6 +340,29 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
                                   integrator=spec.integrator, dt=spec.dt, probe_radius=scene.probe_radius,
                                   fixed_below=scene.fixed_below, law=scene.law)
     return mesh, plan, scene
+
+
+def spec_cost(spec: DatasetSpec) -> tuple[int, float]:
+    """(items, region-steps) of the spec from its counts alone, before any planning: every item's points x
+    frames (one substep each: a lower bound of the cost the planned items then check exactly)."""
+    items, cost = 0, 0.0
+    for scene in spec.scenes:
+        centres = spec.count or len(spec.centers.get(scene.name, ()))
+        n = int(spec.baseline) + centres * len(spec.radii) * len(spec.factors)
+        ramp, hold, settle = (spec.press.get(k, getattr(scene.press, k)) for k in ("ramp", "hold", "settle"))
+        frames = max(ramp / spec.dt, 1.0) + hold / spec.dt + max(settle / spec.dt, 1.0)
+        items += n
+        cost += float(n) * spec.points * frames
+    return items, cost
+
+
+def check_spec_cost(spec: DatasetSpec, limit: float) -> None:
+    """InputError, before any planning, for a spec whose items would take more than `limit` region-steps."""
+    items, cost = spec_cost(spec)
+    if not cost <= limit:
+        raise InputError(f"the dataset would take at least {cost:.3g} region-steps ({items} items of {spec.points} points, "
+                         f"each press's frames), more than the {limit:.3g} allowed; give --max-region-steps {cost:.2g} to run "
+                         f"it anyway, or fewer lesions, points or shorter times")
 
 
 def spec_key(items: list[DatasetItem]) -> str:
@@ -363,6 +388,10 @@ class DatasetFolder:
         self.spec = spec
         self.key = spec_key(items)
         self.done: dict[str, dict] = {}
+        self.created = False
+        """Whether open() made the folder (a run refused before its first item then leaves nothing)."""
+        self.note: str | None = None
+        """What open() found damaged and pressed again, or None."""
 
     @property
     def manifest(self) -> Path:
@@ -378,8 +407,13 @@ class DatasetFolder:
         check_regular(self.manifest)
         if self.dir.exists() and any(self.dir.iterdir()):
             self._check_manifest()
-        (self.dir / "items").mkdir(parents=True, exist_ok=True)
-        self._write_manifest()
+        self.created = not self.dir.exists()
+        try:
+            (self.dir / "items").mkdir(parents=True, exist_ok=True)
+            self._write_manifest()
+        except (OSError, InputError) as exc:  # a full disk: a folder made here goes, and one line says why
+            self.discard_if_new()
+            raise exc if isinstance(exc, InputError) else InputError(f"{self.dir}: cannot write: {exc.strerror or exc}") from None
         return [item for item in self.items if not self._finished(item)]
 
     def _check_manifest(self) -> None:
@@ -388,13 +422,23 @@ class DatasetFolder:
             found, fmt = data["key"], data["format"]
             self.done = {str(k): dict(v) for k, v in data.get("items", {}).items()}
         except (OSError, ValueError, KeyError, TypeError, AttributeError):
-            raise InputError(f"{self.dir}: not empty and not a dataset folder (no readable dataset.json): "
-                             f"give another --out") from None
+            foreign = sorted(p.name for p in self.dir.iterdir() if p.name not in OWN and not p.name.startswith("."))
+            if foreign or not self.manifest.exists() and not (self.dir / "items").is_dir():
+                raise InputError(f"{self.dir}: not empty and not a dataset folder (no readable dataset.json"
+                                 f"{f'; it holds {foreign[0]}' if foreign else ''}): give another --out") from None
+            self.done = {}  # a dataset's own folder whose manifest is damaged (truncated): every item pressed again
+            self.note = f"{self.manifest} was unreadable (damaged): its items are pressed again"
+            return
         if fmt != FORMAT or found != self.key:
             changed = [k for k in sorted(set(data.get("spec", {})) | set(self.spec.source))
                        if data.get("spec", {}).get(k) != self.spec.source.get(k)]
             what = f" (changed: {', '.join(f'[{k}]' for k in changed)})" if changed else " (other meshes or scene files)"
             raise InputError(f"{self.dir} holds a dataset of a different spec{what}: delete it, or give another --out")
+
+    def discard_if_new(self) -> None:
+        """Remove the folder where open() made it and no item is done (a run refused before any result)."""
+        if self.created and not self.done:
+            shutil.rmtree(self.dir, ignore_errors=True)
 
     def _finished(self, item: DatasetItem) -> bool:
         entry = self.done.get(item.name)
@@ -412,6 +456,8 @@ class DatasetFolder:
         path = self.item_path(item)
         parts = Parts(path, item.plan)
         done = set(parts.open())
+        for why in ([parts.dropped] if parts.dropped else []) + ([f"({len(parts.damaged)}) did not match their checksum"] if parts.damaged else []):
+            print(f"note: the chunks in {parts.dir} {why}: pressed again", file=sys.stderr)
         run_local(item.plan, parts, [i for i in range(len(item.plan.chunks)) if i not in done], devices, progress)
         SWEEP_TABLE.write(path, parts.gather())
         parts.remove()

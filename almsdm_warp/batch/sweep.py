@@ -210,13 +210,19 @@ class SweepDevice:
         return self.lane.finish(self.plan, self.origin)
 
 
-def run_ray(plan: SweepPlan, parts: Parts, todo: list[int], gpu: bool, address=None, progress=None) -> None:
-    """Press the chunks `todo` on Ray actors of one GPU each (or one CPU), one per GPU (CPU) of the
-    cluster, two chunks queued on each so the next starts as one returns; written as they come back."""
+def require_ray():
+    """The ray module, or InputError saying how to install it (checked before a sweep writes anything)."""
     try:
         import ray
     except ImportError as exc:
         raise InputError("--ray needs Ray: pip install 'almsdm_warp[ray]'") from exc
+    return ray
+
+
+def run_ray(plan: SweepPlan, parts: Parts, todo: list[int], gpu: bool, address=None, progress=None) -> None:
+    """Press the chunks `todo` on Ray actors of one GPU each (or one CPU), one per GPU (CPU) of the
+    cluster, two chunks queued on each so the next starts as one returns; written as they come back."""
+    ray = require_ray()
     if not ray.is_initialized():
         ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
     device = ray.remote(num_gpus=1, num_cpus=1)(SweepDevice) if gpu else ray.remote(num_cpus=1)(SweepDevice)

@@ -8,6 +8,7 @@ import json
 import shutil
 import threading
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,11 @@ class Parts:
         self.dir = Path(str(out) + ".parts")
         self.plan = plan
         self._key = None
+        self._base_key = None
+        self.created = False
+        """Whether open() made the folder (a run refused before its first chunk then removes it)."""
+        self.dropped: str | None = None
+        """Why open() removed every chunk it found (None: it kept those that matched)."""
         self._manifest_due = False  # a new folder's plan.json: written with its first chunk
         self.sums: dict[int, str] = {}
         """Chunk index -> SHA-256 of its file, as written."""
@@ -68,25 +74,43 @@ class Parts:
     def chunk_path(self, i: int) -> Path:
         return self.dir / f"chunk_{i:06d}.npz"
 
+    @property
+    def base_key(self) -> str:
+        """The plan's key but its chunking (which cuts the work, not a number): a folder of the same plan cut
+        into other chunks is started again, not refused."""
+        if self._base_key is None:
+            self._base_key = replace(self.plan, chunk=0).key()
+        return self._base_key
+
     def open(self) -> list[int]:
         """Create or reuse the parts folder; returns the chunk indices already done (checksums verified).
 
         A new folder's plan.json is written with its first chunk (on the writer's thread: the key waits
         for the points), so a folder with neither plan.json nor a chunk is one a run left before its
-        first chunk: taken as new."""
+        first chunk: taken as new. Chunks that cannot be verified (plan.json missing or unreadable: a run
+        killed while the folder was removed, a truncated file) or that were cut for other chunks are
+        removed and pressed again (:attr:`dropped` says why); a readable plan.json of another plan is refused."""
+        self.dropped = None
         if self.dir.exists() and (self.manifest.exists() or any(self.dir.glob("chunk_*.npz"))):
             try:
                 data = json.loads(self.manifest.read_text())
-                found = data["key"]
+                found, base = data["key"], data.get("base")
                 self.sums = {int(i): str(h) for i, h in data.get("chunks", {}).items()}
             except (OSError, ValueError, KeyError, TypeError, AttributeError):
-                found = None
-            if found != self.key:
-                raise InputError(
-                    f"{self.dir} holds parts of a different sweep (other mesh, points or parameters): "
-                    f"delete it, or give another --out"
-                )
+                found = base = None
+                self.dropped = "had no readable plan.json to check them against"
+            if found is not None and found != self.key:
+                if base != self.base_key:
+                    raise InputError(
+                        f"{self.dir} holds parts of a different sweep (other mesh, points or parameters): "
+                        f"delete it, or give another --out"
+                    )
+                self.dropped = "were cut into other chunks"
+            if self.dropped is not None:
+                self._clear()
+                return []
         else:
+            self.created = not self.dir.exists()
             self.dir.mkdir(exist_ok=True)
             self._manifest_due = True
             return []
@@ -104,8 +128,16 @@ class Parts:
                 self.sums.pop(i, None)
         return done
 
+    def _clear(self) -> None:
+        """Remove every chunk and plan.json (the folder stays): the parts start again."""
+        for path in self.dir.glob("chunk_*.npz"):
+            path.unlink(missing_ok=True)
+        self.manifest.unlink(missing_ok=True)
+        self.sums = {}
+        self._manifest_due = True
+
     def _write_manifest(self) -> None:
-        data = {"key": self.key, "points": len(self.plan.vertices), "chunks": {str(i): h for i, h in sorted(self.sums.items())}}
+        data = {"key": self.key, "base": self.base_key, "points": len(self.plan.vertices), "chunks": {str(i): h for i, h in sorted(self.sums.items())}}
         atomic_write(self.manifest, lambda tmp: Path(tmp).write_text(json.dumps(data)))
 
     def write(self, i: int, columns: dict) -> None:
@@ -147,5 +179,16 @@ class Parts:
                 raise InputError(f"{path}: damaged ({exc}); run the same command again to press that chunk again") from exc
         return {c: np.concatenate([p[c] for p in parts]) for c in COLUMNS}
 
+    def discard_if_new(self) -> None:
+        """Remove the folder where open() made it and no chunk is done (a run refused before any result)."""
+        if self.created and not self.sums:
+            self.remove()
+
     def remove(self) -> None:
+        """Remove the folder: the chunks first, plan.json last, so that a run killed on the way leaves a
+        plan.json beside the chunks still there (resumed), never chunks without one."""
+        if self.dir.is_dir():
+            for path in self.dir.iterdir():
+                if path != self.manifest:
+                    path.unlink(missing_ok=True) if not path.is_dir() else shutil.rmtree(path, ignore_errors=True)
         shutil.rmtree(self.dir, ignore_errors=True)

@@ -57,18 +57,19 @@ def rings_arg(words=("auto", *GLOBAL_RINGS)):
 
 
 def number_arg(rule):
-    """An argparse type: a finite float that is "> 0" or ">= 0"."""
+    """An argparse type: a float that is "> 0", ">= 0" or any "number", and 0 or of the magnitude every
+    physical parameter is held to wherever it enters (checks.check_value: a flag, a scene, a spec, the API)."""
+    from ..checks import check_value
 
     def parse(text):
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-        if (rule == "> 0" and not value > 0) or (rule == ">= 0" and not value >= 0):
-            raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
-        return value
+        try:
+            return check_value(value, float, rule, "")
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc).strip()) from None
 
     parse.__name__ = "number"
     return parse
@@ -351,26 +352,27 @@ def _material_from_flags(args, scene, mesh):
     given = {attr: getattr(args, dest) / factor for dest, (_f, attr, factor, *_rest) in MATERIAL_FLAGS.items()
              if getattr(args, dest, None) is not None}
     tissue = scene.tissue
-    if not given:
-        return tissue
-    base = asdict(tissue) if isinstance(tissue, Material) else {}
-    if "youngs_modulus" not in given and not base:
-        flags = ", ".join(MATERIAL_FLAGS[d][0] for d in MATERIAL_FLAGS if getattr(args, d, None) is not None)
-        raise InputError(f"{flags} make the tissue a material, which needs --youngs-modulus-kpa "
-                         f"(the scene {scene.name!r} gives per-spring constants, not a material)")
-    if "damping_ratio" in given:  # one kind of damping: the flag replaces the scene's
-        base.update(rayleigh_alpha=0.0, rayleigh_beta=0.0)
-    elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
-        base.update(damping_ratio=0.0)
-    base.update(given)
-    from ..tissue.laws import LAWS, default_law
+    if given:
+        base = asdict(tissue) if isinstance(tissue, Material) else {}
+        if "youngs_modulus" not in given and not base:
+            flags = ", ".join(MATERIAL_FLAGS[d][0] for d in MATERIAL_FLAGS if getattr(args, d, None) is not None)
+            raise InputError(f"{flags} make the tissue a material, which needs --youngs-modulus-kpa "
+                             f"(the scene {scene.name!r} gives per-spring constants, not a material)")
+        if "damping_ratio" in given:  # one kind of damping: the flag replaces the scene's
+            base.update(rayleigh_alpha=0.0, rayleigh_beta=0.0)
+        elif "rayleigh_alpha" in given or "rayleigh_beta" in given:
+            base.update(damping_ratio=0.0)
+        base.update(given)
+        try:
+            tissue = Material(**base)
+        except (TypeError, ValueError) as exc:
+            flag = next((f"{f}: " for f, attr, *_r in MATERIAL_FLAGS.values() if f"Material.{attr} " in str(exc)), "")
+            raise InputError(f"{flag}{exc}") from None
+    if isinstance(tissue, Material) and not mesh.is_volume and not tissue.thickness > 0.0:  # from the flags or the scene
+        from ..tissue.laws import LAWS, default_law
 
-    law = getattr(args, "law", None) or scene.law or default_law(True, Material(**base))
-    becomes_volume = getattr(args, "volume", "off") == "auto" and law in LAWS and LAWS[law].volumetric
-    if not mesh.is_volume and not becomes_volume and not base.get("thickness", 0.0) > 0.0:
-        raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0")
-    try:
-        return Material(**base)
-    except (TypeError, ValueError) as exc:
-        flag = next((f"{f}: " for f, attr, *_r in MATERIAL_FLAGS.values() if f"Material.{attr} " in str(exc)), "")
-        raise InputError(f"{flag}{exc}") from None
+        law = getattr(args, "law", None) or scene.law or default_law(True, tissue)
+        if not (getattr(args, "volume", "off") == "auto" and law in LAWS and LAWS[law].volumetric):
+            raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0 "
+                             f"(or the scene's [tissue] thickness_mm)")
+    return tissue

@@ -6,8 +6,8 @@ import sys
 import time
 from pathlib import Path
 
-SPEC_DECIDES = ("scene", "rings", "tol_mm", "depth_mm", "ramp_s", "hold_s", "settle_s", "dt_ms", "scale_mm", "png", "ray", "law", "tissue",
-                "support", "fixed_below_mm")
+SPEC_DECIDES = ("scene", "points", "rings", "tol_mm", "depth_mm", "ramp_s", "hold_s", "settle_s", "dt_ms", "scale_mm", "png", "ray",
+                "law", "integrator", "probe_radius_mm", "tissue", "support", "fixed_below_mm")
 """sweep's arguments that a dataset spec decides (an error beside --dataset, not silently ignored)."""
 
 
@@ -34,20 +34,26 @@ def cmd_dataset(args, devices: list[str]) -> int:
     spec = ds.load_spec(args.dataset)
     if args.chunk:
         spec.chunk = args.chunk
+    ds.check_spec_cost(spec, args.max_region_steps)  # from the spec's counts, before any planning
     for scene in spec.scenes:
         if scene.lesion is not None:
             print(f"note: the scene {scene.name!r}'s own [lesion] is left out: the dataset's lesion grid decides")
-    items = ds.plan_items(spec, cuda=devices[0] != "cpu")
+    count = ds.spec_cost(spec)[0]
+    print(f"planning {count} item(s) of {len(spec.scenes)} scene(s)", flush=True)
+    with Progress(count, enabled=args.progress, label="planning") as bar:
+        items = ds.plan_items(spec, cuda=devices[0] != "cpu", on_item=bar.advance)
+    from ..batch.sweep_plan import press_steps
+
+    check_region_steps(sum(len(i.plan.vertices) * press_steps(i.plan) for i in items), 1, 1, args.max_region_steps)
     folder = ds.DatasetFolder(args.out, items, spec)
-    todo = folder.open()
+    todo = folder.open()  # the first write: every check is behind it
     scenes = len({i.scene for i in items})
     points = sum(len(i.plan.vertices) for i in items)
     print(f"dataset: {len(items)} items ({scenes} scene(s) x lesions, baseline {'on' if spec.baseline else 'off'}), "
           f"{points} presses; {len(items) - len(todo)} item(s) already in {folder.dir}")
-    from ..batch.sweep_plan import press_steps
-
+    if folder.note:
+        print(f"note: {folder.note}", file=sys.stderr)
     total = sum(len(i.plan.vertices) * press_steps(i.plan) for i in todo)
-    check_region_steps(total, 1, 1, args.max_region_steps)
     t0 = time.perf_counter()
     try:
         with Progress(total, enabled=args.progress, label="dataset") as bar:
@@ -55,7 +61,8 @@ def cmd_dataset(args, devices: list[str]) -> int:
     except KeyboardInterrupt:
         print(f"almsdm: interrupted; the items done are in {folder.dir}: run the same command again to resume", file=sys.stderr)
         return 130
-    except SimulationDiverged as exc:
+    except (SimulationDiverged, InputError) as exc:  # diverged, or a write refused: a folder this run made with no item goes
+        folder.discard_if_new()
         raise InputError(str(exc)) from exc
     columns = ds.finish_dataset(folder)
     print(f"pressed {len(todo)} item(s) in {time.perf_counter() - t0:.2f} s; "

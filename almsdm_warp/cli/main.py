@@ -113,6 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", parser_class=Parser)
     for name in COMMANDS:
         importlib.import_module(f"{__package__}.{name}").add_parser(sub)
+    for command in sub.choices.values():
+        command.add_argument("--verbose", action="store_true", help="show Warp's own messages: its banner, module loads, "
+                             "warnings (also ALMSDM_VERBOSE=1); without it every error is one line")
     return parser
 
 
@@ -160,12 +163,21 @@ def main(argv=None) -> int:
             return EXIT_INTERRUPTED
 
 
+def _start_warp(args) -> None:
+    """Warp initialized once, before any command touches it: quiet unless --verbose or ALMSDM_VERBOSE=1."""
+    from ..warp_init import init_warp, verbose
+
+    with signals_held():
+        init_warp(quiet=not (getattr(args, "verbose", False) or verbose()))
+
+
 def _run(argv) -> int:
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
         if _default_command(argv):
             argv = ["palpate", *argv]  # `almsdm`, `almsdm --depth-mm 5`, `almsdm liver`, `almsdm my.obj`
         args = build_parser().parse_args(argv)
+        _start_warp(args)
         if getattr(args, "start_devices", False):  # their contexts start while the imports below run
             from ..warp_init import start_devices
 

@@ -28,7 +28,7 @@ def add_parser(sub) -> None:
     )
     p.add_argument("scene", nargs="?", default=None, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
     p.add_argument("--out", required=True, metavar="FILE", help="output table: .csv or .npz")
-    p.add_argument("--points", type=count_arg, default=200, metavar="N", help="points to press (default 200)")
+    p.add_argument("--points", type=count_arg, default=None, metavar="N", help=f"points to press (default {DEFAULT_POINTS})")
     p.add_argument("--rings", type=rings_arg(("auto",)), default=None, metavar="{K,auto}", help="rings of each local region, or auto: each point's sized to --tol-mm as almsdm palpate --rings auto sizes it (default: the scene's)")
     p.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
     p.add_argument("--depth-mm", "--depth", dest="depth_mm", type=number_arg("> 0"), default=None, metavar="MM", help="press depth [mm] (default: the scene's)")
@@ -50,7 +50,7 @@ def add_parser(sub) -> None:
     p.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
     add_tissue_args(p)
     add_dataset_arg(p)
-    p.set_defaults(func=cmd_sweep, start_devices=True)
+    p.set_defaults(func=cmd_sweep, start_devices=True, integrator=None)  # None: not given (a dataset's spec decides it)
 
 
 def _devices(text: str) -> list[str]:
@@ -67,14 +67,24 @@ def _devices(text: str) -> list[str]:
     return list(dict.fromkeys(get_device(n).alias for n in names))
 
 
+DEFAULT_POINTS = 200
+"""--points when not given (None in the parser: a dataset's spec decides, and refuses it given)."""
+
+
 def cmd_sweep(args) -> int:
     from ..batch.sweep_times import SweepTimes
     from ..export.writers import check_output
 
     if args.dataset:  # several scenes and a lesion grid: cli/dataset.py
         return cmd_dataset(args, _devices(args.device))
+    args.points = DEFAULT_POINTS if args.points is None else args.points
+    args.integrator = args.integrator or "explicit"
     out = Path(args.out)
     check_output(out, "table", "--out")
+    if args.ray:  # before OUT.parts/ is made
+        from ..batch.sweep import require_ray
+
+        require_ray()
     if args.png:
         check_output(args.png, "image", "--png")
     quiet_warp()
@@ -88,6 +98,9 @@ def cmd_sweep(args) -> int:
     parts.rows_file = SWEEP_TABLE.rows(out, len(plan.vertices))
     try:
         return _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo)
+    except InputError:  # a write refused (a full disk): a parts folder this run made with nothing in it goes
+        parts.discard_if_new()
+        raise
     finally:
         if parts.rows_file is not None:
             parts.rows_file.discard()  # after finish(): nothing left to remove
@@ -145,6 +158,7 @@ def _plan(args, devices, times):
     from ..batch.sampling import pressable_points, start_sampling
     from ..batch.sweep import models_behind
     from ..batch.sweep_plan import SweepPlan, check_sphere_travel, default_chunk
+    from ..protocol.palpation import check_probe_radius
     from ..batch.sweep_auto import rings_summary
     scene, mesh = load_scene_and_mesh(args)
     scene = scene_with_tissue_args(args, scene, mesh)
@@ -161,6 +175,7 @@ def _plan(args, devices, times):
     settle = press.settle if args.settle_s is None else args.settle_s
     dt = 1e-3 if args.dt_ms is None else args.dt_ms * 1e-3
     frames = check_protocol(depth, dt, ramp, hold, settle, 1, float(np.ptp(mesh.vertices, axis=0).max()))
+    check_probe_radius(radius, mesh)  # before any work, as the batch checks it again
     check_sphere_travel(radius, depth, dt, ramp)
     check_limit(args.points, "points", "--points")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
@@ -218,6 +233,8 @@ def _resume(out: Path, plan):
 
     parts = Parts(out, plan)
     done = parts.open()
+    if parts.dropped:
+        print(f"note: the chunks in {parts.dir} {parts.dropped}: pressed again", file=sys.stderr)
     if parts.damaged:
         print(f"note: {len(parts.damaged)} chunk(s) in {parts.dir} did not match their checksum (damaged): pressed again", file=sys.stderr)
     done = set(done)

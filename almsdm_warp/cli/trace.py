@@ -47,6 +47,10 @@ BUILTIN_STROKE_S = 3.9
 """The built-in stroke's duration [s]: 8 mm down, 60 mm across and 10 mm up at 20 mm/s."""
 MAX_PATH_STEPS = 10_000_000
 """Steps a path may take at dt (about 3 hours at 1 kHz); beyond, its times or dt are a mistake."""
+MAX_PATH_ROWS = 1_000_000
+"""Rows a path file may hold (17 minutes of a 1 kHz haptic device's log; the path is interpolated between them)."""
+MAX_PATH_BYTES = 64 * 1024**2
+"""Bytes a path file may have (a million rows of four numbers take about 40 MB)."""
 
 
 COUPLING_FLAGS = (
@@ -90,13 +94,16 @@ def add_parser(sub) -> None:
 def read_path(path) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], centre [m] [n, 3]) of a path file: the header t_s,x_mm,y_mm,z_mm, then at least two
     rows of finite numbers with t_s strictly increasing. InputError naming the file, line and value."""
+    from ..mesh.io import read_bounded
+
     p = Path(path)
+    data = read_bounded(p, str(p), what="path file", limit=MAX_PATH_BYTES)  # a regular file, bounded: no FIFO, no /dev/zero
+    if data.count(b"\n") > MAX_PATH_ROWS + 1:
+        raise InputError(f"{p}: more than {MAX_PATH_ROWS:,} rows (MAX_PATH_ROWS); thin the path (it is interpolated at each step)")
     try:
-        lines = p.read_text(encoding="utf-8").splitlines()
+        lines = data.decode("utf-8").splitlines()
     except UnicodeDecodeError as exc:
         raise InputError(f"{p}: not a text file (byte {exc.start} is not UTF-8)") from None
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read the path: {exc.strerror or exc}") from None
     rows = [(k + 1, line) for k, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
     if not rows:
         raise InputError(f"{p}: empty path file (expected a header {','.join(PATH_COLUMNS)} and rows)")
@@ -163,6 +170,25 @@ def check_steps(duration: float, dt: float, what: str) -> None:
         raise InputError(f"{what} lasts {duration:g} s, less than one step of --dt-ms {dt * 1e3:g}")
 
 
+def check_path_clear(stroke, times, centres) -> None:
+    """InputError where the path (straight between its steps) moves the sphere its radius or more in one step
+    through the organ at rest: it would pass through vertices (as a sweep's press may not), and read ~0 N.
+    The stroke itself refuses a path that starts inside the organ or moves that far while touching it."""
+    step = np.linalg.norm(np.diff(centres, axis=0), axis=1)
+    far = np.flatnonzero(step >= stroke.radius)
+    if not len(far):
+        return
+    n = int(math.ceil(2.0 * step[far].max() / stroke.radius)) + 1  # a sample every half radius or closer
+    f = np.linspace(0.0, 1.0, n)[None, :, None]
+    samples = centres[far, None, :] + f * (centres[far + 1] - centres[far])[:, None, :]
+    inside = stroke.clearance(samples.reshape(-1, 3)).reshape(len(far), n).min(axis=1) < stroke.radius - stroke.guard
+    if inside.any():
+        k = int(far[np.argmax(inside)])
+        raise InputError(f"at t = {times[k + 1]:.4g} s the path moves the sphere {step[k] * 1e3:.3g} mm in one step of "
+                         f"{(times[k + 1] - times[k]) * 1e3:.3g} ms through the organ, not less than its radius "
+                         f"{stroke.radius * 1e3:g} mm: it would pass through vertices; slow the path or use a smaller --dt-ms")
+
+
 def cmd_trace(args) -> int:
     """Replay the path, write the trace, the plot, the stage and the summary."""
     from ..export.writers import check_output
@@ -180,6 +206,7 @@ def cmd_trace(args) -> int:
     stroke = _make_stroke(args, scene, mesh, dt, device)
     t, centre = given if given is not None else _builtin_path(stroke, dt)
     times, centres = resample(t, centre, dt)
+    check_path_clear(stroke, times, centres)
     src = args.path_csv or "the built-in stroke"
     print(f"path: {src}, {times[-1] - times[0]:.3g} s in {len(times)} steps of {dt * 1e3:g} ms")
     if coupling is not None:

@@ -47,15 +47,44 @@ def check_writable(path) -> Path:
 
 def temp_path(path, suffix: str = ".tmp") -> Path:
     """A new empty temporary file beside `path` (same folder, so the rename is atomic), for a
-    writer that publishes it when complete (:func:`publish`) or removes it (:func:`discard`)."""
+    writer that publishes it when complete (:func:`publish`) or removes it (:func:`discard`).
+    Its name holds this process's id: the temporaries of `path` that a killed run left (their
+    process gone) are removed here (remove_stale)."""
     p = Path(path)
     folder = p.parent if str(p.parent) else Path(".")
+    remove_stale(p, suffix)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=suffix, dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.{os.getpid()}.", suffix=suffix, dir=folder)
     except OSError as exc:
         raise InputError(f"{p}: cannot write in folder {folder}: {exc.strerror or exc}") from exc
     os.close(fd)
     return Path(tmp)
+
+
+def remove_stale(path: Path, suffix: str) -> None:
+    """Remove the temporaries of `path` (temp_path's names) whose process no longer runs: what a run
+    killed outright (SIGKILL, a power cut) left, which no cleanup of its own could remove."""
+    folder = path.parent if str(path.parent) else Path(".")
+    prefix = f".{path.name}."
+    try:
+        names = [n for n in os.listdir(folder) if n.startswith(prefix) and n.endswith(suffix)]
+    except OSError:
+        return
+    for name in names:
+        pid = name[len(prefix):].split(".", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _running(int(pid)):
+            with contextlib.suppress(OSError):
+                os.unlink(folder / name)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: running
+        return True
+    return True
 
 
 def publish(tmp, path) -> Path:

@@ -124,11 +124,16 @@ class UsdRecorder:
         self._region_key = None
         self._spring_ends = None
         self._tmp = temp_path(self.path, ".tmp.usdc")
+        from pxr import Tf
+
         try:
             self._layer = Sdf.Layer.CreateNew(str(self._tmp))
             if self._layer is None:
                 raise InputError(f"{self.path}: USD could not create a layer at {self._tmp}")
             self._build_stage(remap[mesh.triangles])
+        except Tf.ErrorException as exc:  # a full disk, a quota: one line, not USD's error stack
+            self._discard()
+            raise InputError(f"{self.path}: cannot write the USD stage: {usd_error_cause(exc)}") from None
         except BaseException:
             self._discard()
             raise

@@ -85,13 +85,14 @@ def _check_suffix(suffix: str, where: str) -> None:
         raise InputError(f"{where}: unknown mesh format {suffix or '(no suffix)'!r}; known: {known}")
 
 
-def read_bounded(path, where: str, before_reading=None, what: str = "mesh file") -> bytes:
-    """The bytes of a regular file (a `what`) of at most MAX_FILE_BYTES, else InputError before reading.
+def read_bounded(path, where: str, before_reading=None, what: str = "mesh file", limit: int | None = None) -> bytes:
+    """The bytes of a regular file (a `what`) of at most `limit` bytes (default MAX_FILE_BYTES), else InputError before reading.
 
     The file is opened without blocking and checked on the open descriptor (fstat), so a path that
     names a FIFO, a device (/dev/zero, /dev/urandom) or a socket is refused instead of read without
     end; `before_reading` runs once the path is known to be a regular file (a check of its name).
     """
+    limit = MAX_FILE_BYTES if limit is None else limit
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
     except FileNotFoundError as exc:
@@ -111,17 +112,16 @@ def read_bounded(path, where: str, before_reading=None, what: str = "mesh file")
             kind = next((name for test, name in _SPECIAL if test(mode.st_mode)), "special file")
             raise InputError(f"{where}: is a {kind}, not a regular file; a {what} is read only from a regular file "
                              f"(a device or a pipe may never end)")
-        if mode.st_size > MAX_FILE_BYTES:
-            raise InputError(f"{where}: the file has {mode.st_size} bytes, more than the {MAX_FILE_BYTES} bytes "
-                             f"(MAX_FILE_BYTES) a {what} may have")
+        if mode.st_size > limit:
+            raise InputError(f"{where}: the file has {mode.st_size} bytes, more than the {limit} bytes a {what} may have")
         if before_reading is not None:
             before_reading()
         try:
-            data = f.read(MAX_FILE_BYTES + 1)
+            data = f.read(limit + 1)
         except OSError as exc:
             raise InputError(f"{where}: cannot read: {exc.strerror or exc}") from exc
-    if len(data) > MAX_FILE_BYTES:
-        raise InputError(f"{where}: the file grew past the {MAX_FILE_BYTES} bytes a {what} may have while it was read")
+    if len(data) > limit:
+        raise InputError(f"{where}: the file grew past the {limit} bytes a {what} may have while it was read")
     if not data:
         raise InputError(f"{where}: empty file (0 bytes)")
     return data

@@ -8,6 +8,7 @@ no allocation and no extra copy on the CPU (on CUDA, pinned buffers copied insid
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,12 +17,14 @@ import warp as wp
 from ..kernels.probes.press import hold_probe
 from ..kernels.region.state import reset_vertices_left_behind
 from ..mesh.topology import inverted_tets
+from ..mesh.validate import MAX_COORDINATE_M
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE, Model
 from ..region.patch import sphere_patches
 from ..region.region import Region
 from ..solvers import make_solver
 from ..solvers.stepper import SimulationDiverged, capture_step_pair, diverged, force_bound, plan_substeps, remedies
-from ..checks import fixed_substeps
+from ..checks import check_value, fixed_substeps
+from ..errors import InputError
 from .schedule import PressSchedule, check_press
 
 GLOBAL_MODELS = ("global", "global-free")
@@ -31,13 +34,41 @@ PATCH_DEPTH = 0.01
 then resizes it to its own depth)."""
 
 
-def check_probe_radius(radius) -> float:
-    """The probe's radius [m]: a finite number >= 0 (0: the paper's probe, one driven vertex)."""
-    if isinstance(radius, (bool, np.bool_)) or not isinstance(radius, (int, float, np.integer, np.floating)):
+PROBE_RADIUS_FACTOR = 100.0
+"""A sphere more than this many times the mesh's extent is a plane to the organ, and its centre so far
+off that its float32 position loses the press (a radius of 1e9 m read 0 N): refused."""
+PROBE_MODES = {PROBE_OFF: "PROBE_OFF", PROBE_DISPLACEMENT: "PROBE_DISPLACEMENT", PROBE_FORCE: "PROBE_FORCE",
+               PROBE_SPHERE: "PROBE_SPHERE"}
+"""The probe's modes (sim.model), by value: set_probe takes these and no other."""
+
+
+def check_probe_radius(radius, mesh=None) -> float:
+    """The probe's radius [m]: a number >= 0 (0: the paper's probe, one driven vertex) of the magnitude every
+    parameter is held to (checks.check_value) and, with `mesh`, at most PROBE_RADIUS_FACTOR x its extent.
+    TypeError for a non-number, ValueError (an InputError) naming probe_radius and the value otherwise."""
+    if isinstance(radius, (bool, np.bool_)) or not isinstance(radius, numbers.Real):
         raise TypeError(f"probe_radius must be a number [m], got {type(radius).__name__}")
-    if not (math.isfinite(radius) and radius >= 0):
-        raise ValueError(f"probe_radius must be >= 0 m and finite, got {radius}")
-    return float(radius)
+    value = check_value(radius, float, ">= 0", "probe_radius [m]")
+    if mesh is not None:
+        extent = float(np.ptp(mesh.vertices, axis=0).max())
+        if value > PROBE_RADIUS_FACTOR * extent:
+            raise InputError(f"probe_radius {value:g} m is more than {PROBE_RADIUS_FACTOR:g} x the mesh's extent "
+                             f"({extent:.4g} m): a sphere that large is a plane to the organ, beyond what float32 positions resolve")
+    return value
+
+
+def check_point(value, name: str):
+    """`value` where it is 3 finite numbers within the +-1 km meshes are held to (a position [m], a force
+    [N]), else ValueError naming `name` and the value (cheap: set_probe calls it every step)."""
+    m = MAX_COORDINATE_M
+    try:
+        x, y, z = value
+        ok = -m <= x <= m and -m <= y <= m and -m <= z <= m  # NaN compares False
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} must be 3 finite numbers within {m:g}, got {value!r}")
+    return value
 
 
 @dataclass
@@ -136,9 +167,8 @@ class Palpation:
             raise ValueError(f"rings must be an int >= 1 or one of {GLOBAL_MODELS}, got {rings!r}")
         if isinstance(rings, (int, np.integer)) and rings < 1:
             raise ValueError(f"rings must be >= 1 (ring 0 is the contact vertex alone), got {rings}")
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be > 0, got {dt}")
-        self.probe_radius = check_probe_radius(probe_radius)
+        check_value(dt, float, "> 0", "dt [s]")
+        self.probe_radius = check_probe_radius(probe_radius, mesh)
         self.model = Model(mesh, tissue, device, edge_scale=edge_scale, anchor_scale=anchor_scale, fixed_below=fixed_below, law=law,
                            element_scale=element_scale)
         self.model.law_entry.require(path=self.protocol)
@@ -214,6 +244,11 @@ class Palpation:
     def touch(self, vertex: int, depth: float | None = None) -> None:
         """Put the probe on `vertex`; the local model builds its region there (relocating it). With a
         sphere, ring 0 is the patch it covers pressed `depth` [m] deep (default PATCH_DEPTH)."""
+        from ..mesh.device_mesh import check_vertex
+
+        check_vertex(self.mesh, vertex, "contact vertex")
+        if depth is not None:
+            check_value(depth, float, "> 0", "depth [m]")
         if self.model.support_count and 0 <= vertex < self.model.particle_count and self.model.support_mask[vertex]:
             raise ValueError(f"vertex {vertex} is held by the support (below the fixed plane): the probe cannot move it")
         if self.region is not None:
@@ -230,10 +265,6 @@ class Palpation:
                 reset_vertices_left_behind(self.model, old_vertex, old_count, old, self.states)
             self.solver.set_region(old)
             self.plan_substeps()
-        else:
-            from ..mesh.device_mesh import check_vertex
-
-            check_vertex(self.mesh, vertex, "contact vertex")
         self.vertex = int(vertex)
         self.control.set(vertex=self.vertex, mode=PROBE_OFF)
         self._mode[0] = PROBE_OFF
@@ -371,6 +402,16 @@ class Palpation:
         With substeps, the next frame moves the probe from its start to `target` in even steps (a
         first-order hold). start [m]: that start; default the last frame's target, or where the mode
         changes, `target` itself (no move from a stale target)."""
+        if isinstance(mode, (bool, np.bool_)) or mode not in PROBE_MODES:
+            raise ValueError(f"mode must be one of {', '.join(f'{n} ({v})' for v, n in PROBE_MODES.items())}, got {mode!r}")
+        if target is not None:
+            check_point(target, "target [m]")
+        if start is not None:
+            check_point(start, "start [m]")
+        self._drive(mode, target, start)
+
+    def _drive(self, mode: int, target=None, start=None) -> None:
+        """set_probe without its checks (the press's own targets, made from checked values)."""
         if target is not None:
             self._move[1] = target
             if mode != self._mode[0]:
@@ -382,6 +423,7 @@ class Palpation:
 
     def set_probe_force(self, force) -> None:
         """Force-controlled probe: push the contact vertex with `force` [N] (a 3-vector)."""
+        check_point(force, "force [N]")
         self._mode[0] = PROBE_FORCE
         self._force[0] = force
 
@@ -476,7 +518,7 @@ class Palpation:
         for s in range(total):
             if s < release:
                 # the first frame moves from rest (the sphere touching it), as every later one from the last
-                self.set_probe(drive, start + direction * depth * schedule.fraction(s), start if s == 0 else None)
+                self._drive(drive, start + direction * depth * schedule.fraction(s), start if s == 0 else None)
             else:
                 self.set_probe(PROBE_OFF)
             f = self.step()

@@ -38,11 +38,18 @@ class PressParams:
         check_fields(self, PRESS_KEYS)
 
 
+AMPLITUDES = ("depth", "force")
+"""A press's amplitude (metres or newtons): > 0; its times (ramp, hold, settle [s]) are >= 0."""
+
+
 def check_press(**values) -> None:
-    """ValueError for the first of `values` (name=seconds, metres or newtons) that is not finite and >= 0."""
+    """ValueError (an InputError) naming the first of `values` (name=seconds, metres or newtons) that is
+    not a finite number of the magnitude every parameter is held to (checks.check_value), > 0 for the
+    amplitude (a press of depth 0 has no stiffness) and >= 0 for the times."""
+    from ..checks import check_value
+
     for name, value in values.items():
-        if not (math.isfinite(value) and value >= 0):
-            raise ValueError(f"press {name} must be >= 0, got {value}")
+        check_value(value, float, "> 0" if name in AMPLITUDES else ">= 0", f"press {name}")
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,9 @@ from .palpation import Palpation, check_probe_radius
 
 WAKE_TIME = 0.01
 """[s] A vertex faster than tol / WAKE_TIME is still moving: it stays free when the region moves."""
+CHECK_EVERY = 50
+"""Steps between two checks of the whole state (finite, within twice the mesh's size of rest: check_finite)
+beside the force's bound every step: a stroke whose tissue ran away while the force read 0 raises."""
 
 
 class StrokePath(NamedTuple):
@@ -136,7 +139,7 @@ class ProbeStroke(Palpation):
     def __init__(self, mesh, tissue=None, *, probe_radius, rings=4, integrator="explicit", dt=1e-3, device=None,
                  fixed_below=None, probes=1, lead=None, margin=2, guard=None, tol=1e-5, capture=True, substeps="auto",
                  edge_scale=None, anchor_scale=None, **solver_kw):
-        radius = check_probe_radius(probe_radius)
+        radius = check_probe_radius(probe_radius, mesh)
         if radius <= 0:
             raise ValueError(f"a stroke drives rigid spheres: probe_radius must be > 0 m, got {probe_radius}")
         if isinstance(rings, str) and rings != "global":
@@ -174,6 +177,9 @@ class ProbeStroke(Palpation):
         from scipy.spatial import cKDTree
 
         self._tree = cKDTree(self._surface_rest)
+        if self.model.support_count:  # the free surface vertices: a region's seeds where only held ones are near
+            self._free_surface = surface[~self.model.support_mask[surface]]
+            self._free_tree = cKDTree(self.mesh.vertices[self._free_surface])
         self._held = 0
         self._hold_in_solve()
         n = self.model.particle_count
@@ -196,6 +202,8 @@ class ProbeStroke(Palpation):
         self._frames = None  # the explicit frames: [slot][state], captured once at the first step
         self._views = {}
         self._started = False
+        self._last = None  # the spheres' centres [m] at the last step (None before the first)
+        self._steps = 0
         self._pending = None  # a relocation under way: ("seeds", seeds), ("grow", rings left), ("built", None)
         self._warm = False  # the first step runs uncaptured: it loads the kernels outside any capture
         self._fresh = False  # (implicit) the first step after a relocation runs uncaptured; the next one captures
@@ -216,6 +224,7 @@ class ProbeStroke(Palpation):
                              f"{' or (3,)' if self.probe_count == 1 else ''}, got {c.shape}")
         if not np.all(np.isfinite(c)):
             raise ValueError(f"centres must be finite [m], got {c.tolist()}")
+        self._check_travel(c)
         self._centre[:] = c
         if self.region is not None:
             if not self._started:
@@ -229,12 +238,43 @@ class ProbeStroke(Palpation):
                 elif move == "soon":
                     self._pending = ("seeds", self.seeds(c))
         self._advance()
+        self._steps += 1
+        if self._steps % CHECK_EVERY == 0:
+            self.check_finite(self._steps)
         f = self._sphere_force.astype(np.float64)
         total = float(np.abs(f).sum())
         if not total < self._bound:
             raise diverged(self.solver.integrator, f": the spheres' forces {f.tolist()} N are not finite or more than "
                                                   f"{self._bound:.3g} N", self.dt, self.substeps, self.critical_dt)
         return f[0] if single and self.probe_count == 1 else f
+
+    def _check_travel(self, c) -> None:
+        """ValueError where a sphere would start inside the organ (a stroke touches down from outside), or
+        move its radius or more in one step while it touches the organ or onto it (it would pass through
+        vertices, as a sweep's press may not). A lifted sphere may jump: a touch-down elsewhere, clear of it."""
+        clear = self.clearance(c)
+        p = int(np.argmin(clear))
+        inside = clear[p] < self.radius - self.guard
+        if self._last is None:
+            if inside:
+                raise ValueError(f"the sphere starts {(self.radius - clear[p]) * 1e3:.3g} mm inside the organ (its centre "
+                                 f"{np.round(c[p] * 1e3, 3).tolist()} mm, radius {self.radius * 1e3:g} mm, the surface at rest "
+                                 f"{clear[p] * 1e3:.3g} mm from it): start the path clear of the organ")
+        else:
+            travel = np.linalg.norm(c - self._last, axis=1)
+            far = travel >= self.radius
+            if far.any() and (inside or (self._touching[far] != 0).any()):
+                p = int(np.argmax(travel))
+                raise ValueError(f"the sphere would move {travel[p] * 1e3:.3g} mm in one step of {self.dt * 1e3:g} ms "
+                                 f"{'into' if inside else 'while it touches'} the organ, not less than its radius "
+                                 f"{self.radius * 1e3:g} mm: it would pass through vertices; slow the path or use a smaller dt")
+        self._last = c.copy()
+
+    def clearance(self, points) -> np.ndarray:
+        """How far [m] each of `points` [n, 3] lies outside the surface at rest, along the outward normal of its
+        nearest surface vertex (negative inside); a sphere's centre less than its radius out touches it."""
+        _d, k = self._tree.query(points)
+        return np.einsum("ij,ij->i", points - self._surface_rest[k], self.model.vertex_normal_rest[self._surface[k]])
 
     @property
     def touching(self) -> np.ndarray:
@@ -286,8 +326,20 @@ class ProbeStroke(Palpation):
             picked.append(verts[moving])
         seeds = np.unique(np.concatenate(picked)).astype(np.int32)
         if self.model.support_count:
+            self._check_support(c)
             seeds = seeds[~self.model.support_mask[seeds]]
+            if not len(seeds):  # only held vertices near: the nearest free surface vertex of each centre
+                seeds = np.unique(self._free_surface[self._free_tree.query(c)[1]]).astype(np.int32)
         return seeds
+
+    def _check_support(self, c) -> None:
+        """ValueError where a sphere reaches a vertex held by the support (at rest within its radius): it
+        would press the rigid support, which no force of the model holds."""
+        for p, near in enumerate(self._tree.query_ball_point(c, self.radius)):
+            held = [int(v) for v in self._surface[np.asarray(near, dtype=np.int64)] if self.model.support_mask[v]]
+            if held:
+                raise ValueError(f"the sphere at {np.round(c[p] * 1e3, 3).tolist()} mm reaches vertex {held[0]}, held by "
+                                 f"the support (fixed_below): the probe cannot press the support; keep the path above it")
 
     def relocate(self, centres) -> None:
         """Rebuild the region around `centres` [m] and the wake now, keeping every vertex's state (see

@@ -8,6 +8,7 @@ import numpy as np
 import warp as wp
 
 from ..mesh.device_mesh import as_device_mesh
+from ..mesh.validate import MAX_COORDINATE_M
 from ..kernels.region import contact as ck
 
 
@@ -55,6 +56,10 @@ class ContactQuery:
         if not np.all(np.isfinite(p)):
             bad = int(np.flatnonzero(~np.all(np.isfinite(p), axis=1))[0])
             raise ValueError(f"probe {bad} has a non-finite position {p[bad].tolist()}")
+        far = np.flatnonzero(np.abs(p).max(axis=1, initial=0.0) > MAX_COORDINATE_M)
+        if len(far):  # beyond float32's reach of any mesh the simulator holds: no surface is near
+            raise ValueError(f"probe {int(far[0])} at {p[far[0]].tolist()} m is more than {MAX_COORDINATE_M:g} m from the "
+                             f"origin, beyond any mesh the simulator holds")
         count = len(p)
         self._reserve(max(count, 1))
         self.probe[:count].assign(p.astype(np.float32))

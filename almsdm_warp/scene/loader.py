@@ -228,7 +228,7 @@ def load_scene(path) -> Scene:
     """
     where = str(path)
     p = Path(path)
-    data = _read_toml(p, where)
+    data = read_toml(p, where)
     lesion = None
     if "lesion" in data:  # an optional table of its own (an array and scalars: almsdm_warp/tissue/lesion.py)
         from ..tissue.lesion import parse_lesion
@@ -284,19 +284,20 @@ def _tissue(table: dict, values: dict, where: str) -> TissueParams | Material:
         raise InputError(f"{where}: {exc}") from None
 
 
-def _read_toml(p: Path, where: str) -> dict:
-    """The scene file's TOML document; InputError when it is missing, not a regular file, unreadable or not TOML."""
+def read_toml(p: Path, where: str, what: str = "scene file") -> dict:
+    """A TOML document (a scene file, a dataset spec), read through the bounded reader; InputError when it
+    is missing, not a regular file, unreadable, not TOML or nested past the parser's recursion."""
     from ..mesh.io import read_bounded
 
     if not p.exists():
-        raise InputError(f"{where}: no such scene file")
-    data = read_bounded(p, where, what="scene file")
+        raise InputError(f"{where}: no such {what}")
+    data = read_bounded(p, where, what=what)
     try:
         return tomllib.loads(data.decode("utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{where}: TOML syntax error: {exc}") from exc
     except RecursionError:  # the parser recurses once per level of nested arrays or tables
-        raise InputError(f"{where}: arrays or tables nested too deeply (a scene file needs two levels)") from None
+        raise InputError(f"{where}: arrays or tables nested too deeply (a {what} needs two levels)") from None
     except UnicodeDecodeError as exc:
         raise InputError(f"{where}: not a UTF-8 text file (TOML), byte {exc.start} is 0x{exc.object[exc.start]:02x}") from exc
 

@@ -41,6 +41,25 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
+def check_factors(values, count: int, name: str, each: str, rule: str = ">= 0") -> np.ndarray:
+    """`values` as `count` float64 multipliers (a lesion's, an anchor's area), each finite, `rule` (">= 0" or
+    "> 0") and 0 or of the magnitude every parameter is held to (checks.MAGNITUDE); else ValueError naming
+    `name`, the first bad one and its value."""
+    from ..checks import MAGNITUDE
+
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if len(v) != count:
+        raise ValueError(f"{name} must be {count} factors (one {each}), got {len(v)}")
+    lo, hi = MAGNITUDE
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(v) & ((v > 0) if rule == "> 0" else (v >= 0)) & ((v == 0) | ((np.abs(v) >= lo) & (np.abs(v) <= hi)))
+    bad = np.flatnonzero(~ok)
+    if len(bad):
+        raise ValueError(f"{name} must be finite factors {rule}, 0 or of magnitude {lo:g} to {hi:g}: "
+                         f"{name}[{int(bad[0])}] = {float(v[bad[0]])!r}")
+    return v
+
+
 class Model:
     """The static tissue model on one device: rest shape, topology, masses, springs, anchors."""
 
@@ -83,8 +102,8 @@ class Model:
         if np.any(mass <= 0):
             bad = int(np.flatnonzero(mass <= 0)[0])
             raise ValueError(f"vertex {bad} has mass {mass[bad]:.3g} kg: it belongs to no element with area or volume")
-        es = np.ones(e) if edge_scale is None else np.asarray(edge_scale, dtype=np.float64)
-        an = np.ones(n) if anchor_scale is None else np.asarray(anchor_scale, dtype=np.float64)
+        es = np.ones(e) if edge_scale is None else check_factors(edge_scale, e, "edge_scale", "an edge")
+        an = np.ones(n) if anchor_scale is None else check_factors(anchor_scale, n, "anchor_scale", "a vertex")
         if isinstance(t, Material):  # the dampers follow the scaled springs by the material's law
             ke, ka = ke * es, ka * an
             kd, da = damping(t, self.mesh.edges, ke, ka, mass)
@@ -129,10 +148,7 @@ class Model:
         if element_scale is not None:
             if not volumetric:
                 raise ValueError(f"element_scale scales a volumetric law's tets; the {self.law} law takes edge_scale and anchor_scale")
-            element_scale = np.asarray(element_scale, dtype=np.float64).reshape(-1)
-            if len(element_scale) != self.mesh.tet_count or not np.all(np.isfinite(element_scale) & (element_scale > 0)):
-                raise ValueError(f"element_scale must be {self.mesh.tet_count} finite factors > 0 (one a tet), "
-                                 f"got {len(element_scale)} (smallest {element_scale.min(initial=np.inf):.3g})")
+            element_scale = check_factors(element_scale, self.mesh.tet_count, "element_scale", "a tet", "> 0")
         self.element_scale = element_scale
         """Each tet's modulus factor (a volumetric law's lesion), or None."""
         self.entry_offsets, self.entry_topology, self.entry_params = self.law_entry.entries(self)

@@ -33,6 +33,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from ..checks import check_fields
 from ..mesh.topology import TET_EDGES, lumped_masses, tet_signed_volumes, triangle_areas, unique_edges
 
 MATERIAL_KEYS: dict[str, tuple[str, type, float, str]] = {
@@ -87,6 +88,7 @@ class Material:
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise TypeError(f"Material.{f.name} must be a number, got {type(value).__name__} {value!r}")
+        check_fields(self, MATERIAL_KEYS)  # finite, and 0 or of the magnitude every parameter is held to
         rules = (
             ("youngs_modulus", self.youngs_modulus > 0.0, "> 0 [Pa]"),
             ("poisson_ratio", -1.0 < self.poisson_ratio < 0.5, "in (-1, 0.5)"),
