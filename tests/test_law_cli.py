@@ -120,7 +120,7 @@ def test_law_flag_with_the_implicit_step_and_the_adaptive_region(ball, extra, tm
 
 @pytest.mark.parametrize("args, message", [
     (["--law", "neo-hookean", "--tissue", "paper"], "the neo-hookean law needs a material"),  # the paper's preset, on request
-    (["--law", "corotational"], "--law: 'corotational' is not a tissue law (allowed: springs, neo-hookean)"),
+    (["--law", "hooke"], "--law: 'hooke' is not a tissue law (allowed: springs, neo-hookean, corotational)"),
 ])
 def test_palpate_refusals_are_one_line(ball, args, message, capsys):
     assert main(["palpate", str(ball), *args]) == 2
@@ -220,12 +220,12 @@ def test_a_deep_press_warns_of_inverted_tets(ball, tmp_path, capsys):
     from almsdm_warp.tissue.material import Material
 
     out = tmp_path / "deep.json"
-    args = ["--youngs-modulus-kpa", "10", "--fixed-below-mm", "-5", *PRESS]
+    args = ["--youngs-modulus-kpa", "10", "--fixed-below-mm", "-5", "--law", "springs", *PRESS]
     args[args.index("--depth-mm") + 1] = "6"
     assert main(["palpate", str(ball), *args, "--json", str(out)]) == 0
     data = json.loads(out.read_text())
     mesh = load_mesh(ball)
-    pal = Palpation(mesh, Material(youngs_modulus=10e3), rings=2, dt=1e-3, device="cpu", fixed_below=-5e-3)
+    pal = Palpation(mesh, Material(youngs_modulus=10e3), rings=2, dt=1e-3, device="cpu", fixed_below=-5e-3, law="springs")
     pal.touch(data["contact"]["vertex"])
     seen = {}
 

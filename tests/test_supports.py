@@ -92,7 +92,8 @@ def test_pressed_supported_ball_settles_at_the_linear_static_solution(ball, inte
     """A 0.1 mm press (linear range) held until the motion dies out: positions and the reaction match
     K u = 0 on the free vertices with u = 0 on the supports and u = press on the driven vertex."""
     depth, vertex = 1e-4, top(ball)
-    pal = Palpation(ball, TISSUE, rings="global", integrator=integrator, dt=1e-4, device="cpu", fixed_below=FIXED_BELOW)
+    pal = Palpation(ball, TISSUE, rings="global", integrator=integrator, dt=1e-4, device="cpu", fixed_below=FIXED_BELOW,
+                    law="springs")  # the springs law: its linear statics, K of its springs
     force, q = hold(pal, vertex, depth, 3000)
     model = pal.model
     x = ball.vertices

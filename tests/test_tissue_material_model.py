@@ -61,7 +61,7 @@ def test_lesion_multipliers_apply_on_top_of_the_material():
     lesion = Lesion(center=mesh.vertices[0], radius=0.01, stiffness_factor=4.0)
     edge_scale, anchor_scale = lesion.scales(mesh)  # no tissue given: the paper's rule
     assert edge_scale.max() == 4.0 and edge_scale.min() == 1.0
-    model = Model(mesh, LIVER, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale)
+    model = Model(mesh, LIVER, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale, law="springs")
     s = springs_for_mesh(mesh, LIVER)
     np.testing.assert_allclose(model.spring_ke.numpy(), s.edge_stiffness * edge_scale, rtol=1e-6)
     np.testing.assert_allclose(model.spring_kd.numpy(), s.edge_damping * edge_scale, rtol=1e-6)
@@ -253,9 +253,9 @@ def test_lesion_over_the_whole_body_is_a_uniformly_stiffer_material():
     for mesh, material in ((tet_ball(20.0, 8.0), LIVER), (icosphere(20.0, 2), WALL)):
         lesion = Lesion(center=(0.0, 0.0, 0.0), radius=1.0, stiffness_factor=factor)
         edge_scale, anchor_scale = lesion.scales(mesh, material)
-        with_lesion = Model(mesh, material, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale)
+        with_lesion = Model(mesh, material, "cpu", edge_scale=edge_scale, anchor_scale=anchor_scale, law="springs")
         stiffer = Model(mesh, replace(material, youngs_modulus=material.youngs_modulus * factor,
-                                      foundation=material.foundation * factor), "cpu")
+                                      foundation=material.foundation * factor), "cpu", law="springs")
         for name in ("spring_ke", "spring_kd", "anchor_ke", "anchor_kd"):
             np.testing.assert_allclose(getattr(with_lesion, name).numpy(), getattr(stiffer, name).numpy(), rtol=1e-6, err_msg=name)
     mesh = tet_ball(20.0, 8.0)
@@ -263,7 +263,7 @@ def test_lesion_over_the_whole_body_is_a_uniformly_stiffer_material():
     forces = []
     for scales in ((None, None), Lesion((0.0, 0.0, 0.0), 1.0, factor).scales(mesh, LIVER)):
         pal = Palpation(mesh, LIVER, rings="global", integrator="implicit", device="cpu", fixed_below=-0.01,
-                        edge_scale=scales[0], anchor_scale=scales[1])
+                        edge_scale=scales[0], anchor_scale=scales[1], law="springs")
         pal.touch(top)
         result = pal.press(0.5e-3, 0.1, 0.4, 0.01)
         forces.append(result.force[result.release_step - 1])  # hold end, 0.5 mm: linear
@@ -285,7 +285,7 @@ def test_deep_lesion_raises_the_force_above_it_and_not_far_away():
     force = {}
     for name, scales in (("plain", (None, None)), ("lesion", lesion.scales(mesh, LIVER))):
         pal = Palpation(mesh, LIVER, rings="global", integrator="implicit", device="cpu", fixed_below=0.001,
-                        edge_scale=scales[0], anchor_scale=scales[1])
+                        edge_scale=scales[0], anchor_scale=scales[1], law="springs")
         for v in (above, far):
             pal.touch(v)
             result = pal.press(1e-3, 0.1, 0.3, 0.01)
