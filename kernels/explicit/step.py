@@ -166,8 +166,8 @@ def integrate_explicit(model, free_vertex, counts, threads, anchor_scale, state_
     """Advance the free vertices (the first counts[0] of `free_vertex`; counts: a device int32 array,
     read when the launch runs, counts[1] the region's vertices, free and fixed ring) by one
     semi-implicit Euler step of `dt` [s], on `threads` threads (1 on the CPU; on CUDA at least the
-    region's vertex count); a volumetric law's nodal pressures first (update_pressure), a Control
-    with a sphere adds the sphere's contact (a one-thread launch after)."""
+    free count: both launches stride over their vertices); a volumetric law's nodal pressures first
+    (update_pressure), a Control with a sphere adds the sphere's contact (a one-thread launch after)."""
     update_pressure(model, free_vertex, counts, threads, state_in.particle_q)
     wp.launch(
         region_kernel(model.law),
