@@ -143,30 +143,48 @@ def _tet_material(model):
     return tets, dm, det / 6.0, (mu * scale, lam * scale)  # per tet (a lesion scales both)
 
 
+CORNER_ORDER = np.array([[1, 0, 3, 2], [0, 1, 2, 3], [0, 2, 3, 1], [0, 3, 1, 2]])
+"""A vertex at corner c of an oriented tet sees it as (i, a, j, k) = the tet's corners in row c's order:
+itself second and the same orientation (each row an even permutation), so that its entry's volume is
+(x_a - x_i) . ((x_j - x_i) x (x_k - x_i)) / 6 and that volume's gradient at x_a is the cross product."""
+
+
 def tet_entries(model):
     """A tet law's entries (kernels/laws/tets.py): each vertex's incident tets (vertex-to-tet CSR), each
-    with the tet's four vertex ids and its rest data (D_m^-1, V_0, mu_0, lambda_0, the corner)."""
+    with the tet's four vertex ids in the vertex's order (CORNER_ORDER: the vertex is corner 1) and its
+    rest data in that order (D_m^-1, V_0, mu_0, lambda_0, the shear weights, the vertex's nodal weights)."""
     import warp as wp
 
     from ..kernels.laws.tets import TetEntry
 
-    tets, dm, volume, (mu, lam0) = _tet_material(model)
+    tets, _, volume, (mu, lam0) = _tet_material(model)
     n = model.particle_count
     corner_vertex = tets.ravel()
     order = np.argsort(corner_vertex, kind="stable")  # by vertex, then tet, then corner
     tet_of, corner = order // 4, order % 4
     offsets = np.concatenate([[0], np.cumsum(np.bincount(corner_vertex, minlength=n))]).astype(np.int32)
+    topology = tets[tet_of[:, None], CORNER_ORDER[corner]]  # [entries, 4]: (i, a, j, k)
+    x = model.mesh.vertices
+    dm = np.stack([x[topology[:, c]] - x[topology[:, 0]] for c in (1, 2, 3)], axis=2)
     dm_inv = np.linalg.inv(dm)
+    grads = np.concatenate([-dm_inv.sum(axis=1, keepdims=True), dm_inv], axis=1)  # [entries, 4, 3]: b_i, b_a, b_j, b_k
+    v0, m0 = volume[tet_of], mu[tet_of]
+    shear = (m0 * v0)[:, None] * np.einsum("ecx,ex->ec", grads[:, 1:], grads[:, 1])  # mu V_0 (b_a.b_a, b_j.b_a, b_k.b_a)
+    rest = np.bincount(corner_vertex, weights=np.tile(volume[:, None], (1, 4)).ravel(), minlength=n)  # S_a = sum V_t
+    kappa = np.bincount(corner_vertex, weights=np.tile((volume * lam0)[:, None], (1, 4)).ravel(), minlength=n) / np.maximum(rest, 1e-300)
     params = np.zeros(len(order), dtype=TetEntry.numpy_dtype())
-    params["dm_inv"] = dm_inv[tet_of]
-    params["volume"] = volume[tet_of]
-    params["mu"] = mu[tet_of]
+    params["dm_inv"] = dm_inv
+    params["volume"] = v0
+    params["mu"] = m0
     params["bulk"] = lam0[tet_of]
-    params["corner"] = corner
-    grads = np.concatenate([-dm_inv.sum(axis=1, keepdims=True), dm_inv], axis=1)  # [m, 4, 3]: b_0..b_3
-    params["gradient"] = grads[tet_of, corner]
+    params["corner"] = 1
+    params["gradient"] = grads[:, 1]
+    params["shear"] = shear
+    params["mu_v6"] = m0 / (6.0 * v0)
+    owner = corner_vertex[order]
+    params["nodal"] = np.stack([1.0 / (6.0 * rest[owner]), kappa[owner]], axis=1)
     d = model.device
-    return (wp.array(offsets, dtype=wp.int32, device=d), wp.array(tets[tet_of].astype(np.int32), dtype=wp.vec4i, device=d),
+    return (wp.array(offsets, dtype=wp.int32, device=d), wp.array(topology.astype(np.int32), dtype=wp.vec4i, device=d),
             wp.array(params, dtype=TetEntry, device=d))
 
 

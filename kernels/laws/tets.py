@@ -36,6 +36,14 @@ class TetEntry:
     gradient: wp.vec3
     """b: the gradient of that corner's barycentric coordinate at rest [1/m] (a row of D_m^-1; corner 0:
     minus their sum), so that the tet's force on the corner is -V_0 P b."""
+    shear: wp.vec3
+    """mu V_0 (b_a . b_a, b_j . b_a, b_k . b_a) [N/m] (the tet as (i, a, j, k): the vertex a is corner 1),
+    so that mu V_0 F b_a = shear[0] (x_a - x_i) + shear[1] (x_j - x_i) + shear[2] (x_k - x_i)."""
+    mu_v6: float
+    """mu / (6 V_0) [Pa/m^3]: mu J = mu_v6 v6, v6 six times the deformed volume."""
+    nodal: wp.vec2
+    """The vertex's nodal weights, the same in each of its entries: (1 / (6 S_a), kappa_a), S_a = sum V_t
+    over its tets, kappa_a = sum V_t lambda_0 / S_a [Pa] (`nodal_pressure`)."""
 
 
 VOLUMETRIC = True
@@ -92,22 +100,17 @@ def corner_position(q: Any, rest: Any, c: int):
 @wp.func
 def nodal_pressure(begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, rest: Any):
     # p_a = kappa_a (J_a - 1) of a vertex from its incident tets, entries begin..end (corner positions
-    # from q, or `rest` for a negative corner: corner_position): J_a = sum v_t / sum V_t, kappa_a =
-    # sum V_t lambda_0 / sum V_t, v_t the deformed volume (the module's docstring)
-    rest_volume = float(0.0)
-    volume = float(0.0)
-    bulk = float(0.0)
+    # from q, or `rest` for a negative corner: corner_position): J_a = sum v_t / S_a, with the vertex's
+    # weights (1 / (6 S_a), kappa_a) from its first entry (TetEntry.nodal; the module's docstring)
+    if begin >= end:
+        return 0.0
+    volume6 = float(0.0)
     for k in range(begin, end):
         t = topology[k]
-        p = params[k + shift]
         x0 = corner_position(q, rest, t[0])
-        v6 = wp.dot(wp.cross(corner_position(q, rest, t[1]) - x0, corner_position(q, rest, t[2]) - x0), corner_position(q, rest, t[3]) - x0)
-        rest_volume += p.volume
-        volume += v6 * (1.0 / 6.0)
-        bulk += p.volume * p.bulk
-    if rest_volume <= 0.0:
-        return 0.0
-    return (bulk / rest_volume) * (volume / rest_volume - 1.0)
+        volume6 += wp.dot(wp.cross(corner_position(q, rest, t[2]) - x0, corner_position(q, rest, t[3]) - x0), corner_position(q, rest, t[1]) - x0)
+    nodal = params[begin + shift].nodal
+    return nodal[1] * (volume6 * nodal[0] - 1.0)
 
 
 @wp.func
