@@ -12,6 +12,8 @@ sweep is), written as its own table. The output folder holds::
     maps/<scene>.png          force maps (each scene's baseline, or every item)
     table.npz                 the dataset: one array per column and a "schema" entry (JSON)
     table.csv                 the same table as text (when the spec asks for it)
+    table.parquet             the same table as Parquet (when the spec asks for it: the parquet extra),
+                              its schema's metadata the "schema" entry and what made it (dataset_info)
 
 A rerun with the same spec skips finished items and resumes the one in progress; a rerun with
 another spec into the same folder is refused. Every file is written atomically.
@@ -71,10 +73,10 @@ DATASET_TABLE = TableLayout("dataset table", {c: SCHEMA[c][0] for c in DATASET_C
 {dtype, unit, meaning}; np.load reads it without pickle) or .csv (a header row); a table written before the
 hold_force_N column has none."""
 MAPS = ("scene", "items", "none")
-OWN = ("dataset.json", "items", "maps", "table.npz", "table.csv")
+OWN = ("dataset.json", "items", "maps", "table.npz", "table.csv", "table.parquet")
 """What a dataset folder holds (and temporary files starting with a dot): a folder with anything else is not resumed into."""
 SPEC_KEYS = {
-    "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "chunk"),
+    "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "parquet", "chunk"),
     "press": ("depth_mm", "ramp_s", "hold_s", "settle_s"),
     "lesions": ("count", "depth_mm", "centers_mm", "radii_mm", "stiffness_factors"),
 }
@@ -109,6 +111,8 @@ class DatasetSpec:
     baseline: bool = True
     maps: str = "scene"
     csv: bool = False
+    parquet: bool = False
+    """Write table.parquet too (needs pyarrow: checked when the spec is read)."""
     chunk: int | None = None
     """Points per resumable part (None: 64 on the CPU, an item's points on a GPU)."""
     source: dict = field(default_factory=dict)
@@ -138,11 +142,15 @@ def load_spec(path) -> DatasetSpec:
     spec.maps = ds.get("maps", "scene")
     if spec.maps not in MAPS:
         raise InputError(f"{where}: [dataset] maps {spec.maps!r} is not one of {', '.join(map(repr, MAPS))}")
-    for key in ("baseline", "csv"):
+    for key in ("baseline", "csv", "parquet"):
         value = ds.get(key, key == "baseline")
         if not isinstance(value, bool):
             raise InputError(f"{where}: [dataset] {key} must be true or false, got {describe(value)}")
         setattr(spec, key, value)
+    if spec.parquet:
+        from ..export.parquet import require_pyarrow
+
+        require_pyarrow(f"{where}: [dataset] parquet = true")
     spec.chunk = _int(ds, "chunk", where, "[dataset]", None, required=False)
     press = data.get("press", {})
     spec.press = {k.rsplit("_", 1)[0]: _number(press, k, where, "[press]", None, "> 0" if k == "depth_mm" else ">= 0")
@@ -504,11 +512,30 @@ def draw_maps(folder: DatasetFolder) -> list[Path]:
     return written
 
 
+def dataset_info(folder: DatasetFolder) -> dict:
+    """What made the dataset's table (a Parquet table's schema metadata): the package, each scene's mesh,
+    material, law and press (sweep_plan.table_info of its baseline), and each item's lesion."""
+    from .sweep_plan import table_info
+
+    scenes, common = {}, {}
+    for item in folder.items:
+        if item.scene not in scenes:
+            info = table_info(item.plan, item.scene_obj)
+            common = {k: info.pop(k) for k in ("package", "version")}
+            scenes[item.scene] = {k: v for k, v in info.items() if k != "lesion"}
+    lesions = [{"scene": item.scene, "lesion_id": item.lesion_id, "lesion": None if item.lesion is None else item.lesion.as_dict()}
+               for item in folder.items]
+    return {**common, "format": FORMAT, "key": folder.key, "scenes": scenes, "lesions": lesions}
+
+
 def finish_dataset(folder: DatasetFolder) -> dict:
-    """Gather the items into table.npz (and table.csv when the spec asks), draw the maps; returns the table."""
+    """Gather the items into table.npz (and table.csv, table.parquet when the spec asks), draw the maps;
+    returns the table."""
     columns = folder.gather()
     DATASET_TABLE.write(folder.dir / "table.npz", columns)
     if folder.spec.csv:
         DATASET_TABLE.write(folder.dir / "table.csv", columns)
+    if folder.spec.parquet:
+        DATASET_TABLE.write(folder.dir / "table.parquet", columns, dataset_info(folder))
     draw_maps(folder)
     return columns

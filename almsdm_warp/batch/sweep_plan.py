@@ -164,6 +164,41 @@ class SweepPlan:
         return out
 
 
+def mesh_sha256(mesh) -> str:
+    """The SHA-256 of a mesh's rest geometry and topology (vertices [m] float64, triangles, tetrahedra), in hex:
+    the same mesh read from any file or made in memory gives the same hash."""
+    h = hashlib.sha256()
+    for a in (mesh.vertices, mesh.triangles, mesh.tetrahedra):
+        h.update(str(a.shape).encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def tissue_record(tissue) -> dict:
+    """The tissue's type and parameters (SI units, as its dataclass names them), for a table's metadata."""
+    from dataclasses import asdict, is_dataclass
+
+    return {"type": type(tissue).__name__, **(asdict(tissue) if is_dataclass(tissue) else {"repr": repr(tissue)})}
+
+
+def table_info(plan: SweepPlan, scene=None) -> dict:
+    """What made a sweep's table (export/tables.py's `info`: a Parquet table's schema metadata): the package
+    and its version, the scene, the mesh (file, hash, sizes), the material, the law, the lesion, the press."""
+    from .. import __version__
+
+    mesh = plan.mesh
+    lesion = getattr(scene, "lesion", None)
+    return {
+        "package": "almsdm_warp", "version": __version__, "scene": None if scene is None else scene.name,
+        "mesh": {"path": None if mesh.path is None else str(mesh.path), "sha256": mesh_sha256(mesh), "vertices": int(mesh.vertex_count),
+                 "triangles": len(mesh.triangles), "tetrahedra": len(mesh.tetrahedra)},
+        "material": tissue_record(plan.tissue), "law": plan.law, "lesion": None if lesion is None else lesion.as_dict(),
+        "press": {"depth_mm": plan.depth * 1e3, "ramp_s": plan.ramp, "hold_s": plan.hold, "settle_s": plan.settle,
+                  "dt_ms": plan.dt * 1e3, "probe_radius_mm": plan.probe_radius * 1e3, "integrator": plan.integrator,
+                  "fixed_below_mm": None if plan.fixed_below is None else plan.fixed_below * 1e3},
+    }
+
+
 def sweep_critical_dt(plan: SweepPlan) -> float | None:
     """The whole mesh's critical step [s] (a bound of every region's, BatchPalpation.critical_dt_bound)
     for an explicit plan, computed once a sweep; None for an implicit one."""

@@ -92,10 +92,11 @@ def cmd_sweep(args) -> int:
     times, t_start = SweepTimes(), time.perf_counter()
     plan, scene, rings_text, models = _plan(args, devices, times)
     parts, todo, left = _resume(out, plan)
-    from ..batch.sweep_plan import SWEEP_TABLE
+    from ..batch.sweep_plan import SWEEP_TABLE, table_info
 
     # where the format can, the table is written as the chunks come: after the last press, only what needs the whole
-    parts.rows_file = SWEEP_TABLE.rows(out, len(plan.vertices))
+    args.table_info = table_info(plan, scene)  # what made the table: a Parquet table's metadata
+    parts.rows_file = SWEEP_TABLE.rows(out, len(plan.vertices), args.table_info)
     try:
         return _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo)
     except InputError:  # a write refused (a full disk): a parts folder this run made with nothing in it goes
@@ -136,7 +137,7 @@ def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_s
         if parts.rows_file is not None:
             parts.rows_file.finish(columns)
         else:
-            SWEEP_TABLE.write(out, columns)
+            SWEEP_TABLE.write(out, columns, args.table_info)
         parts.remove()
     _report(columns, left, steps, elapsed)
     if args.profile:
