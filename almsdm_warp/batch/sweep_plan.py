@@ -68,6 +68,14 @@ class SweepPlan:
     """The tissue law (Model's law; a law without kernels for a batch is refused before the plan)."""
     element_scale: np.ndarray | None = None
     """A volumetric law's lesion: each tet's modulus factor (Model's element_scale), or None."""
+    records: "Records | None" = None
+    """The learning records each press keeps (batch/records.py: the force curve, the patch and tactile map), or None."""
+
+    @property
+    def table(self) -> TableLayout:
+        """The layout of the sweep's table and its parts: SWEEP_TABLE, and the record columns asked for."""
+        extra = self.records.dtypes() if self.records is not None else {}
+        return with_columns(SWEEP_TABLE, extra)
 
     def wait(self, end: int | None = None) -> None:
         """Return once the points up to `end` (all: None) are there (see `sampling`)."""
@@ -112,6 +120,8 @@ class SweepPlan:
             scalars += [self.probe_radius, self.fixed_below]
         if self.law != "springs":
             scalars += [self.law]
+        if self.records is not None and self.records.on:
+            scalars += [f"records {self.records.curve_points} {self.records.tactile_size}"]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
         for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings,
                   *(() if self.element_scale is None else (self.element_scale,))):
@@ -161,7 +171,26 @@ class SweepPlan:
             out["hold_force_N"][idx] = result.hold_force
             out["stiffness_N_per_mm"][idx] = result.stiffness_N_per_mm
             out["recovery_error_mm"][idx] = result.recovery_error * 1e3
+        if self.records is not None and self.records.on:
+            from .records import record_columns
+
+            widths = self.table.widths()
+            for name in self.records.dtypes():
+                out[name] = np.empty((n, widths[name]) if "[" in self.table.dtypes[name] else n, dtype=np.float64)
+            for idx, result in results:
+                for name, values in record_columns(result.records).items():
+                    out[name][idx] = values
         return out
+
+
+def with_columns(layout: TableLayout, extra: dict, meta: dict | None = None) -> TableLayout:
+    """`layout` with the columns `extra` (name -> dtype) after its own (and `meta` for its entries): `layout`
+    itself where there are none (the default tables stay as they were)."""
+    from dataclasses import replace
+
+    if not extra and meta is None:
+        return layout
+    return replace(layout, dtypes={**layout.dtypes, **extra}, meta=layout.meta if meta is None else meta)
 
 
 def mesh_sha256(mesh) -> str:
