@@ -39,7 +39,8 @@ from ..solvers import integrators
 from ..tissue.laws import law_entry, resolve_law
 from .sampling import pressable_points, sample_points
 from .sweep import run_local
-from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, check_sphere_travel
+from .records import UNITS, Records, lesion_labels
+from .sweep_plan import COLUMNS, SweepPlan, check_sphere_travel, with_columns
 from .sweep_store import Parts, file_sha256
 
 FORMAT = "almsdm dataset 1"
@@ -67,16 +68,34 @@ SCHEMA = {
     "rings": ("int64", "", "rings of the local region"),
 }
 """Column -> (dtype, unit, meaning): written into table.npz as its "schema" entry."""
-DATASET_TABLE = TableLayout("dataset table", {c: SCHEMA[c][0] for c in DATASET_COLUMNS}, optional=("hold_force_N",), meta={"schema": json.dumps(
-    {"format": FORMAT, "columns": {c: {"dtype": d, "unit": u, "meaning": m} for c, (d, u, m) in SCHEMA.items()}})})
+
+
+def schema_entry(schema: dict) -> dict:
+    """The layout's entries beside the columns: "schema", JSON of column -> {dtype, unit, meaning}."""
+    return {"schema": json.dumps({"format": FORMAT, "columns": {c: {"dtype": d, "unit": u, "meaning": m} for c, (d, u, m) in schema.items()}})}
+
+
+DATASET_TABLE = TableLayout("dataset table", {c: SCHEMA[c][0] for c in DATASET_COLUMNS}, optional=("hold_force_N",), meta=schema_entry(SCHEMA))
 """The dataset table (export/tables.py): .npz (one array per column, plus "schema": JSON text of column ->
 {dtype, unit, meaning}; np.load reads it without pickle) or .csv (a header row); a table written before the
 hold_force_N column has none."""
+
+
+def dataset_layout(records: Records) -> TableLayout:
+    """The dataset table with the rows for learning `records` asks for (their columns after the sweep's,
+    the lesion labels last; each in the schema): DATASET_TABLE itself where none is asked for."""
+    extra = records.dtypes(lesion=True)
+    if not extra:
+        return DATASET_TABLE
+    return with_columns(DATASET_TABLE, extra, schema_entry(SCHEMA | {c: (d, *UNITS[c]) for c, d in extra.items()}))
+
+
 MAPS = ("scene", "items", "none")
 OWN = ("dataset.json", "items", "maps", "table.npz", "table.csv", "table.parquet")
 """What a dataset folder holds (and temporary files starting with a dot): a folder with anything else is not resumed into."""
 SPEC_KEYS = {
-    "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "parquet", "chunk"),
+    "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "parquet", "chunk",
+                "curve_points", "tactile_size", "lesion_labels"),
     "press": ("depth_mm", "ramp_s", "hold_s", "settle_s"),
     "lesions": ("count", "depth_mm", "centers_mm", "radii_mm", "stiffness_factors"),
 }
@@ -113,6 +132,8 @@ class DatasetSpec:
     csv: bool = False
     parquet: bool = False
     """Write table.parquet too (needs pyarrow: checked when the spec is read)."""
+    records: Records = field(default_factory=Records)
+    """The rows for learning each press keeps (batch/records.py): [dataset] curve_points, tactile_size, lesion_labels."""
     chunk: int | None = None
     """Points per resumable part (None: 64 on the CPU, an item's points on a GPU)."""
     source: dict = field(default_factory=dict)
@@ -143,10 +164,9 @@ def load_spec(path) -> DatasetSpec:
     if spec.maps not in MAPS:
         raise InputError(f"{where}: [dataset] maps {spec.maps!r} is not one of {', '.join(map(repr, MAPS))}")
     for key in ("baseline", "csv", "parquet"):
-        value = ds.get(key, key == "baseline")
-        if not isinstance(value, bool):
-            raise InputError(f"{where}: [dataset] {key} must be true or false, got {describe(value)}")
-        setattr(spec, key, value)
+        setattr(spec, key, _bool(ds, key, where, key == "baseline"))
+    counts = {k: _int(ds, k, where, "[dataset]", 0, rule=">= 0") for k in ("curve_points", "tactile_size")}
+    spec.records = Records(counts["curve_points"], counts["tactile_size"], _bool(ds, "lesion_labels", where, False))
     if spec.parquet:
         from ..export.parquet import require_pyarrow
 
@@ -220,6 +240,13 @@ def _centers(value, scenes, where: str) -> dict:
     return out
 
 
+def _bool(table, key, where, default: bool) -> bool:
+    value = table.get(key, default)
+    if not isinstance(value, bool):
+        raise InputError(f"{where}: [dataset] {key} must be true or false, got {describe(value)}")
+    return value
+
+
 def _number(table, key, where, section, default, rule):
     if key not in table:
         if default is None:
@@ -267,8 +294,25 @@ class DatasetItem:
                "lesion_radius_mm": np.full(n, 0.0 if self.lesion is None else self.lesion.radius * 1e3),
                "lesion_factor": np.full(n, 1.0 if self.lesion is None else self.lesion.stiffness_factor),
                "point": np.arange(n, dtype=np.int64)}
-        out.update({k: sweep[k] for k in COLUMNS})
+        out.update({k: sweep[k] for k in self.plan.table.dtypes})
+        records = self.plan.records
+        if records is not None and records.lesion_labels:
+            out.update(self.lesion_columns())
         return out
+
+    def lesion_columns(self) -> dict:
+        """lesion_in_footprint and lesion_distance_mm of each point (batch/records.py's lesion_labels), at its
+        contact vertex's rest position, pressed along its inward rest normal, with the scene's probe."""
+        n = len(self.plan.vertices)
+        if self.lesion is None:
+            return {"lesion_in_footprint": np.zeros(n, dtype=np.int64), "lesion_distance_mm": np.full(n, np.nan)}
+        from ..sim.model import vertex_normals
+
+        mesh = self.plan.mesh
+        inward = -vertex_normals(mesh.vertices, mesh.triangles)[self.plan.vertices]
+        inside, distance = lesion_labels(mesh.vertices[self.plan.vertices], inward, self.lesion.center, self.lesion.radius,
+                                         self.plan.probe_radius)
+        return {"lesion_in_footprint": inside, "lesion_distance_mm": millimetres(distance)}
 
 
 def lesion_centers(mesh, count: int, depth: float) -> np.ndarray:
@@ -340,7 +384,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     tol = (scene.tol or AUTO_TOL) if rings == AUTO else None
     plan = SweepPlan(mesh, scene.tissue, None, None, 1 if tol else int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
                      press["settle"], points, vertices, chunk, spec.integrator, tol, probe_radius=scene.probe_radius,
-                     fixed_below=scene.fixed_below, law=scene.law)
+                     fixed_below=scene.fixed_below, law=scene.law, records=_records(spec, scene, name, press["ramp"]))
     if tol is not None:  # rings "auto" (a mesh file's preset): each point's sized once, on the baseline, as a sweep's
         from .sweep_auto import size_regions
 
@@ -348,6 +392,25 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
                                   integrator=spec.integrator, dt=spec.dt, probe_radius=scene.probe_radius,
                                   fixed_below=scene.fixed_below, law=scene.law)
     return mesh, plan, scene
+
+
+def _records(spec: DatasetSpec, scene, name: str, ramp: float) -> Records | None:
+    """The spec's rows for learning for scene `name` (None: none asked for), or InputError: a map without a
+    sphere or on the implicit integrator, more curve samples than the ramp's frames."""
+    from ..protocol.schedule import PressSchedule
+
+    records = spec.records
+    if records == Records():
+        return None
+    try:
+        records.check(scene.probe_radius, spec.integrator, f"scene {name!r}: [dataset] ")
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    frames = PressSchedule.from_times(spec.dt, ramp, 0.0, 0.0).ramp_n
+    if records.curve_points > frames:
+        raise InputError(f"scene {name!r}: [dataset] curve_points {records.curve_points}: the ramp has only {frames} frame(s); "
+                         f"ask for at most {frames}, or a longer ramp_s")
+    return records
 
 
 def spec_cost(spec: DatasetSpec) -> tuple[int, float]:
@@ -395,6 +458,8 @@ class DatasetFolder:
         self.items = items
         self.spec = spec
         self.key = spec_key(items)
+        self.layout = dataset_layout(spec.records)
+        """The dataset table's layout: DATASET_TABLE, with the rows for learning the spec asks for."""
         self.done: dict[str, dict] = {}
         self.created = False
         """Whether open() made the folder (a run refused before its first item then leaves nothing)."""
@@ -467,7 +532,7 @@ class DatasetFolder:
         for why in ([parts.dropped] if parts.dropped else []) + ([f"({len(parts.damaged)}) did not match their checksum"] if parts.damaged else []):
             print(f"note: the chunks in {parts.dir} {why}: pressed again", file=sys.stderr)
         run_local(item.plan, parts, [i for i in range(len(item.plan.chunks)) if i not in done], devices, progress)
-        SWEEP_TABLE.write(path, parts.gather())
+        item.plan.table.write(path, parts.gather())
         parts.remove()
         self.done[item.name] = {"key": item.key(), "sha256": file_sha256(path), "scene": item.scene,
                                 "lesion": None if item.lesion is None else item.lesion.as_dict()}
@@ -480,8 +545,8 @@ class DatasetFolder:
             path = self.item_path(item)
             if not self._finished(item):
                 raise InputError(f"{path}: missing or damaged; run the same command again to press it again")
-            parts.append(item.columns(SWEEP_TABLE.read(path)))
-        return {c: np.concatenate([p[c] for p in parts]) for c in DATASET_COLUMNS}
+            parts.append(item.columns(item.plan.table.read(path)))
+        return {c: np.concatenate([p[c] for p in parts]) for c in self.layout.dtypes}
 
 
 def press_dataset(folder: DatasetFolder, todo: list[DatasetItem], devices: list[str], progress=None, on_item=None) -> None:
@@ -507,7 +572,7 @@ def draw_maps(folder: DatasetFolder) -> list[Path]:
         name = item.scene if folder.spec.maps == "scene" else item.name
         what = "no lesion" if item.lesion is None else f"lesion {item.lesion_id} ({item.lesion.radius * 1e3:g} mm, x{item.lesion.stiffness_factor:g})"
         title = f"{item.scene}, {what}: stiffness under a {item.plan.depth * 1e3:g} mm press"
-        table = SWEEP_TABLE.read(folder.item_path(item))
+        table = item.plan.table.read(folder.item_path(item))
         written.append(plot_sweep(item.plan.mesh, table, folder.dir / "maps" / f"{name}.png", title=title, lesion=item.lesion))
     return written
 
@@ -532,10 +597,10 @@ def finish_dataset(folder: DatasetFolder) -> dict:
     """Gather the items into table.npz (and table.csv, table.parquet when the spec asks), draw the maps;
     returns the table."""
     columns = folder.gather()
-    DATASET_TABLE.write(folder.dir / "table.npz", columns)
+    folder.layout.write(folder.dir / "table.npz", columns)
     if folder.spec.csv:
-        DATASET_TABLE.write(folder.dir / "table.csv", columns)
+        folder.layout.write(folder.dir / "table.csv", columns)
     if folder.spec.parquet:
-        DATASET_TABLE.write(folder.dir / "table.parquet", columns, dataset_info(folder))
+        folder.layout.write(folder.dir / "table.parquet", columns, dataset_info(folder))
     draw_maps(folder)
     return columns

@@ -31,8 +31,8 @@ UNITS = {
     "patch_area_mm2": ("mm^2", "surface area of the vertices the sphere touches at the end of the hold"),
     "tactile_map_kPa": ("kPa", "contact pressure at the end of the hold on an n x n grid over the sphere's footprint "
                                "(side 2 x radius, row-major, rows along e2: docs/datasets.md)"),
-    "lesion_in_footprint": ("", "1 where the lesion reaches into the cylinder of the probe's radius along the press axis "
-                                "(below the surface), else 0 (0 for the baseline)"),
+    "lesion_in_footprint": ("", "1 where the lesion reaches into the cylinder of the probe's radius around the press axis, "
+                                "from the contact point inward, else 0 (0 for the baseline)"),
     "lesion_distance_mm": ("mm", "distance from the contact point to the lesion's surface (negative inside; NaN for the baseline)"),
 }
 """Each record column's unit and meaning (a dataset's schema)."""
@@ -100,18 +100,19 @@ def footprint_frame(direction) -> tuple[np.ndarray, np.ndarray]:
 
 
 def lesion_labels(points, directions, center, radius: float, probe_radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """(in footprint: int64 0/1, distance to the lesion's surface [m]) of presses at `points` [m] along the
-    unit `directions` (inward), for a spherical lesion (`center` [m], `radius` [m]) and a probe of
-    `probe_radius` [m]. In the footprint: the lesion meets the half-cylinder of the probe's radius around
-    the press axis, below the contact point (the ball reaches within probe_radius of the axis' inward half)."""
+    """(in footprint: int64 0/1, distance to the lesion's surface [m], negative inside) of presses at
+    `points` [m] along the unit `directions` (inward), for a spherical lesion (`center` [m], `radius` [m])
+    and a probe of `probe_radius` [m]. In the footprint: the lesion's ball meets the solid half-cylinder
+    of the probe's radius around the press axis, from the contact point inward (for the paper's point
+    probe, radius 0: the half-axis itself)."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     r = np.asarray(center, dtype=np.float64) - p
     along = np.einsum("ij,ij->i", r, d)
-    # distance from the centre to the inward half-axis {p + t d, t >= 0}
-    to_axis = np.linalg.norm(r - np.maximum(along, 0.0)[:, None] * d, axis=1)
-    inside = to_axis < probe_radius + radius
-    return inside.astype(np.int64), np.linalg.norm(r, axis=1) - radius
+    off_axis = np.maximum(np.linalg.norm(r - along[:, None] * d, axis=1) - probe_radius, 0.0)
+    # the centre's distance to the half-cylinder: beside it where along >= 0, else to its end disc
+    gap = np.where(along >= 0.0, off_axis, np.hypot(along, off_axis))
+    return (gap < radius).astype(np.int64), np.linalg.norm(r, axis=1) - radius
 
 
 class BatchRecordArrays:

@@ -113,7 +113,7 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
                     qd_out[i] = u1
                     total += c
                     if wp.static(PATCH):
-                        if hold != 0:
+                        if hold != 0 and records.map_size > 0:
                             record_contact(records, b, region_vertex[b, i], x1, c, centre, direction, radius)
         return total
 
