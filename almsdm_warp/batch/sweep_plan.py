@@ -19,7 +19,7 @@ COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "hold_force_N", "st
 ring count of each point's region (the same for all but at --rings auto)."""
 SWEEP_TABLE = TableLayout("sweep table", {c: "int64" if c in ("vertex", "rings") else "float64" for c in COLUMNS},
                           optional=("hold_force_N", "rings"))
-"""The sweep's table and its parts' (export/tables.py: .csv or .npz); a table written before the rings or the
+"""The sweep's table and its parts' (export/tables.py: .csv, .npz or .parquet); a table written before the rings or the
 hold_force_N column has none."""
 
 

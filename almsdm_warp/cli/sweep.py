@@ -20,7 +20,7 @@ from .args import (auto_tol, add_integrator_arg, add_law_arg, add_tissue_args, c
 def add_parser(sub) -> None:
     p = sub.add_parser(
         "sweep",
-        help="press N points spread over a scene or mesh at once (batched); write a force map (.csv/.npz)",
+        help="press N points spread over a scene or mesh at once (batched); write a force map (.csv/.npz/.parquet)",
         description="Press N points spread evenly over the surface, all at once on the device (the local ALMSDM "
         "region of each; explicit or implicit integrator), and write per point: x_mm, y_mm, z_mm, vertex, peak_force_N, "
         "hold_force_N (force at the end of the hold), stiffness_N_per_mm (hold_force_N / depth), recovery_error_mm, rings. An interrupted sweep resumes "
