@@ -626,7 +626,7 @@ class BatchPalpation:
             recovery_error=recovery,
             region_vertices=self.region_vertex_counts.copy(),
             free_vertices=self.free_vertex_counts.copy(),
-            records=self.records.read(self.depth, self.ramp_steps) if self.records.on else {},
+            records=self.records.read(self.depth, self.ramp_steps, host_copy) if self.records.on else {},
         )
 
     def _check_results(self, peak, hold, recovery) -> None:

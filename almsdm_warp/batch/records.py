@@ -155,10 +155,9 @@ class BatchRecordArrays:
             raise ValueError(f"curve_points {self.spec.curve_points}: the ramp has only {ramp_steps} step(s); "
                              f"ask for at most {ramp_steps} samples, or a longer ramp")
 
-    def read(self, depth: float, ramp_steps: int) -> dict:
-        """The records of the press just done, host arrays a row a press (SI: N, m, m^2, Pa)."""
-        from .batch_palpation import host_copy
-
+    def read(self, depth: float, ramp_steps: int, host_copy) -> dict:
+        """The records of the press just done, host arrays a row a press (SI: N, m, m^2, Pa); host_copy(array):
+        a device array's host copy (batch_palpation.host_copy: on the current stream, not the null stream)."""
         out = {}
         if self.spec.curve_points:
             f = host_copy(self.arrays.force_curve).astype(np.float64)
