@@ -31,18 +31,19 @@ def plate(size_mm=30.0, n=31):
     return TissueMesh.from_arrays(vertices, triangles)
 
 
+@pytest.mark.parametrize("kernel", ["exact", "fast"])
 @pytest.mark.parametrize("radius", [0.0, 5e-3])
-def test_the_curve_ends_at_the_peak_of_a_monotone_ramp_and_changes_no_bit(stomach, device, radius):
+def test_the_curve_ends_at_the_peak_of_a_monotone_ramp_and_changes_no_bit(stomach, device, radius, kernel):
     # with no hold the peak is the ramp's largest force: on a ramp whose force only grows, its last sample;
     # the samples are those of the every-step curve at curve_steps; peak and hold as without records
     vertices = np.arange(3, 1000, 111)
 
     def press(records):
-        b = BatchPalpation(stomach, TissueParams(), rings=2, device=device, probe_radius=radius, records=records)
+        b = BatchPalpation(stomach, TissueParams(), rings=2, device=device, probe_radius=radius, records=records, kernel=kernel)
         return b, b.touch(vertices, PRESS["depth"]).press(**PRESS)
 
     batch, every = press(Records(curve_points=40))
-    assert batch.ramp_steps == 40 and batch.kernel == "exact"
+    assert batch.ramp_steps == 40 and batch.kernel == kernel
     curve = every.records["force_curve"]
     assert (np.diff(curve, axis=1) >= 0).all()  # monotone here: the claim's premise
     np.testing.assert_array_equal(curve[:, -1], every.peak_force)
@@ -144,10 +145,21 @@ def test_a_sweep_and_a_dataset_write_the_rows(tmp_path, capsys):
     from almsdm_warp.batch.sweep_plan import SWEEP_TABLE
 
     fast = ["--ramp-s", "0.02", "--hold-s", "0.01", "--settle-s", "0.01", "--dt-ms", "0.5"]
-    assert main(["sweep", "stomach", "--points", "8", *fast, "--curve-points", "4", "--tactile-size", "3", "--out", str(tmp_path / "s.csv")]) == 0
+    rows = ["sweep", "stomach", "--points", "8", "--chunk", "3", *fast, "--curve-points", "4", "--tactile-size", "3"]
+    assert main([*rows, "--out", str(tmp_path / "s.csv")]) == 0
     text = (tmp_path / "s.csv").read_text().splitlines()[0].split(",")
     assert text[-18:] == [*(f"force_curve_N[{k}]" for k in range(4)), *(f"force_curve_depth_mm[{k}]" for k in range(4)), "patch_area_mm2",
                           *(f"tactile_map_kPa[{k}]" for k in range(9))]
+    for suffix in (".npz", ".parquet"):  # each written as its chunks come (NpzRows, ParquetRows): the CSV's numbers
+        assert main([*rows, "--out", str(tmp_path / f"s{suffix}")]) == 0
+    layout = SWEEP_TABLE.__class__(SWEEP_TABLE.name, {**SWEEP_TABLE.dtypes, **Records(4, 3).dtypes()})
+    tables = [layout.read(tmp_path / f"s{suffix}") for suffix in (".csv", ".npz", ".parquet")]
+    assert tables[0]["force_curve_N"].shape == (8, 4) and tables[0]["tactile_map_kPa"].shape == (8, 9)
+    for c in layout.dtypes:
+        np.testing.assert_array_equal(tables[1][c], tables[0][c])
+        np.testing.assert_array_equal(tables[2][c], tables[0][c])
+    for suffix in (".npz", ".parquet"):
+        (tmp_path / f"s{suffix}").unlink()
     assert main(["sweep", "paper_stomach", "--points", "8", *fast, "--tactile-size", "3", "--out", str(tmp_path / "p.csv")]) == 2
     assert "--tactile-size 3: the patch and tactile map need a spherical probe" in capsys.readouterr().err
     assert main(["sweep", "stomach", "--points", "8", *fast, "--curve-points", "50", "--out", str(tmp_path / "p.csv")]) == 2

@@ -247,7 +247,7 @@ class BatchPalpation:
     Model keywords (edge_scale, anchor_scale: a lesion; fixed_below [m]: vertices with z below it are
     supported, left out of every free set, as Palpation does); or pass a ready `model`.
     records: the learning records (batch/records.py's Records: a force curve along the ramp, the contact
-    patch and tactile map at the end of the hold), in BatchResult.records; made by the exact kernel.
+    patch and tactile map at the end of the hold), in BatchResult.records; the patch and map by the exact kernel.
     """
 
     def __init__(
@@ -467,7 +467,7 @@ class BatchPalpation:
         cuda = self.device.is_cuda
         if self.model.law_entry.volumetric:  # the fast kernel is a layout of the springs law
             self.fast_plan = None
-        if self.records.on:  # the records are the exact kernel's
+        if self.records.spec.tactile_size:  # the patch and tactile map are the exact kernel's (the fast one: the force curve)
             self.fast_plan = None
         kernel = self._kernel or ("fast" if cuda and self.fast_plan is not None else "exact")
         if kernel == "fast" and self.fast_plan is None:

@@ -12,7 +12,8 @@
   the contact point's distance to the lesion's surface.
 
 The records are made by the batch kernels only when asked for (a kernel variant of their own): a
-press without them runs the same code as before, at the same speed, to the same bits.
+press without them runs the same code as before, at the same speed, to the same bits. The force curve:
+every batch kernel (exact and fast explicit, implicit); the patch and map: the exact explicit kernel.
 """
 
 from __future__ import annotations
