@@ -212,7 +212,8 @@ def tissue_record(tissue) -> dict:
 
 def table_info(plan: SweepPlan, scene=None) -> dict:
     """What made a sweep's table (export/tables.py's `info`: a Parquet table's schema metadata): the package
-    and its version, the scene, the mesh (file, hash, sizes), the material, the law, the lesion, the press."""
+    and its version, the scene, the mesh (file, hash, sizes), the material, the law, the lesion, the press, the
+    rows for learning asked for (batch/records.py)."""
     from .. import __version__
 
     mesh = plan.mesh
@@ -225,6 +226,8 @@ def table_info(plan: SweepPlan, scene=None) -> dict:
         "press": {"depth_mm": plan.depth * 1e3, "ramp_s": plan.ramp, "hold_s": plan.hold, "settle_s": plan.settle,
                   "dt_ms": plan.dt * 1e3, "probe_radius_mm": plan.probe_radius * 1e3, "integrator": plan.integrator,
                   "fixed_below_mm": None if plan.fixed_below is None else plan.fixed_below * 1e3},
+        "records": None if plan.records is None else {"curve_points": plan.records.curve_points, "tactile_size": plan.records.tactile_size,
+                                                      "lesion_labels": plan.records.lesion_labels},
     }
 
 
