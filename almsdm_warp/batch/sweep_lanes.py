@@ -200,7 +200,13 @@ class Lane:
         results = []
         with self.times.phase("read-back"):
             for idx, batch, pinned, _ in self.started:
-                result = batch.finish_press() if pinned is None else batch.result_from(*(b.numpy() for b in pinned))
+                if pinned is None:
+                    result = batch.finish_press()
+                elif batch.records.on:  # the records read on this lane's stream (done), not waiting for the other lane
+                    with self.scope():
+                        result = batch.result_from(*(b.numpy() for b in pinned))
+                else:
+                    result = batch.result_from(*(b.numpy() for b in pinned))
                 results.append((idx, result))
             columns = plan.columns(*self.chunk, results)
         with self.times.phase("checks"):
