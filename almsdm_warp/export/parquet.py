@@ -5,7 +5,7 @@ Each column's Arrow type follows its layout's dtype (int64, float64, string; a f
 (a dataset's "schema": each column's unit and meaning) and, under ``almsdm``, what made the table
 (the package and its version, the scene, the mesh's hash, the material, the law, the lesion: the
 `info` a writer is given), so that a file read on its own says where its numbers come from
-(:func:`read_info`). pandas, polars and Hugging Face ``datasets`` read it as it is.
+(:func:`read_info`). pandas and polars read it as it is (tests/test_parquet.py).
 
 :class:`ParquetRows` takes a sweep's rows as its chunks come, through Arrow's ParquetWriter (row
 groups written in order, the file's footer at the end): rows that come ahead of a gap wait for it.
