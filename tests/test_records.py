@@ -165,7 +165,19 @@ def test_a_sweep_and_a_dataset_write_the_rows(tmp_path, capsys):
     assert "--tactile-size 3: the patch and tactile map need a spherical probe" in capsys.readouterr().err
     assert main(["sweep", "stomach", "--points", "8", *fast, "--curve-points", "50", "--out", str(tmp_path / "p.csv")]) == 2
     assert "--curve-points 50: the ramp has only 40 frame(s)" in capsys.readouterr().err
+    assert main(["sweep", "stomach", "--points", "8", *fast, "--lesion-labels", "--out", str(tmp_path / "p.csv")]) == 2
+    assert "--lesion-labels: scene stomach has no [lesion]" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv"]
+    # a scene's lesion labels its sweep's presses: the distance's sign says which contact vertices lie inside it
+    from almsdm_warp.scene.loader import resolve_scene_or_mesh
+
+    assert main(["sweep", "stomach_lesion", "--points", "30", *fast, "--lesion-labels", "--out", str(tmp_path / "l.npz")]) == 0
+    lesion = resolve_scene_or_mesh("stomach_lesion").lesion
+    labelled = SWEEP_TABLE.__class__(SWEEP_TABLE.name, {**SWEEP_TABLE.dtypes, **Records(lesion_labels=True).dtypes(lesion=True)}).read(tmp_path / "l.npz")
+    mesh = load_cached(SCENES / "stomach.obj")
+    np.testing.assert_array_equal(labelled["lesion_distance_mm"] < 0, lesion.vertex_inside(mesh.vertices[labelled["vertex"]]))
+    assert 0 < labelled["lesion_in_footprint"].sum() < 30 and (labelled["lesion_in_footprint"][labelled["lesion_distance_mm"] < 0] == 1).all()
+    (tmp_path / "l.npz").unlink()
     spec = tmp_path / "spec.toml"
     spec.write_text('[dataset]\nscenes = ["stomach"]\npoints = 5\nmaps = "none"\ncsv = true\ncurve_points = 3\ntactile_size = 2\n'
                     'lesion_labels = true\n[press]\nramp_s = 0.03\nhold_s = 0.01\nsettle_s = 0.01\n'

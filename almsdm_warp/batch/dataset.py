@@ -39,7 +39,7 @@ from ..solvers import integrators
 from ..tissue.laws import law_entry, resolve_law
 from .sampling import pressable_points, sample_points
 from .sweep import run_local
-from .records import UNITS, Records, lesion_labels
+from .records import UNITS, Records, lesion_columns
 from .sweep_plan import COLUMNS, SweepPlan, check_sphere_travel, with_columns
 from .sweep_store import Parts, file_sha256
 
@@ -301,18 +301,8 @@ class DatasetItem:
         return out
 
     def lesion_columns(self) -> dict:
-        """lesion_in_footprint and lesion_distance_mm of each point (batch/records.py's lesion_labels), at its
-        contact vertex's rest position, pressed along its inward rest normal, with the scene's probe."""
-        n = len(self.plan.vertices)
-        if self.lesion is None:
-            return {"lesion_in_footprint": np.zeros(n, dtype=np.int64), "lesion_distance_mm": np.full(n, np.nan)}
-        from ..sim.model import vertex_normals
-
-        mesh = self.plan.mesh
-        inward = -vertex_normals(mesh.vertices, mesh.triangles)[self.plan.vertices]
-        inside, distance = lesion_labels(mesh.vertices[self.plan.vertices], inward, self.lesion.center, self.lesion.radius,
-                                         self.plan.probe_radius)
-        return {"lesion_in_footprint": inside, "lesion_distance_mm": millimetres(distance)}
+        """lesion_in_footprint and lesion_distance_mm of each point (batch/records.py's lesion_columns)."""
+        return lesion_columns(self.plan.mesh, self.plan.vertices, self.lesion, self.plan.probe_radius)
 
 
 def lesion_centers(mesh, count: int, depth: float) -> np.ndarray:

@@ -116,6 +116,20 @@ def lesion_labels(points, directions, center, radius: float, probe_radius: float
     return (gap < radius).astype(np.int64), np.linalg.norm(r, axis=1) - radius
 
 
+def lesion_columns(mesh, vertices, lesion, probe_radius: float) -> dict:
+    """lesion_in_footprint and lesion_distance_mm (people's units) of presses at `vertices` of `mesh` (each at its
+    rest position, along its inward rest normal) for `lesion` (tissue.lesion.Lesion; None: the baseline's 0 and NaN)."""
+    from ..export.tables import millimetres
+    from ..sim.model import vertex_normals
+
+    n = len(vertices)
+    if lesion is None:
+        return {"lesion_in_footprint": np.zeros(n, dtype=np.int64), "lesion_distance_mm": np.full(n, np.nan)}
+    inward = -vertex_normals(mesh.vertices, mesh.triangles)[vertices]
+    inside, distance = lesion_labels(mesh.vertices[vertices], inward, lesion.center, lesion.radius, probe_radius)
+    return {"lesion_in_footprint": inside, "lesion_distance_mm": millimetres(distance)}
+
+
 class BatchRecordArrays:
     """A BatchPalpation's learning records on its device (kernels/arrays.py's BatchRecords) and their read-back."""
 

@@ -70,11 +70,14 @@ class SweepPlan:
     """A volumetric law's lesion: each tet's modulus factor (Model's element_scale), or None."""
     records: "Records | None" = None
     """The learning records each press keeps (batch/records.py: the force curve, the patch and tactile map), or None."""
+    lesion: object = None
+    """The scene's lesion (tissue.lesion.Lesion) where the table labels each press with it (records.lesion_labels),
+    else None; its effect on the numbers is in the scales above."""
 
     @property
     def table(self) -> TableLayout:
         """The layout of the sweep's table and its parts: SWEEP_TABLE, and the record columns asked for."""
-        extra = self.records.dtypes() if self.records is not None else {}
+        extra = self.records.dtypes(lesion=self.lesion is not None) if self.records is not None else {}
         return with_columns(SWEEP_TABLE, extra)
 
     def wait(self, end: int | None = None) -> None:
@@ -120,8 +123,8 @@ class SweepPlan:
             scalars += [self.probe_radius, self.fixed_below]
         if self.law != "springs":
             scalars += [self.law]
-        if self.records is not None and self.records.on:
-            scalars += [f"records {self.records.curve_points} {self.records.tactile_size}"]
+        if self.records is not None and (self.records.on or self.records.lesion_labels):  # other columns: other parts
+            scalars += [f"records {self.records.curve_points} {self.records.tactile_size} {self.records.lesion_labels}"]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
         for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings,
                   *(() if self.element_scale is None else (self.element_scale,))):
@@ -180,6 +183,10 @@ class SweepPlan:
             for idx, result in results:
                 for name, values in record_columns(result.records).items():
                     out[name][idx] = values
+        if self.records is not None and self.records.lesion_labels and self.lesion is not None:
+            from .records import lesion_columns
+
+            out.update(lesion_columns(self.mesh, self.vertices[begin:end], self.lesion, self.probe_radius))
         return out
 
 

@@ -49,6 +49,7 @@ def add_parser(sub) -> None:
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
     p.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
     p.add_argument("--curve-points", type=count_arg, default=None, metavar="N", help="rows for learning: the force curve, N samples along the ramp (columns force_curve_N and force_curve_depth_mm, N values a row)")
+    p.add_argument("--lesion-labels", action="store_true", default=None, help="rows for learning, for a scene with a [lesion]: whether the lesion lies in the probe's footprint (lesion_in_footprint) and the contact vertex's distance to its surface (lesion_distance_mm)")
     p.add_argument("--tactile-size", type=count_arg, default=None, metavar="N", help="rows for learning, with a sphere: the contact patch's area (patch_area_mm2) and the contact pressure on an N x N grid over the sphere's footprint at the end of the hold (tactile_map_kPa, N*N values a row)")
     add_tissue_args(p)
     add_dataset_arg(p)
@@ -194,7 +195,8 @@ def _plan(args, devices, times):
     chunk = args.chunk or default_chunk(len(vertices), devices)
     plan = SweepPlan(mesh, scene.tissue, scales.get("edge_scale"), scales.get("anchor_scale"), 1 if tol else rings, dt, depth,
                      ramp, hold, settle, points, vertices, chunk, args.integrator, tol, radius, scene.fixed_below,
-                     sampling=sampling, law=scene.law, element_scale=scales.get("element_scale"), records=_records(args, radius, ramp, dt))
+                     sampling=sampling, law=scene.law, element_scale=scales.get("element_scale"), records=_records(args, radius, ramp, dt, scene),
+                     lesion=scene.lesion if args.lesion_labels else None)
     times.mark("plan")
     models = None if args.ray or not args.pipeline else models_behind(plan, devices)
     print(mesh.summary())
@@ -219,14 +221,16 @@ def _plan(args, devices, times):
     return plan, scene, rings_text, models
 
 
-def _records(args, radius: float, ramp: float, dt: float):
-    """The learning records asked for (--curve-points, --tactile-size), checked before any work, or None."""
+def _records(args, radius: float, ramp: float, dt: float, scene):
+    """The learning records asked for (--curve-points, --tactile-size, --lesion-labels), checked before any work, or None."""
     from ..batch.records import Records
     from ..protocol.schedule import PressSchedule
 
-    if args.curve_points is None and args.tactile_size is None:
+    if args.curve_points is None and args.tactile_size is None and not args.lesion_labels:
         return None
-    records = Records(args.curve_points or 0, args.tactile_size or 0)
+    if args.lesion_labels and scene.lesion is None:
+        raise InputError(f"--lesion-labels: scene {scene.name} has no [lesion] to label the presses with")
+    records = Records(args.curve_points or 0, args.tactile_size or 0, bool(args.lesion_labels))
     check_records(records, radius, args.integrator)
     ramp_n = PressSchedule.from_times(dt, ramp, 0.0, 0.0).ramp_n  # frames: the substeps only add steps
     if records.curve_points > ramp_n:
