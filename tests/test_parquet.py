@@ -131,3 +131,30 @@ def test_the_package_imports_without_pyarrow():
             "import almsdm_warp.export.writers, almsdm_warp.cli.main, almsdm_warp.batch.dataset; print('ok')")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
+
+
+def test_an_interrupted_sweep_resumes_to_the_same_parquet(tmp_path, monkeypatch):
+    # the resumed run streams only the chunks it presses (after a gap: they wait), finish() adds the ones
+    # read back from the parts: the same table as one run's
+    from almsdm_warp.batch.sweep_store import Parts
+
+    args = ["sweep", "--points", "20", "--chunk", "6", *FAST]
+    assert run_main([*args, "--out", tmp_path / "whole.parquet"])[0] == 0
+    real, calls = Parts.write, []
+
+    def write_then_stop(self, i, columns):
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        calls.append(i)
+        real(self, i, columns)
+
+    monkeypatch.setattr(Parts, "write", write_then_stop)
+    out = tmp_path / "resumed.parquet"
+    assert run_main([*args, "--out", out])[0] == 130 and not out.exists()
+    monkeypatch.setattr(Parts, "write", real)
+    code, stdout, _ = run_main([*args, "--out", out])
+    assert code == 0 and "resuming: 2 of 4 chunks" in stdout
+    a, b = SWEEP_TABLE.read(tmp_path / "whole.parquet"), SWEEP_TABLE.read(out)
+    for c in a:
+        np.testing.assert_array_equal(a[c], b[c])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["resumed.parquet", "whole.parquet"]
