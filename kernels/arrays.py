@@ -176,6 +176,26 @@ class BatchPress:
     hold_reaction: wp.array(dtype=wp.vec3)
 
 
+@wp.struct
+class BatchRecords:
+    """A batch's opt-in records for learning (almsdm_warp/batch/records.py; kernels/probes/press.py): the
+    feedback force sampled along the ramp, and at the end of the hold the contact patch's area and the
+    contact forces on an n x n grid over the sphere's footprint. Kernels made without records never read it."""
+
+    curve_points: int
+    """Samples of the force curve a press (0: none); sample k at the first step whose depth reaches (k + 1) / curve_points."""
+    force_curve: wp.array2d(dtype=wp.vec3)
+    """Feedback force [N] at each sample, [B, curve_points]."""
+    map_size: int
+    """n of the n x n tactile grid (0: no patch, no map)."""
+    tactile: wp.array2d(dtype=wp.float64)
+    """Normal contact force [N] in each grid cell at the end of the hold, [B, n * n], row-major (rows along e2)."""
+    patch_area: wp.array(dtype=wp.float64)
+    """Surface area [m^2] of the vertices in contact at the end of the hold, [B]."""
+    vertex_area: wp.array(dtype=wp.float32)
+    """Each mesh vertex's share of the surface [m^2] (a third of each triangle at it), [particle_count]."""
+
+
 def struct_from(struct, source, **values):
     """An instance of `struct` with each member taken from `values`, else from `source`'s attribute of that name."""
     out = struct()

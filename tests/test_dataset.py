@@ -22,6 +22,7 @@ dt_ms = 0.25  # one explicit step a frame even in the 6x lesion (see the palpati
 chunk = 3
 maps = "none"
 csv = true
+parquet = true
 [press]
 ramp_s = 0.05
 hold_s = 0.05
@@ -67,14 +68,31 @@ def test_one_table_of_every_item_and_point(whole):
         xyz = np.column_stack([table[c][table["scene"] == scene] for c in ("x_mm", "y_mm", "z_mm")]).reshape(3, POINTS, 3)
         np.testing.assert_array_equal(xyz[0], xyz[1])
         np.testing.assert_array_equal(xyz[0], xyz[2])
-    text = ds.DATASET_TABLE.read(out / "table.csv")
+    text, arrow = ds.DATASET_TABLE.read(out / "table.csv"), ds.DATASET_TABLE.read(out / "table.parquet")
     for c in ds.DATASET_COLUMNS:
         np.testing.assert_array_equal(text[c], table[c])
+        np.testing.assert_array_equal(arrow[c], table[c])
     with np.load(out / "table.npz", allow_pickle=False) as z:  # numpy alone reads it, schema included
         schema = json.loads(z["schema"].item())["columns"]
     assert list(schema) == list(ds.DATASET_COLUMNS) and schema["peak_force_N"]["unit"] == "N"
     assert table["scene"].dtype.kind == "U" and table["vertex"].dtype == np.int64
-    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "items", "table.csv", "table.npz"]
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "items", "table.csv", "table.npz", "table.parquet"]
+
+
+def test_the_parquet_table_says_what_made_it(whole):
+    # each scene's mesh hash, material and law, each item's lesion, the package's version, the units
+    from almsdm_warp import __version__
+    from almsdm_warp.batch.sweep_plan import mesh_sha256
+    from almsdm_warp.export.parquet import read_info
+
+    pytest.importorskip("pyarrow")
+    info = read_info(whole[0] / "table.parquet")
+    assert info["version"] == __version__ and info["format"] == ds.FORMAT and list(info["scenes"]) == ["stomach", "paper_liver"]
+    for name, scene in info["scenes"].items():
+        mesh = resolve_scene_or_mesh(name if name == "stomach" else str(SCENES / "paper_liver.toml")).load_mesh()
+        assert scene["mesh"]["sha256"] == mesh_sha256(mesh) and scene["law"] and scene["material"]["type"]
+    assert [(x["scene"], x["lesion_id"]) for x in info["lesions"]] == [(s, k) for s in info["scenes"] for k in range(3)]
+    assert info["lesions"][1]["lesion"]["radius_mm"] == 15.0 and info["lesions"][0]["lesion"] is None
 
 
 def test_lesion_stiffens_the_points_over_it_as_one_palpation_finds(whole):

@@ -353,7 +353,7 @@ def test_sweep_png(tmp_path):
 @pytest.mark.parametrize(
     "args,message",
     [
-        (["--out", "x.txt"], "--out x.txt: unknown table suffix '.txt' (allowed: .csv, .npz)"),
+        (["--out", "x.txt"], "--out x.txt: unknown table suffix '.txt' (allowed: .csv, .npz, .parquet)"),
         (["--out", "/nonexistent/x.csv"], "does not exist"),
         (["--out", "x.csv", "--device", "tpu"], "unknown device"),
         (["--out", "x.csv", "--points", "0"], "must be >= 1"),

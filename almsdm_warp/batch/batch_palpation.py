@@ -114,6 +114,9 @@ class BatchResult:
     """Distance of the contact vertex from rest at the end of the settle window [m], [B]."""
     region_vertices: np.ndarray = field(repr=False)
     free_vertices: np.ndarray = field(repr=False)
+    records: dict = field(default_factory=dict, repr=False)
+    """The learning records asked for (batch/records.py's BatchRecordArrays.read: force_curve [N] and
+    curve_depth [m], [B, points]; patch_area [m^2], [B]; tactile [Pa], [B, n * n]), else empty."""
 
     # the names of PressResult, each with its unit (the fields above are SI, named without one)
     @property
@@ -243,12 +246,14 @@ class BatchPalpation:
     force is the sum of the contact reactions.
     Model keywords (edge_scale, anchor_scale: a lesion; fixed_below [m]: vertices with z below it are
     supported, left out of every free set, as Palpation does); or pass a ready `model`.
+    records: the learning records (batch/records.py's Records: a force curve along the ramp, the contact
+    patch and tactile map at the end of the hold), in BatchResult.records; the patch and map by the exact kernel.
     """
 
     def __init__(
         self, mesh=None, tissue=None, *, rings=4, dt=1e-3, device=None, model=None, integrator="explicit",
         kernel=None, threads=None, capacity=None,
-        cg_max_iterations=200, cg_tolerance=1e-6, substeps="auto", probe_radius=0.0, **model_kw,
+        cg_max_iterations=200, cg_tolerance=1e-6, substeps="auto", probe_radius=0.0, records=None, **model_kw,
     ):
         check_probe_radius(probe_radius)  # its type and magnitude before the model is made
         self.model = model if model is not None else Model(mesh, tissue, device, **model_kw)
@@ -300,6 +305,12 @@ class BatchPalpation:
         self.buffers = DeviceBuffers(self.device)
         """The per-build device arrays and uploads, reused from one build to the next (DeviceBuffers)."""
         self.vertices = np.zeros(0, dtype=np.int64)
+        from .records import BatchRecordArrays
+
+        if records is not None:
+            records.check(self.probe_radius, integrator)
+        self.records = BatchRecordArrays(records, self)
+        """The learning records' device arrays (batch/records.py), placeholders where none is asked for."""
         offsets = self.mesh.adjacency[0]
         self._max_degree = int(np.diff(offsets).max(initial=1))
 
@@ -456,6 +467,8 @@ class BatchPalpation:
         cuda = self.device.is_cuda
         if self.model.law_entry.volumetric:  # the fast kernel is a layout of the springs law
             self.fast_plan = None
+        if self.records.spec.tactile_size:  # the patch and tactile map are the exact kernel's (the fast one: the force curve)
+            self.fast_plan = None
         kernel = self._kernel or ("fast" if cuda and self.fast_plan is not None else "exact")
         if kernel == "fast" and self.fast_plan is None:
             raise ValueError(
@@ -572,9 +585,15 @@ class BatchPalpation:
             if travel >= self.probe_radius:
                 raise ValueError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its radius "
                                  f"{self.probe_radius * 1e3:g} mm: it would pass through vertices; ramp longer or use a smaller dt")
+        self.records.check_press(ramp_n)
+        if self.records.spec.tactile_size and self.integrator != "explicit":
+            raise ValueError(f"the tactile map is recorded by the explicit integrator only; the batch took the implicit "
+                             f"fall-back ({'; '.join(self.notes)}): give a smaller dt")
         self.depth = float(depth)
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
         self.press_arrays = struct_from(BatchPress, self)
+        if self.records.on:
+            self.records.allocate(self.batch_size)  # zeroed: the patch and the map are sums
         br.rest_states(self)
         solver_class(self.integrator).press_batch(self, total, steps_per_launch, on_launch)
 
@@ -607,6 +626,7 @@ class BatchPalpation:
             recovery_error=recovery,
             region_vertices=self.region_vertex_counts.copy(),
             free_vertices=self.free_vertex_counts.copy(),
+            records=self.records.read(self.depth, self.ramp_steps, host_copy) if self.records.on else {},
         )
 
     def _check_results(self, peak, hold, recovery) -> None:

@@ -12,6 +12,8 @@ sweep is), written as its own table. The output folder holds::
     maps/<scene>.png          force maps (each scene's baseline, or every item)
     table.npz                 the dataset: one array per column and a "schema" entry (JSON)
     table.csv                 the same table as text (when the spec asks for it)
+    table.parquet             the same table as Parquet (when the spec asks for it: the parquet extra),
+                              its schema's metadata the "schema" entry and what made it (dataset_info)
 
 A rerun with the same spec skips finished items and resumes the one in progress; a rerun with
 another spec into the same folder is refused. Every file is written atomically.
@@ -37,7 +39,8 @@ from ..solvers import integrators
 from ..tissue.laws import law_entry, resolve_law
 from .sampling import pressable_points, sample_points
 from .sweep import run_local
-from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, check_sphere_travel
+from .records import UNITS, Records, lesion_columns
+from .sweep_plan import COLUMNS, SweepPlan, check_sphere_travel, with_columns
 from .sweep_store import Parts, file_sha256
 
 FORMAT = "almsdm dataset 1"
@@ -65,16 +68,34 @@ SCHEMA = {
     "rings": ("int64", "", "rings of the local region"),
 }
 """Column -> (dtype, unit, meaning): written into table.npz as its "schema" entry."""
-DATASET_TABLE = TableLayout("dataset table", {c: SCHEMA[c][0] for c in DATASET_COLUMNS}, optional=("hold_force_N",), meta={"schema": json.dumps(
-    {"format": FORMAT, "columns": {c: {"dtype": d, "unit": u, "meaning": m} for c, (d, u, m) in SCHEMA.items()}})})
+
+
+def schema_entry(schema: dict) -> dict:
+    """The layout's entries beside the columns: "schema", JSON of column -> {dtype, unit, meaning}."""
+    return {"schema": json.dumps({"format": FORMAT, "columns": {c: {"dtype": d, "unit": u, "meaning": m} for c, (d, u, m) in schema.items()}})}
+
+
+DATASET_TABLE = TableLayout("dataset table", {c: SCHEMA[c][0] for c in DATASET_COLUMNS}, optional=("hold_force_N",), meta=schema_entry(SCHEMA))
 """The dataset table (export/tables.py): .npz (one array per column, plus "schema": JSON text of column ->
 {dtype, unit, meaning}; np.load reads it without pickle) or .csv (a header row); a table written before the
 hold_force_N column has none."""
+
+
+def dataset_layout(records: Records) -> TableLayout:
+    """The dataset table with the rows for learning `records` asks for (their columns after the sweep's,
+    the lesion labels last; each in the schema): DATASET_TABLE itself where none is asked for."""
+    extra = records.dtypes(lesion=True)
+    if not extra:
+        return DATASET_TABLE
+    return with_columns(DATASET_TABLE, extra, schema_entry(SCHEMA | {c: (d, *UNITS[c]) for c, d in extra.items()}))
+
+
 MAPS = ("scene", "items", "none")
-OWN = ("dataset.json", "items", "maps", "table.npz", "table.csv")
+OWN = ("dataset.json", "items", "maps", "table.npz", "table.csv", "table.parquet")
 """What a dataset folder holds (and temporary files starting with a dot): a folder with anything else is not resumed into."""
 SPEC_KEYS = {
-    "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "chunk"),
+    "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "parquet", "chunk",
+                "curve_points", "tactile_size", "lesion_labels"),
     "press": ("depth_mm", "ramp_s", "hold_s", "settle_s"),
     "lesions": ("count", "depth_mm", "centers_mm", "radii_mm", "stiffness_factors"),
 }
@@ -109,6 +130,10 @@ class DatasetSpec:
     baseline: bool = True
     maps: str = "scene"
     csv: bool = False
+    parquet: bool = False
+    """Write table.parquet too (needs pyarrow: checked when the spec is read)."""
+    records: Records = field(default_factory=Records)
+    """The rows for learning each press keeps (batch/records.py): [dataset] curve_points, tactile_size, lesion_labels."""
     chunk: int | None = None
     """Points per resumable part (None: 64 on the CPU, an item's points on a GPU)."""
     source: dict = field(default_factory=dict)
@@ -138,11 +163,14 @@ def load_spec(path) -> DatasetSpec:
     spec.maps = ds.get("maps", "scene")
     if spec.maps not in MAPS:
         raise InputError(f"{where}: [dataset] maps {spec.maps!r} is not one of {', '.join(map(repr, MAPS))}")
-    for key in ("baseline", "csv"):
-        value = ds.get(key, key == "baseline")
-        if not isinstance(value, bool):
-            raise InputError(f"{where}: [dataset] {key} must be true or false, got {describe(value)}")
-        setattr(spec, key, value)
+    for key in ("baseline", "csv", "parquet"):
+        setattr(spec, key, _bool(ds, key, where, key == "baseline"))
+    counts = {k: _int(ds, k, where, "[dataset]", 0, rule=">= 0") for k in ("curve_points", "tactile_size")}
+    spec.records = Records(counts["curve_points"], counts["tactile_size"], _bool(ds, "lesion_labels", where, False))
+    if spec.parquet:
+        from ..export.parquet import require_pyarrow
+
+        require_pyarrow(f"{where}: [dataset] parquet = true")
     spec.chunk = _int(ds, "chunk", where, "[dataset]", None, required=False)
     press = data.get("press", {})
     spec.press = {k.rsplit("_", 1)[0]: _number(press, k, where, "[press]", None, "> 0" if k == "depth_mm" else ">= 0")
@@ -212,6 +240,13 @@ def _centers(value, scenes, where: str) -> dict:
     return out
 
 
+def _bool(table, key, where, default: bool) -> bool:
+    value = table.get(key, default)
+    if not isinstance(value, bool):
+        raise InputError(f"{where}: [dataset] {key} must be true or false, got {describe(value)}")
+    return value
+
+
 def _number(table, key, where, section, default, rule):
     if key not in table:
         if default is None:
@@ -259,8 +294,15 @@ class DatasetItem:
                "lesion_radius_mm": np.full(n, 0.0 if self.lesion is None else self.lesion.radius * 1e3),
                "lesion_factor": np.full(n, 1.0 if self.lesion is None else self.lesion.stiffness_factor),
                "point": np.arange(n, dtype=np.int64)}
-        out.update({k: sweep[k] for k in COLUMNS})
+        out.update({k: sweep[k] for k in self.plan.table.dtypes})
+        records = self.plan.records
+        if records is not None and records.lesion_labels:
+            out.update(self.lesion_columns())
         return out
+
+    def lesion_columns(self) -> dict:
+        """lesion_in_footprint and lesion_distance_mm of each point (batch/records.py's lesion_columns)."""
+        return lesion_columns(self.plan.mesh, self.plan.vertices, self.lesion, self.plan.probe_radius)
 
 
 def lesion_centers(mesh, count: int, depth: float) -> np.ndarray:
@@ -332,7 +374,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     tol = (scene.tol or AUTO_TOL) if rings == AUTO else None
     plan = SweepPlan(mesh, scene.tissue, None, None, 1 if tol else int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
                      press["settle"], points, vertices, chunk, spec.integrator, tol, probe_radius=scene.probe_radius,
-                     fixed_below=scene.fixed_below, law=scene.law)
+                     fixed_below=scene.fixed_below, law=scene.law, records=_records(spec, scene, name, press["ramp"]))
     if tol is not None:  # rings "auto" (a mesh file's preset): each point's sized once, on the baseline, as a sweep's
         from .sweep_auto import size_regions
 
@@ -340,6 +382,25 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
                                   integrator=spec.integrator, dt=spec.dt, probe_radius=scene.probe_radius,
                                   fixed_below=scene.fixed_below, law=scene.law)
     return mesh, plan, scene
+
+
+def _records(spec: DatasetSpec, scene, name: str, ramp: float) -> Records | None:
+    """The spec's rows for learning for scene `name` (None: none asked for), or InputError: a map without a
+    sphere or on the implicit integrator, more curve samples than the ramp's frames."""
+    from ..protocol.schedule import PressSchedule
+
+    records = spec.records
+    if records == Records():
+        return None
+    try:
+        records.check(scene.probe_radius, spec.integrator, f"scene {name!r}: [dataset] ")
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    frames = PressSchedule.from_times(spec.dt, ramp, 0.0, 0.0).ramp_n
+    if records.curve_points > frames:
+        raise InputError(f"scene {name!r}: [dataset] curve_points {records.curve_points}: the ramp has only {frames} frame(s); "
+                         f"ask for at most {frames}, or a longer ramp_s")
+    return records
 
 
 def spec_cost(spec: DatasetSpec) -> tuple[int, float]:
@@ -387,6 +448,8 @@ class DatasetFolder:
         self.items = items
         self.spec = spec
         self.key = spec_key(items)
+        self.layout = dataset_layout(spec.records)
+        """The dataset table's layout: DATASET_TABLE, with the rows for learning the spec asks for."""
         self.done: dict[str, dict] = {}
         self.created = False
         """Whether open() made the folder (a run refused before its first item then leaves nothing)."""
@@ -459,7 +522,7 @@ class DatasetFolder:
         for why in ([parts.dropped] if parts.dropped else []) + ([f"({len(parts.damaged)}) did not match their checksum"] if parts.damaged else []):
             print(f"note: the chunks in {parts.dir} {why}: pressed again", file=sys.stderr)
         run_local(item.plan, parts, [i for i in range(len(item.plan.chunks)) if i not in done], devices, progress)
-        SWEEP_TABLE.write(path, parts.gather())
+        item.plan.table.write(path, parts.gather())
         parts.remove()
         self.done[item.name] = {"key": item.key(), "sha256": file_sha256(path), "scene": item.scene,
                                 "lesion": None if item.lesion is None else item.lesion.as_dict()}
@@ -472,8 +535,8 @@ class DatasetFolder:
             path = self.item_path(item)
             if not self._finished(item):
                 raise InputError(f"{path}: missing or damaged; run the same command again to press it again")
-            parts.append(item.columns(SWEEP_TABLE.read(path)))
-        return {c: np.concatenate([p[c] for p in parts]) for c in DATASET_COLUMNS}
+            parts.append(item.columns(item.plan.table.read(path)))
+        return {c: np.concatenate([p[c] for p in parts]) for c in self.layout.dtypes}
 
 
 def press_dataset(folder: DatasetFolder, todo: list[DatasetItem], devices: list[str], progress=None, on_item=None) -> None:
@@ -499,16 +562,35 @@ def draw_maps(folder: DatasetFolder) -> list[Path]:
         name = item.scene if folder.spec.maps == "scene" else item.name
         what = "no lesion" if item.lesion is None else f"lesion {item.lesion_id} ({item.lesion.radius * 1e3:g} mm, x{item.lesion.stiffness_factor:g})"
         title = f"{item.scene}, {what}: stiffness under a {item.plan.depth * 1e3:g} mm press"
-        table = SWEEP_TABLE.read(folder.item_path(item))
+        table = item.plan.table.read(folder.item_path(item))
         written.append(plot_sweep(item.plan.mesh, table, folder.dir / "maps" / f"{name}.png", title=title, lesion=item.lesion))
     return written
 
 
+def dataset_info(folder: DatasetFolder) -> dict:
+    """What made the dataset's table (a Parquet table's schema metadata): the package, each scene's mesh,
+    material, law and press (sweep_plan.table_info of its baseline), and each item's lesion."""
+    from .sweep_plan import table_info
+
+    scenes, common = {}, {}
+    for item in folder.items:
+        if item.scene not in scenes:
+            info = table_info(item.plan, item.scene_obj)
+            common = {k: info.pop(k) for k in ("package", "version")}
+            scenes[item.scene] = {k: v for k, v in info.items() if k != "lesion"}
+    lesions = [{"scene": item.scene, "lesion_id": item.lesion_id, "lesion": None if item.lesion is None else item.lesion.as_dict()}
+               for item in folder.items]
+    return {**common, "format": FORMAT, "key": folder.key, "scenes": scenes, "lesions": lesions}
+
+
 def finish_dataset(folder: DatasetFolder) -> dict:
-    """Gather the items into table.npz (and table.csv when the spec asks), draw the maps; returns the table."""
+    """Gather the items into table.npz (and table.csv, table.parquet when the spec asks), draw the maps;
+    returns the table."""
     columns = folder.gather()
-    DATASET_TABLE.write(folder.dir / "table.npz", columns)
+    folder.layout.write(folder.dir / "table.npz", columns)
     if folder.spec.csv:
-        DATASET_TABLE.write(folder.dir / "table.csv", columns)
+        folder.layout.write(folder.dir / "table.csv", columns)
+    if folder.spec.parquet:
+        folder.layout.write(folder.dir / "table.parquet", columns, dataset_info(folder))
     draw_maps(folder)
     return columns

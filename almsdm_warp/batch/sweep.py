@@ -11,7 +11,7 @@ regions gathered from that table on the device: batch/sweep_lanes.py); or to Ray
 GPU each (``ray`` extra, run_ray). Where the wall time goes: batch/sweep_times.py. Many points
 are sampled behind the first chunks (Sampling), and an .npz output takes each chunk's rows as it
 is written (export/npz_rows.py). When all are done they are gathered, in point order, into the
-output (export/tables.py: .csv or .npz) and the parts removed.
+output (export/tables.py: .csv, .npz or .parquet) and the parts removed.
 """
 
 from __future__ import annotations

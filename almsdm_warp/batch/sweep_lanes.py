@@ -19,7 +19,7 @@ def checked_columns(columns: dict) -> dict:
     from ..solvers.stepper import SimulationDiverged
 
     for name, values in columns.items():
-        bad = np.flatnonzero(~np.isfinite(values))
+        bad = np.flatnonzero(~np.isfinite(values).reshape(len(values), -1).all(axis=1))  # rows (a curve: any sample)
         if len(bad):
             raise SimulationDiverged(f"the sweep's {name} is not finite at vertex {int(columns['vertex'][bad[0]])} "
                                      f"({len(bad)} of {len(values)} points): nothing is written")
@@ -47,7 +47,7 @@ class RingBatches:
         if rings not in self._batches:
             p = self.plan
             batch = BatchPalpation(model=self.model, rings=int(rings), dt=p.dt, integrator=p.integrator,
-                                   probe_radius=p.probe_radius)
+                                   probe_radius=p.probe_radius, records=p.records)
             if rings in self.tables:
                 batch.region_table = self.tables[rings]
             elif (contacts := p.contacts(rings)) is not None:  # contacts pressed again: each region built once
@@ -200,7 +200,13 @@ class Lane:
         results = []
         with self.times.phase("read-back"):
             for idx, batch, pinned, _ in self.started:
-                result = batch.finish_press() if pinned is None else batch.result_from(*(b.numpy() for b in pinned))
+                if pinned is None:
+                    result = batch.finish_press()
+                elif batch.records.on:  # the records read on this lane's stream (done), not waiting for the other lane
+                    with self.scope():
+                        result = batch.result_from(*(b.numpy() for b in pinned))
+                else:
+                    result = batch.result_from(*(b.numpy() for b in pinned))
                 results.append((idx, result))
             columns = plan.columns(*self.chunk, results)
         with self.times.phase("checks"):

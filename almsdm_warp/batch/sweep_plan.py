@@ -19,7 +19,7 @@ COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "hold_force_N", "st
 ring count of each point's region (the same for all but at --rings auto)."""
 SWEEP_TABLE = TableLayout("sweep table", {c: "int64" if c in ("vertex", "rings") else "float64" for c in COLUMNS},
                           optional=("hold_force_N", "rings"))
-"""The sweep's table and its parts' (export/tables.py: .csv or .npz); a table written before the rings or the
+"""The sweep's table and its parts' (export/tables.py: .csv, .npz or .parquet); a table written before the rings or the
 hold_force_N column has none."""
 
 
@@ -68,6 +68,17 @@ class SweepPlan:
     """The tissue law (Model's law; a law without kernels for a batch is refused before the plan)."""
     element_scale: np.ndarray | None = None
     """A volumetric law's lesion: each tet's modulus factor (Model's element_scale), or None."""
+    records: "Records | None" = None
+    """The learning records each press keeps (batch/records.py: the force curve, the patch and tactile map), or None."""
+    lesion: object = None
+    """The scene's lesion (tissue.lesion.Lesion) where the table labels each press with it (records.lesion_labels),
+    else None; its effect on the numbers is in the scales above."""
+
+    @property
+    def table(self) -> TableLayout:
+        """The layout of the sweep's table and its parts: SWEEP_TABLE, and the record columns asked for."""
+        extra = self.records.dtypes(lesion=self.lesion is not None) if self.records is not None else {}
+        return with_columns(SWEEP_TABLE, extra)
 
     def wait(self, end: int | None = None) -> None:
         """Return once the points up to `end` (all: None) are there (see `sampling`)."""
@@ -112,6 +123,8 @@ class SweepPlan:
             scalars += [self.probe_radius, self.fixed_below]
         if self.law != "springs":
             scalars += [self.law]
+        if self.records is not None and (self.records.on or self.records.lesion_labels):  # other columns: other parts
+            scalars += [f"records {self.records.curve_points} {self.records.tactile_size} {self.records.lesion_labels}"]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
         for a in (self.mesh.vertices, self.points, self.vertices, self.edge_scale, self.anchor_scale, self.point_rings,
                   *(() if self.element_scale is None else (self.element_scale,))):
@@ -161,7 +174,68 @@ class SweepPlan:
             out["hold_force_N"][idx] = result.hold_force
             out["stiffness_N_per_mm"][idx] = result.stiffness_N_per_mm
             out["recovery_error_mm"][idx] = result.recovery_error * 1e3
+        if self.records is not None and self.records.on:
+            from .records import record_columns
+
+            widths = self.table.widths()
+            for name in self.records.dtypes():
+                out[name] = np.empty((n, widths[name]) if "[" in self.table.dtypes[name] else n, dtype=np.float64)
+            for idx, result in results:
+                for name, values in record_columns(result.records).items():
+                    out[name][idx] = values
+        if self.records is not None and self.records.lesion_labels and self.lesion is not None:
+            from .records import lesion_columns
+
+            out.update(lesion_columns(self.mesh, self.vertices[begin:end], self.lesion, self.probe_radius))
         return out
+
+
+def with_columns(layout: TableLayout, extra: dict, meta: dict | None = None) -> TableLayout:
+    """`layout` with the columns `extra` (name -> dtype) after its own (and `meta` for its entries): `layout`
+    itself where there are none (the default tables stay as they were)."""
+    from dataclasses import replace
+
+    if not extra and meta is None:
+        return layout
+    return replace(layout, dtypes={**layout.dtypes, **extra}, meta=layout.meta if meta is None else meta)
+
+
+def mesh_sha256(mesh) -> str:
+    """The SHA-256 of a mesh's rest geometry and topology (vertices [m] float64, triangles, tetrahedra), in hex:
+    the same mesh read from any file or made in memory gives the same hash."""
+    h = hashlib.sha256()
+    for a in (mesh.vertices, mesh.triangles, mesh.tetrahedra):
+        h.update(str(a.shape).encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def tissue_record(tissue) -> dict:
+    """The tissue's type and parameters (SI units, as its dataclass names them), for a table's metadata."""
+    from dataclasses import asdict, is_dataclass
+
+    return {"type": type(tissue).__name__, **(asdict(tissue) if is_dataclass(tissue) else {"repr": repr(tissue)})}
+
+
+def table_info(plan: SweepPlan, scene=None) -> dict:
+    """What made a sweep's table (export/tables.py's `info`: a Parquet table's schema metadata): the package
+    and its version, the scene, the mesh (file, hash, sizes), the material, the law, the lesion, the press, the
+    rows for learning asked for (batch/records.py)."""
+    from .. import __version__
+
+    mesh = plan.mesh
+    lesion = getattr(scene, "lesion", None)
+    return {
+        "package": "almsdm_warp", "version": __version__, "scene": None if scene is None else scene.name,
+        "mesh": {"path": None if mesh.path is None else str(mesh.path), "sha256": mesh_sha256(mesh), "vertices": int(mesh.vertex_count),
+                 "triangles": len(mesh.triangles), "tetrahedra": len(mesh.tetrahedra)},
+        "material": tissue_record(plan.tissue), "law": plan.law, "lesion": None if lesion is None else lesion.as_dict(),
+        "press": {"depth_mm": plan.depth * 1e3, "ramp_s": plan.ramp, "hold_s": plan.hold, "settle_s": plan.settle,
+                  "dt_ms": plan.dt * 1e3, "probe_radius_mm": plan.probe_radius * 1e3, "integrator": plan.integrator,
+                  "fixed_below_mm": None if plan.fixed_below is None else plan.fixed_below * 1e3},
+        "records": None if plan.records is None else {"curve_points": plan.records.curve_points, "tactile_size": plan.records.tactile_size,
+                                                      "lesion_labels": plan.records.lesion_labels},
+    }
 
 
 def sweep_critical_dt(plan: SweepPlan) -> float | None:

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..export.output import atomic_write
-from .sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan
+from .sweep_plan import SweepPlan
 
 
 def file_sha256(path) -> str:
@@ -146,16 +146,16 @@ class Parts:
             if self._manifest_due:  # before any chunk: a folder with a chunk always has its plan.json
                 self._write_manifest()
                 self._manifest_due = False
-        digest = file_sha256(SWEEP_TABLE.write(self.chunk_path(i), columns))
+        digest = file_sha256(self.plan.table.write(self.chunk_path(i), columns))
         with self._lock:
             self.sums[i] = digest
             self._write_manifest()
             self.written[i] = columns
             if self.table is None:
                 n = len(self.plan.vertices)
-                self.table = {c: np.empty(n, dtype=np.asarray(columns[c]).dtype) for c in COLUMNS}
+                self.table = {c: np.empty((n, *np.shape(columns[c])[1:]), dtype=np.asarray(columns[c]).dtype) for c in self.plan.table.dtypes}
             begin, end = self.plan.chunks[i]
-            for c in COLUMNS:
+            for c in self.plan.table.dtypes:
                 self.table[c][begin:end] = columns[c]
         if self.rows_file is not None:  # the output's rows too, in place (one writer thread: no lock)
             self.rows_file.rows(begin, columns)
@@ -174,10 +174,10 @@ class Parts:
             try:
                 if self.sums.get(i) != file_sha256(path):
                     raise ValueError("its checksum does not match plan.json")
-                parts.append(SWEEP_TABLE.read(path))
+                parts.append(self.plan.table.read(path))
             except (OSError, ValueError, KeyError, zipfile.BadZipFile, InputError) as exc:
                 raise InputError(f"{path}: damaged ({exc}); run the same command again to press that chunk again") from exc
-        return {c: np.concatenate([p[c] for p in parts]) for c in COLUMNS}
+        return {c: np.concatenate([p[c] for p in parts]) for c in self.plan.table.dtypes}
 
     def discard_if_new(self) -> None:
         """Remove the folder where open() made it and no chunk is done (a run refused before any result)."""

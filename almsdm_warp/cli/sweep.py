@@ -20,14 +20,14 @@ from .args import (auto_tol, add_integrator_arg, add_law_arg, add_tissue_args, c
 def add_parser(sub) -> None:
     p = sub.add_parser(
         "sweep",
-        help="press N points spread over a scene or mesh at once (batched); write a force map (.csv/.npz)",
+        help="press N points spread over a scene or mesh at once (batched); write a force map (.csv/.npz/.parquet)",
         description="Press N points spread evenly over the surface, all at once on the device (the local ALMSDM "
         "region of each; explicit or implicit integrator), and write per point: x_mm, y_mm, z_mm, vertex, peak_force_N, "
         "hold_force_N (force at the end of the hold), stiffness_N_per_mm (hold_force_N / depth), recovery_error_mm, rings. An interrupted sweep resumes "
         "from the chunks it wrote (OUT.parts/) when run again with the same arguments.",
     )
     p.add_argument("scene", nargs="?", default=None, metavar="SCENE_OR_MESH", help="scene (.toml), scene name or mesh file; default: the stomach scene")
-    p.add_argument("--out", required=True, metavar="FILE", help="output table: .csv or .npz")
+    p.add_argument("--out", required=True, metavar="FILE", help="output table: .csv, .npz or .parquet (the parquet extra)")
     p.add_argument("--points", type=count_arg, default=None, metavar="N", help=f"points to press (default {DEFAULT_POINTS})")
     p.add_argument("--rings", type=rings_arg(("auto",)), default=None, metavar="{K,auto}", help="rings of each local region, or auto: each point's sized to --tol-mm as almsdm palpate --rings auto sizes it (default: the scene's)")
     p.add_argument("--tol-mm", type=number_arg("> 0"), default=None, metavar="MM", help="--rings auto: the displacement tolerance [mm] (default: the scene's, else 0.1)")
@@ -48,6 +48,9 @@ def add_parser(sub) -> None:
     p.add_argument("--max-region-steps", type=number_arg("> 0"), default=LIMITS["region_steps"], metavar="N", help=f"refuse a sweep that would take more region-steps (points x frames x substeps) than N (default {LIMITS['region_steps']:g})")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar on stderr (default: only on a terminal)")
     p.add_argument("--probe-radius-mm", type=number_arg(">= 0"), default=None, metavar="MM", help="radius of the spherical probe [mm]; 0: the paper's probe, the contact vertex driven (default: the scene's [probe] radius_mm, else 0)")
+    p.add_argument("--curve-points", type=count_arg, default=None, metavar="N", help="rows for learning: the force curve, N samples along the ramp (columns force_curve_N and force_curve_depth_mm, N values a row)")
+    p.add_argument("--lesion-labels", action="store_true", default=None, help="rows for learning, for a scene with a [lesion]: whether the lesion lies in the probe's footprint (lesion_in_footprint) and the contact vertex's distance to its surface (lesion_distance_mm)")
+    p.add_argument("--tactile-size", type=count_arg, default=None, metavar="N", help="rows for learning, with a sphere: the contact patch's area (patch_area_mm2) and the contact pressure on an N x N grid over the sphere's footprint at the end of the hold (tactile_map_kPa, N*N values a row)")
     add_tissue_args(p)
     add_dataset_arg(p)
     p.set_defaults(func=cmd_sweep, start_devices=True, integrator=None)  # None: not given (a dataset's spec decides it)
@@ -92,10 +95,11 @@ def cmd_sweep(args) -> int:
     times, t_start = SweepTimes(), time.perf_counter()
     plan, scene, rings_text, models = _plan(args, devices, times)
     parts, todo, left = _resume(out, plan)
-    from ..batch.sweep_plan import SWEEP_TABLE
+    from ..batch.sweep_plan import table_info
 
     # where the format can, the table is written as the chunks come: after the last press, only what needs the whole
-    parts.rows_file = SWEEP_TABLE.rows(out, len(plan.vertices))
+    args.table_info = table_info(plan, scene)  # what made the table: a Parquet table's metadata
+    parts.rows_file = plan.table.rows(out, len(plan.vertices), args.table_info)
     try:
         return _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo)
     except InputError:  # a write refused (a full disk): a parts folder this run made with nothing in it goes
@@ -109,7 +113,7 @@ def cmd_sweep(args) -> int:
 def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_start, todo) -> int:
     """cmd_sweep's second half: the chunks, the table, the report."""
     from ..batch.sweep import run_local, run_ray
-    from ..batch.sweep_plan import SWEEP_TABLE, press_steps
+    from ..batch.sweep_plan import press_steps
     from ..progress import Progress
     from ..solvers.stepper import SimulationDiverged
 
@@ -136,7 +140,7 @@ def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_s
         if parts.rows_file is not None:
             parts.rows_file.finish(columns)
         else:
-            SWEEP_TABLE.write(out, columns)
+            plan.table.write(out, columns, args.table_info)
         parts.remove()
     _report(columns, left, steps, elapsed)
     if args.profile:
@@ -191,12 +195,14 @@ def _plan(args, devices, times):
     chunk = args.chunk or default_chunk(len(vertices), devices)
     plan = SweepPlan(mesh, scene.tissue, scales.get("edge_scale"), scales.get("anchor_scale"), 1 if tol else rings, dt, depth,
                      ramp, hold, settle, points, vertices, chunk, args.integrator, tol, radius, scene.fixed_below,
-                     sampling=sampling, law=scene.law, element_scale=scales.get("element_scale"))
+                     sampling=sampling, law=scene.law, element_scale=scales.get("element_scale"), records=_records(args, radius, ramp, dt, scene),
+                     lesion=scene.lesion if args.lesion_labels else None)
     times.mark("plan")
     models = None if args.ray or not args.pipeline else models_behind(plan, devices)
     print(mesh.summary())
     with times.phase("set-up"):
         substeps = _substeps(plan)
+    check_records(plan.records, plan.probe_radius, plan.integrator)  # the explicit integrator's fall-back: implicit
     cost = check_region_steps(len(vertices), frames, substeps, args.max_region_steps)
     if tol is not None:
         plan.rings = _size(plan, scales, tol, args.progress)
@@ -213,6 +219,33 @@ def _plan(args, devices, times):
     print(f"cost: {cost:.3g} region-steps ({len(vertices)} points x {frames} frames x at most {substeps} substep(s); "
           f"limit {args.max_region_steps:.3g}, --max-region-steps)")
     return plan, scene, rings_text, models
+
+
+def _records(args, radius: float, ramp: float, dt: float, scene):
+    """The learning records asked for (--curve-points, --tactile-size, --lesion-labels), checked before any work, or None."""
+    from ..batch.records import Records
+    from ..protocol.schedule import PressSchedule
+
+    if args.curve_points is None and args.tactile_size is None and not args.lesion_labels:
+        return None
+    if args.lesion_labels and scene.lesion is None:
+        raise InputError(f"--lesion-labels: scene {scene.name} has no [lesion] to label the presses with")
+    records = Records(args.curve_points or 0, args.tactile_size or 0, bool(args.lesion_labels))
+    check_records(records, radius, args.integrator)
+    ramp_n = PressSchedule.from_times(dt, ramp, 0.0, 0.0).ramp_n  # frames: the substeps only add steps
+    if records.curve_points > ramp_n:
+        raise InputError(f"--curve-points {records.curve_points}: the ramp has only {ramp_n} frame(s) of {dt * 1e3:g} ms; "
+                         f"ask for at most {ramp_n}, or a longer --ramp-s")
+    return records
+
+
+def check_records(records, radius: float, integrator: str) -> None:
+    """InputError for learning records the sweep's press cannot make (Records.check, in the flags' names)."""
+    if records is not None:
+        try:
+            records.check(radius, integrator, names=("--curve-points", "--tactile-size"))
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
 
 
 def _substeps(plan) -> int:

@@ -39,7 +39,7 @@ DEVICE_COLUMNS = ("device_x_mm", "device_y_mm", "device_z_mm")
 INT_COLUMNS = ("region_vertices", "relocations")
 TRACE_TABLE = TableLayout("trace", {c: "int64" if c in INT_COLUMNS else "float64" for c in (*COLUMNS, *DEVICE_COLUMNS)},
                           optional=DEVICE_COLUMNS)
-"""The trace (export/tables.py): .csv (a header, then rows, floats as repr reads them back) or .npz (one array a column)."""
+"""The trace (export/tables.py): .csv (a header, then rows, floats as repr reads them back) or .npz (one array a column) or .parquet."""
 DEFAULT_PROBE_RADIUS_MM = 10.0
 """The sphere's radius [mm] where neither --probe-radius-mm nor the scene gives one (a fingertip; larger than the
 built-in stroke's 8 mm press: a sphere pressed deeper than its radius pokes between the vertices)."""
@@ -78,7 +78,7 @@ def add_parser(sub) -> None:
     p.add_argument("--dt-ms", type=number_arg("> 0"), default=1.0, metavar="MS", help="step [ms] at which the path is sampled (default 1: haptic rate)")
     p.add_argument("--report-every", type=count_arg, default=1, metavar="N", help="a trace row every Nth step, and the last (default 1)")
     p.add_argument("--scale-mm", type=number_arg("> 0"), default=None, metavar="MM", help="millimetres per mesh file unit, for a mesh file (default: guessed from its size)")
-    p.add_argument("--out", default=None, type=path_arg, metavar="PATH", help="the trace: .csv (a header line, then one row per reported step) or .npz")
+    p.add_argument("--out", default=None, type=path_arg, metavar="PATH", help="the trace: .csv (a header line, then one row per reported step), .npz or .parquet")
     p.add_argument("--png", default=None, type=path_arg, metavar="PATH", help="a plot of the force against time")
     p.add_argument("--usd", default=None, type=path_arg, metavar="PATH", help="record the stroke to a USD stage (.usda, .usdc, .usd): the organ, the probe, the moving region")
     p.add_argument("--usd-every", type=count_arg, default=10, metavar="N", help="a USD frame every Nth step (default 10)")

@@ -33,22 +33,25 @@ _DOS_DATE = (1980 - 1980) << 9 | 1 << 5 | 1  # 1980-01-01, as np.savez's entries
 _DOS_TIME = 0
 
 
-def npy_header(dtype, n: int) -> bytes:
-    """The .npy header np.save writes before n values of `dtype` (1-D, C order)."""
+def npy_header(dtype, n: int, width: int | None = None) -> bytes:
+    """The .npy header np.save writes before n values of `dtype` (1-D; [n, width] where a width is given; C order)."""
     buf = io.BytesIO()
+    shape = (int(n),) if width is None else (int(n), int(width))
     np.lib.format.write_array_header_1_0(buf, {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)), "fortran_order": False,
-                                               "shape": (int(n),)})
+                                               "shape": shape})
     return buf.getvalue()
 
 
 class NpzRows:
     """`path` (.npz) with `n` rows of the columns `dtypes` (name -> dtype), written by rows(begin,
     columns) in any order and published by finish(columns), which takes every column whole (for
-    the CRCs, and the rows not yet written); discard() removes the temporary file."""
+    the CRCs, and the rows not yet written); discard() removes the temporary file. widths: name ->
+    values a row of a column stored [n, width] (export/tables.py's "float64[N]"), 1 or absent: 1-D."""
 
-    def __init__(self, path, n: int, dtypes: dict):
+    def __init__(self, path, n: int, dtypes: dict, widths: dict | None = None):
         self.path, self.n = Path(path), int(n)
         self.dtypes = {name: np.dtype(d) for name, d in dtypes.items()}
+        self.widths = {name: w for name, w in (widths or {}).items() if w != 1}
         self.tmp, self.fd = temp_path(self.path), None
         try:
             self.fd = os.open(self.tmp, os.O_RDWR)
@@ -62,10 +65,11 @@ class NpzRows:
         self.entries = []
         offset = 0
         for name, dtype in self.dtypes.items():
-            fname, head = f"{name}.npy".encode(), npy_header(dtype, self.n)
+            fname, head = f"{name}.npy".encode(), npy_header(dtype, self.n, self.widths.get(name))
+            row = dtype.itemsize * self.widths.get(name, 1)
             data = offset + _LOCAL.size + len(fname) + 20 + len(head)
-            self.entries.append((fname, offset, head, data, len(head) + self.n * dtype.itemsize))
-            offset = data + self.n * dtype.itemsize
+            self.entries.append((fname, offset, head, data, len(head) + self.n * row))
+            offset = data + self.n * row
         self.central = offset
         os.ftruncate(self.fd, offset)
         self.written = np.zeros(self.n, dtype=bool)
@@ -83,11 +87,12 @@ class NpzRows:
     def _rows(self, begin: int, columns: dict) -> None:
         in_order = begin == self.crc_rows
         for k, ((fname, _, _, data, _), (name, dtype)) in enumerate(zip(self.entries, self.dtypes.items())):
+            row = dtype.itemsize * self.widths.get(name, 1)
             values = memoryview(np.ascontiguousarray(columns[name], dtype=dtype)).cast("B")
-            os.pwrite(self.fd, values, data + begin * dtype.itemsize)
+            os.pwrite(self.fd, values, data + begin * row)
             if in_order:
                 self.crc[k] = zlib.crc32(values, self.crc[k])
-        end = begin + len(values) // dtype.itemsize
+        end = begin + len(values) // row
         self.written[begin:end] = True
         if in_order:
             self.crc_rows = end

@@ -7,6 +7,12 @@ such as a dataset's "schema"); how a file holds it is a :class:`TableFormat`. A 
 writer and a reader (and, where the format can take rows as they come, a row writer such as
 export/npz_rows.py's NpzRows) and one line of TABLE_FORMATS; every table, and the suffixes the
 command line takes for one (export/writers.py), follow. Writes are atomic (export/output.py).
+
+A column's dtype is "int64", "float64", "str", or "float64[N]": N values a row (a force curve, a
+tactile map), a 2-D array [rows, N] in memory, a fixed-size list in Parquet, an [rows, N] array in
+an .npz, and N columns NAME[0] .. NAME[N-1] in a CSV. A writer may be given `info`, what made the
+table (the scene, the mesh's hash, the material, ...): Parquet keeps it in its schema's metadata
+(export/parquet.py); CSV and NPZ have no place for it and leave it out.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ import numpy as np
 from ..errors import InputError
 from .npz_rows import NpzRows
 from .output import atomic_write
+from .parquet import ParquetRows, read_parquet, require_pyarrow, split_dtype, write_parquet
 
 CSV_BLOCK = 1 << 16
 """Rows formatted at once in a CSV (each column a block at a time)."""
@@ -33,7 +40,7 @@ class TableLayout:
     name: str
     """The table in a few words, for messages ("sweep table": "PATH: not a sweep table ...")."""
     dtypes: dict
-    """Column -> "int64", "float64" or "str", in the table's order."""
+    """Column -> "int64", "float64", "str" or "float64[N]" (N values a row), in the table's order."""
     optional: tuple = ()
     """Columns a table may lack (written where the columns given hold them; a reader takes a table without them)."""
     meta: dict = field(default_factory=dict)
@@ -47,37 +54,51 @@ class TableLayout:
         """`columns` as arrays of their dtypes, in order (a required one missing: KeyError)."""
         return {c: np.asarray(columns[c]).astype(_dtype(self.dtypes[c]), copy=False) for c in self.columns(columns)}
 
-    def write(self, path, columns: dict) -> Path:
-        """Write `columns` to `path` in its suffix's format, atomically."""
+    def write(self, path, columns: dict, info: dict | None = None) -> Path:
+        """Write `columns` to `path` in its suffix's format, atomically; `info`: what made the table, kept
+        where the format can (Parquet's schema metadata)."""
         fmt, columns = table_format(path), self.cast(columns)
-        atomic_write(path, lambda tmp: fmt.write(tmp, columns, self))
+        fmt.check(path)
+        atomic_write(path, lambda tmp: fmt.write(tmp, columns, self, info))
         return Path(path)
 
     def read(self, path) -> dict:
         """The columns of the table at `path` (by its suffix); InputError for a file that is not one."""
         return table_format(path).read(Path(path), self)
 
-    def rows(self, path, n: int):
+    def rows(self, path, n: int, info: dict | None = None):
         """A writer of `n` rows to `path` as they come (rows(begin, columns), finish(columns), discard()),
-        or None where the format writes a table only whole (or the layout has entries beside the columns)."""
+        or None where the format writes a table only whole (an .npz of a layout with entries beside the columns)."""
         fmt = table_format(path)
-        if fmt.rows is None or self.meta:
-            return None
-        return fmt.rows(path, n, {c: _dtype(d) for c, d in self.dtypes.items()})
+        fmt.check(path)
+        return None if fmt.rows is None else fmt.rows(path, n, self, info)
+
+    def widths(self) -> dict:
+        """Column -> values a row (1 for a scalar column)."""
+        return {c: split_dtype(d)[1] or 1 for c, d in self.dtypes.items()}
 
 
 def _dtype(name: str):
-    return str if name == "str" else np.dtype(name)
+    base = split_dtype(name)[0]
+    return str if base == "str" else np.dtype(base)
+
+
+def csv_names(name: str, width: int) -> list[str]:
+    """The CSV columns of a column of `width` values a row: NAME, or NAME[0] .. NAME[width - 1]."""
+    return [name] if width == 1 else [f"{name}[{k}]" for k in range(width)]
 
 
 # -- CSV: a header line, then a row a line; floats as repr writes them (the shortest text that reads back the same)
-def write_csv(tmp, columns: dict, layout: TableLayout) -> None:
-    names = list(columns)
-    n = len(columns[names[0]]) if names else 0
+def write_csv(tmp, columns: dict, layout: TableLayout, info: dict | None = None) -> None:
+    flat = {}  # a column of N values a row: N columns
+    for name, col in columns.items():
+        parts = col.reshape(len(col), -1).T if col.ndim > 1 else [col]
+        flat.update(zip(csv_names(name, len(parts)), parts))
+    n = len(next(iter(flat.values()))) if flat else 0
     with open(tmp, "w", encoding="utf-8") as f:
-        f.write(",".join(names) + "\n")
+        f.write(",".join(flat) + "\n")
         for b in range(0, n, CSV_BLOCK):
-            text = [map(repr if col.dtype.kind == "f" else str, col[b : b + CSV_BLOCK].tolist()) for col in columns.values()]
+            text = [map(repr if col.dtype.kind == "f" else str, col[b : b + CSV_BLOCK].tolist()) for col in flat.values()]
             f.write("".join(line + "\n" for line in map(",".join, zip(*text))))
 
 
@@ -95,18 +116,29 @@ def millimetres(metres):
 def read_csv(path: Path, layout: TableLayout) -> dict:
     with open(path, encoding="utf-8") as f:
         header = f.readline().strip().split(",")
-    if header != layout.columns(header):
+    widths = layout.widths()
+    present = {c for c in layout.dtypes if csv_names(c, widths[c])[0] in header}
+    names = layout.columns(present)
+    if header != [h for c in names for h in csv_names(c, widths[c])]:
         raise InputError(f"{path}: not a {layout.name} (header {header})")
     parsed = {"str": object, "int64": np.int64, "float64": np.float64}  # str: read as Python strings, then sized
-    dtype = np.dtype([(c, parsed[layout.dtypes[c]]) for c in header])
+    dtype = np.dtype([(h, parsed[split_dtype(layout.dtypes[c])[0]]) for c in names for h in csv_names(c, widths[c])])
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", "loadtxt: input contained no data")  # a header alone: no rows
         data = np.loadtxt(path, delimiter=",", skiprows=1, dtype=dtype, comments=None, ndmin=1, encoding="utf-8")
-    return {c: np.array(data[c].tolist(), dtype=str) if layout.dtypes[c] == "str" else np.array(data[c]) for c in header}
+    out = {}
+    for c in names:
+        if layout.dtypes[c] == "str":
+            out[c] = np.array(data[c].tolist(), dtype=str)
+        elif widths[c] > 1 or split_dtype(layout.dtypes[c])[1] is not None:
+            out[c] = np.stack([np.array(data[h]) for h in csv_names(c, widths[c])], axis=1).reshape(len(data), widths[c])
+        else:
+            out[c] = np.array(data[c])
+    return out
 
 
 # -- NPZ: a NumPy archive, one array a column (np.load reads it without pickle)
-def write_npz(tmp, columns: dict, layout: TableLayout) -> None:
+def write_npz(tmp, columns: dict, layout: TableLayout, info: dict | None = None) -> None:
     with open(tmp, "wb") as f:
         np.savez(f, **{k: np.array(text) for k, text in layout.meta.items()}, **columns)
 
@@ -119,6 +151,17 @@ def read_npz(path: Path, layout: TableLayout) -> dict:
         return {c: z[c] for c in layout.columns(z.files)}
 
 
+def npz_rows(path, n: int, layout: TableLayout, info: dict | None = None):
+    """NpzRows of `layout`'s columns, or None for a layout with entries beside the columns (written whole)."""
+    if layout.meta:
+        return None
+    return NpzRows(path, n, {c: _dtype(d) for c, d in layout.dtypes.items()}, layout.widths())
+
+
+def no_check(path) -> None:
+    """A format that every installation can write."""
+
+
 @dataclass(frozen=True)
 class TableFormat:
     """One file format a table may be written in."""
@@ -127,19 +170,24 @@ class TableFormat:
     """The file name's suffix, lower case, with its dot."""
     what: str
     """The format in a few words."""
-    write: Callable[[object, dict, TableLayout], None]
-    """write(temporary path, columns cast to the layout's dtypes, layout): the whole file there."""
+    write: Callable[[object, dict, TableLayout, dict | None], None]
+    """write(temporary path, columns cast to the layout's dtypes, layout, info): the whole file there."""
     read: Callable[[Path, TableLayout], dict]
     """read(path, layout) -> columns; InputError for a file that does not hold the layout's table."""
     rows: Callable | None = None
-    """rows(path, n, dtypes) -> a writer of rows as they come (export/npz_rows.py's NpzRows), or None."""
+    """rows(path, n, layout, info) -> a writer of rows as they come (export/npz_rows.py's NpzRows), or None."""
+    check: Callable = no_check
+    """check(path): InputError where this installation cannot write the format (a package missing),
+    called before any work (export/writers.py's check_output) and by every write."""
 
 
 TABLE_FORMATS: dict[str, TableFormat] = {
     f.suffix: f
     for f in (
         TableFormat(".csv", "comma-separated columns, a header line first", write_csv, read_csv),
-        TableFormat(".npz", "a NumPy archive, one array a column", write_npz, read_npz, NpzRows),
+        TableFormat(".npz", "a NumPy archive, one array a column", write_npz, read_npz, npz_rows),
+        TableFormat(".parquet", "Apache Parquet (the parquet extra: pyarrow)", write_parquet, read_parquet, ParquetRows,
+                    require_pyarrow),
     )
 }
 """Every table format, by suffix."""

@@ -71,8 +71,11 @@ def output_format(path, kind: str, flag: str | None = None) -> OutputFormat:
 
 
 def check_output(path, kind: str, flag: str | None = None) -> Path:
-    """Fail before any work when `path` cannot take an output of `kind`: its suffix, then its folder."""
-    output_format(path, kind, flag)
+    """Fail before any work when `path` cannot take an output of `kind`: its suffix, the package its
+    format needs (a table's TableFormat.check: .parquet without pyarrow), then its folder."""
+    fmt = output_format(path, kind, flag)
+    if fmt.kind == "table":
+        TABLE_FORMATS[fmt.suffix].check(f"{flag} {path}" if flag else path)
     return check_writable(path)
 
 

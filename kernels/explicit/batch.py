@@ -22,10 +22,10 @@ import functools
 
 import warp as wp
 
-from ..arrays import BatchElements, BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
+from ..arrays import BatchElements, BatchPress, BatchRecords, BatchRegionArrays, BatchSphere, TissueArrays
 from ..block_memory import SHARED_BYTES_MAX, block_sync, work_array
 from ..laws import LAWS
-from ..probes.press import drive_vertex, press_target, record_peak
+from ..probes.press import drive_vertex, press_target, record_contact, record_curve, record_peak
 from ..probes.sphere import sphere_contact_step
 from .step import advance
 
@@ -36,13 +36,17 @@ __all__ = ["SHARED_BYTES_MAX", "press_batch", "press_kernel", "scratch_sizes", "
 
 
 @functools.cache
-def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bool, sphere: bool = False):
+def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bool, sphere: bool = False, records: bool = False):
     """The batch press kernel of tissue law `law` (a key of kernels.laws.LAWS) for regions of up to
     `vertex_capacity` vertices and `entry_capacity` CSR entries of free vertices; working arrays in
     shared memory on CUDA when `shared`. `sphere`: the probe is a sphere (BatchSphere; no vertex
     driven, a contact pass after each pressed step), a variant of its own so that the paper's probe
-    runs none of it."""
+    runs none of it. `records`: the learning records (BatchRecords: the force curve, and with a
+    sphere the contact patch and tactile map), a variant of its own so that a press without them
+    runs none of it (the same code, speed and bits as before)."""
     SPHERE = bool(sphere)
+    RECORDS = bool(records)
+    PATCH = RECORDS and SPHERE
     VOLUMETRIC = LAWS[law].VOLUMETRIC
     SPRINGS = not VOLUMETRIC  # its springs in the working arrays; a volumetric law's tets read from the batch's element arrays
     cv, ce, cp = work_sizes(vertex_capacity, entry_capacity, VOLUMETRIC)
@@ -95,9 +99,11 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
         nf: int, region_vertex: wp.array2d(dtype=wp.int32), b: int, probe_surface: wp.array(dtype=wp.int32),
         particle_mass: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, dt: float,
         q_in: wp.array(dtype=wp.vec3), qd_in: wp.array(dtype=wp.vec3), q_out: wp.array(dtype=wp.vec3), qd_out: wp.array(dtype=wp.vec3),
+        records: BatchRecords, hold: int, direction: wp.vec3,
     ):
         # the sphere after the step (one thread, local order, as the one-region contact pass): each
         # free surface vertex inside it onto its surface; returns the sum of the contact reactions
+        # (with records, at the hold's last step: each contact into the patch and the tactile map)
         total = wp.vec3(0.0)
         for i in range(nf):
             if probe_surface[region_vertex[b, i]] != 0:
@@ -106,6 +112,9 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
                     q_out[i] = x1
                     qd_out[i] = u1
                     total += c
+                    if wp.static(PATCH):
+                        if hold != 0 and records.map_size > 0:
+                            record_contact(records, b, region_vertex[b, i], x1, c, centre, direction, radius)
         return total
 
     w_q_a = work_array("q_a", wp.vec3, cv, shared)
@@ -136,6 +145,7 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
         scratch_int: wp.array(dtype=wp.int32),
         entries: Entries,
         elements: BatchElements,
+        records: BatchRecords,
         q_state: wp.array2d(dtype=wp.vec3),
         qd_state: wp.array2d(dtype=wp.vec3),
     ):
@@ -209,12 +219,16 @@ def press_kernel(law: str, vertex_capacity: int, entry_capacity: int, shared: bo
                     block_sync()
                     if lane == 0:
                         rv = regions.region_vertex
+                        hold = int(s == press.press_steps - 1)
+                        d = wp.vec3(direction)
                         if (s - step_begin) % 2 == 0:
-                            f = contact(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_a, qd_a, q_b, qd_b)
+                            f = contact(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_a, qd_a, q_b, qd_b, records, hold, d)
                         else:
-                            f = contact(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_b, qd_b, q_a, qd_a)
+                            f = contact(nf, rv, b, probe.probe_surface, mass, target, probe.radius, dt, q_b, qd_b, q_a, qd_a, records, hold, d)
             if lane == 0 and pressed != 0:
                 peak, peak_f = record_peak(peak, peak_f, f)
+                if wp.static(RECORDS):
+                    record_curve(records, b, s, press.ramp_steps, f)
                 if s == press.press_steps - 1:
                     press.hold_reaction[b] = f
             block_sync()
@@ -258,13 +272,13 @@ def shared_bytes(vertex_capacity: int, entry_capacity: int, volumetric: bool = F
 def press_batch(batch, step_begin, step_count):
     """Advance every palpation of `batch` (an almsdm_warp.batch.batch_palpation.BatchPalpation) `step_count` steps."""
     m, r, p = batch.model, batch.regions, batch
-    kernel = press_kernel(m.law, p.vertex_capacity, p.entry_capacity, p.shared, p.probe_radius > 0)
+    kernel = press_kernel(m.law, p.vertex_capacity, p.entry_capacity, p.shared, p.probe_radius > 0, p.records.on)
     wp.launch(
         kernel,
         dim=p.batch_size * p.threads,
         block_dim=p.threads,
         inputs=[p.threads, r.arrays, m.arrays, 1.0, p.press_arrays, p.sphere_arrays, int(step_begin), int(step_count), p.scratch_vec3,
-                p.scratch_float, p.scratch_int, m.entries, p.elements],
+                p.scratch_float, p.scratch_int, m.entries, p.elements, p.records.arrays],
         outputs=[p.q_state, p.qd_state],
         device=m.device,
     )

@@ -33,7 +33,8 @@ import warp as wp
 
 from ..block_memory import add_entry16, block_sync, cpu_blocks, load2, load4, load_xyz, named, rsqrt_approx, shared_array, store_xyz, work_array
 from ..laws.springs import EPS_LENGTH, anchor_force, spring_force_along
-from ..probes.press import force_square
+from ..arrays import BatchRecords
+from ..probes.press import force_square, record_curve
 from ..probes.sphere import sphere_project
 from .step import advance
 
@@ -173,15 +174,17 @@ def record_force_fast(f: wp.vec3, hold: bool, p64: wp.array(dtype=wp.float64), p
 
 @functools.cache
 def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_capacity: int, spring_capacity: int, max_degree: int = 16,
-                      sphere: bool = False):
+                      sphere: bool = False, curve: bool = False):
     """The fast kernel for blocks of `threads` threads with `per_thread` springs each, regions of up
     to `vertex_capacity` vertices, `free_capacity` free ones of degree up to `max_degree`, and
     `spring_capacity` springs (compile-time sizes: registers are unrolled, shared arrays static).
     `sphere`: the probe is a sphere (no vertex driven; after each pressed step every free surface
     vertex inside it goes onto it and the feedback force is the sum of the contact reactions), a
-    variant of its own, so that the paper's probe runs none of it."""
+    variant of its own, so that the paper's probe runs none of it. `curve`: the force curve of the
+    learning records (BatchRecords, kernels/probes/press.py's record_curve), a variant of its own too."""
     T, P, cv, cf, cs, cd = int(threads), int(per_thread), int(vertex_capacity), int(free_capacity), int(spring_capacity), max(int(max_degree), 1)
     SPHERE = bool(sphere)
+    CURVE = bool(curve)
     w_qa = work_array("oqa4", wp.vec4, cv, True)  # x, y, z, vx
     w_qb = shared_array("oqb2", wp.vec2, cv)  # vy, vz
     w_rest = work_array("orest4", wp.vec4, cf, True)  # rest position, anchor stiffness
@@ -234,6 +237,7 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
         scratch: wp.array(dtype=wp.vec4),
         # the sphere's (read by its variant only): who may touch, each contact vertex's local index, R [m]
         probe_surface: wp.array(dtype=wp.int32), contact_local: wp.array(dtype=wp.int32), radius: float, radius64: wp.float64,
+        records: BatchRecords,
     ):
         tid = wp.tid()
         b = tid // T
@@ -370,6 +374,8 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
                 elif i == 0 and s < press_steps:
                     # the feedback force, then displacement control (lane 0; its state in shared memory)
                     record_force_fast(f, s == press_steps - 1, p64, pv)
+                    if wp.static(CURVE):
+                        record_curve(records, b, s, ramp_steps, f)
                     tf = load4(pv, 1)
                     target = wp.vec3(tf[0], tf[1], tf[2])
                     if s < ramp_steps:
@@ -405,7 +411,10 @@ def press_kernel_fast(threads: int, per_thread: int, vertex_capacity: int, free_
             if wp.static(SPHERE):
                 if lane == 0 and s < press_steps:
                     # the feedback force: the sum of the contact reactions (a tree in each warp, then the warps in order)
-                    record_force_fast(sum_parts(w_part()), s == press_steps - 1, p64, pv)
+                    fs = sum_parts(w_part())
+                    record_force_fast(fs, s == press_steps - 1, p64, pv)
+                    if wp.static(CURVE):
+                        record_curve(records, b, s, ramp_steps, fs)
         for i in range(lane, n, T):
             av = load4(qa, i)
             bv = load2(qb, i)
@@ -425,7 +434,7 @@ def press_batch_fast(batch, step_begin, step_count):
     threads = p.fast_plan[0]
     with cpu_blocks(m.device):
         wp.launch(
-            press_kernel_fast(*p.fast_plan, sphere=p.probe_radius > 0),
+            press_kernel_fast(*p.fast_plan, sphere=p.probe_radius > 0, curve=p.records.on),
             dim=p.batch_size * threads,
             block_dim=threads,
             inputs=[
@@ -435,6 +444,6 @@ def press_batch_fast(batch, step_begin, step_count):
                 p.press_direction, p.depth, p.ramp_steps, p.press_steps, p.dt, int(step_begin), int(step_count),
             ],
             outputs=[p.q_state, p.qd_state, p.peak_force, p.peak_reaction, p.hold_reaction, p.scratch_wide,
-                     p.probe_surface, p.contact_local, p.sphere_arrays.radius, p.sphere_arrays.radius64],
+                     p.probe_surface, p.contact_local, p.sphere_arrays.radius, p.sphere_arrays.radius64, p.records.arrays],
             device=m.device,
         )

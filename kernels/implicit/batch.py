@@ -15,9 +15,9 @@ import functools
 
 import warp as wp
 
-from ..arrays import BatchCGArrays, BatchElements, BatchPress, BatchRegionArrays, BatchSphere, TissueArrays
+from ..arrays import BatchCGArrays, BatchElements, BatchPress, BatchRecords, BatchRegionArrays, BatchSphere, TissueArrays
 from ..laws import LAWS
-from ..probes.press import drive_vertex, press_target, record_peak
+from ..probes.press import drive_vertex, press_target, record_curve, record_peak
 from ..probes.sphere import sphere_constrain
 from .block_cg import solve_block_cg
 from .step import CONTACT_SLACK, implicit_rhs, implicit_update
@@ -37,8 +37,10 @@ def record_force(press: BatchPress, b: int, step: int, f: wp.vec3):
 
 
 @functools.cache
-def batch_kernel(law: str):
-    """The implicit batch step of tissue law `law` (a key of kernels.laws.LAWS)."""
+def batch_kernel(law: str, records: bool = False):
+    """The implicit batch step of tissue law `law` (a key of kernels.laws.LAWS); `records`: with the
+    force curve of the learning records (BatchRecords; a variant of its own, as the explicit batch's)."""
+    RECORDS = bool(records)
     implicit_row, nodal_pressure, Entries = LAWS[law].implicit_row, LAWS[law].nodal_pressure, LAWS[law].Entries
     SPRINGS = not LAWS[law].VOLUMETRIC  # its entries are the rows'; a volumetric law's tets are the batch's element arrays
 
@@ -57,6 +59,7 @@ def batch_kernel(law: str):
         cg: BatchCGArrays,
         entries: Entries,
         elements: BatchElements,
+        records: BatchRecords,
         q_out: wp.array2d(dtype=wp.vec3),
         qd_out: wp.array2d(dtype=wp.vec3),
     ):
@@ -118,6 +121,8 @@ def batch_kernel(law: str):
                 )
             if i == 0 and driven == 0:
                 record_force(press, b, step, f)  # the feedback force: internal forces on the probe's vertex
+                if wp.static(RECORDS):
+                    record_curve(records, b, step, press.ramp_steps, f)
             cg.diag[b, i] = D
             cg.diag_inv[b, i] = wp.inverse(D)
             rhs = implicit_rhs(f, Kv, correction, dt)
@@ -142,6 +147,8 @@ def batch_kernel(law: str):
 
         if constrained != 0:
             record_force(press, b, step, reaction)  # the feedback force: the sum of the contact reactions
+            if wp.static(RECORDS):
+                record_curve(records, b, step, press.ramp_steps, reaction)
 
         # 4) v1 = v0 + dv, x1 = x0 + dt v1; the driven vertex goes where the probe puts it
         for i in range(free_n):
@@ -165,11 +172,11 @@ def step_batch(batch, step, state_in, state_out, scratch, max_iterations, tolera
     """One implicit step of every palpation of `batch`: state_in -> state_out, (q, qd) pairs."""
     m, r, p = batch.model, batch.regions, batch
     wp.launch(
-        batch_kernel(m.law),
+        batch_kernel(m.law, p.records.on),
         dim=p.batch_size,
         inputs=[
             r.arrays, m.arrays, 1.0, p.press_arrays, p.sphere_arrays, int(step), int(max_iterations), float(tolerance),
-            state_in[0], state_in[1], scratch.arrays, m.entries, p.elements,
+            state_in[0], state_in[1], scratch.arrays, m.entries, p.elements, p.records.arrays,
         ],
         outputs=[state_out[0], state_out[1]],
         device=m.device,

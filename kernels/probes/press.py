@@ -8,6 +8,8 @@ same bits.
 
 import warp as wp
 
+from ..arrays import BatchRecords
+
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
@@ -43,6 +45,50 @@ def record_peak(peak2: wp.float64, peak_f: wp.vec3, f: wp.vec3):
     if m2 > peak2:
         return m2, f
     return peak2, peak_f
+
+
+@wp.func
+def curve_slot(step: int, ramp_steps: int, points: int):
+    # the force curve's sample taken after `step`, or -1: sample k at the first step of the ramp whose
+    # depth reaches (k + 1) / points of the press's (points <= ramp_steps: at most one a step)
+    if step >= ramp_steps:
+        return -1
+    crossed = (step + 1) * points // ramp_steps
+    if crossed > step * points // ramp_steps:
+        return crossed - 1
+    return -1
+
+
+@wp.func
+def record_curve(records: BatchRecords, b: int, step: int, ramp_steps: int, f: wp.vec3):
+    # the force record's samples along the ramp (the same force record_peak takes)
+    k = curve_slot(step, ramp_steps, records.curve_points)
+    if k >= 0:
+        records.force_curve[b, k] = f
+
+
+@wp.func
+def footprint_frame(direction: wp.vec3):
+    # the tactile grid's axes (e1, e2), both normal to the press direction: e1 = direction x the world
+    # axis least aligned with it (x, else y), normalized; e2 = direction x e1
+    axis = wp.vec3(1.0, 0.0, 0.0)
+    if wp.abs(direction[0]) > 0.9:
+        axis = wp.vec3(0.0, 1.0, 0.0)
+    e1 = wp.normalize(wp.cross(direction, axis))
+    return e1, wp.cross(direction, e1)
+
+
+@wp.func
+def record_contact(records: BatchRecords, b: int, v: int, x: wp.vec3, c: wp.vec3, centre: wp.vec3, direction: wp.vec3, radius: float):
+    # a vertex in contact at the end of the hold: its share of the surface into the patch, its contact
+    # force along the press (the tissue pushing back) into the grid cell over which it lies
+    records.patch_area[b] = records.patch_area[b] + wp.float64(records.vertex_area[v])
+    n = records.map_size
+    e1, e2 = footprint_frame(direction)
+    r = x - centre
+    i = wp.clamp(int((wp.dot(r, e1) + radius) / (2.0 * radius) * float(n)), 0, n - 1)
+    j = wp.clamp(int((wp.dot(r, e2) + radius) / (2.0 * radius) * float(n)), 0, n - 1)
+    records.tactile[b, j * n + i] = records.tactile[b, j * n + i] - wp.float64(wp.dot(c, direction))
 
 
 @wp.kernel
