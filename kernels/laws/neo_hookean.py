@@ -46,7 +46,6 @@ from typing import Any
 
 import warp as wp
 
-from .springs import anchor_force
 from .tets import ENTRY_PARAMS, ENTRY_TOPOLOGY, VOLUMETRIC, Entries, TetEntry, column, nodal_pressure, tet_law  # noqa: F401
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
@@ -61,32 +60,22 @@ def corner_force(F: wp.mat33, dJ: wp.mat33, p: TetEntry, pressure: float):
     return (-p.volume) * (p.mu * (F * p.gradient) + (p.mu * (J - 2.0) + pressure) * (dJ * p.gradient))
 
 
-_, implicit_row, static_row = tet_law(corner_force, shear=1.0, element_bulk=1.0)
-"""The implicit step's functions (kernels/laws/tets.py): Gauss-Newton blocks V_0 (mu (b_a . b_b) I +
-(mu + lambda_0) (dJ b_a)(dJ b_b)^T)."""
-
-
 @wp.func
-def vertex_force(
-    x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float,
-    begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, qd: Any, pressure: Any,
-):
-    # the internal force on a vertex at x with velocity u, for every explicit kernel (tets.tet_law's
-    # vertex_force says what each argument is): its anchor and damper, then corner_force of each
-    # incident tet written without F (a third of the arithmetic),
-    # each tet seen as (i, a, j, k), the vertex a (TetEntry): -V_0 mu F b_a = -(shear . edges from x_i)
-    # and -V_0 dJ b_a = -(x_j - x_i) x (x_k - x_i) / 6, the gradient of the deformed volume
-    f = anchor_force(x, u, x_rest, ka, kda, scale)
-    for k in range(begin, end):
-        t = topology[k]
-        p = params[k + shift]
-        xi = q[t[0]]
-        eia = x - xi
-        eij = q[t[2]] - xi
-        eik = q[t[3]] - xi
-        n6 = wp.cross(eij, eik)
-        v6 = wp.dot(n6, eia)
-        s = p.shear
-        pt = 0.25 * ((pressure[t[0]] + pressure[t[1]]) + (pressure[t[2]] + pressure[t[3]]))
-        f -= (s[0] * eia + s[1] * eij + s[2] * eik) + ((p.mu_v6 * v6 - 2.0 * p.mu + pt) * (1.0 / 6.0)) * n6
-    return f
+def entry_force(x: wp.vec3, t: wp.vec4i, p: TetEntry, q: Any, pressure: Any):
+    # corner_force on the entry's vertex at x written without F (a third of the arithmetic), the tet
+    # seen as (i, a, j, k), the vertex a (TetEntry): -V_0 mu F b_a = -(shear . edges from x_i) and
+    # -V_0 dJ b_a = -(x_j - x_i) x (x_k - x_i) / 6, the gradient of the deformed volume
+    xi = q[t[0]]
+    eia = x - xi
+    eij = q[t[2]] - xi
+    eik = q[t[3]] - xi
+    n6 = wp.cross(eij, eik)
+    v6 = wp.dot(n6, eia)
+    s = p.shear
+    pt = 0.25 * ((pressure[t[0]] + pressure[t[1]]) + (pressure[t[2]] + pressure[t[3]]))
+    return -((s[0] * eia + s[1] * eij + s[2] * eik) + ((p.mu_v6 * v6 - 2.0 * p.mu + pt) * (1.0 / 6.0)) * n6)
+
+
+vertex_force, implicit_row, static_row = tet_law(corner_force, shear=1.0, element_bulk=1.0, entry_force=entry_force)
+"""The step kernels' functions (kernels/laws/tets.py): the explicit gather from entry_force; Gauss-Newton
+blocks V_0 (mu (b_a . b_b) I + (mu + lambda_0) (dJ b_a)(dJ b_b)^T)."""

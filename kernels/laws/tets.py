@@ -124,11 +124,13 @@ def corner_gradient(dm_inv: wp.mat33, c: int):
     return wp.vec3(dm_inv[c - 1, 0], dm_inv[c - 1, 1], dm_inv[c - 1, 2])
 
 
-def tet_law(corner_force: Any, shear: float, element_bulk: float):
+def tet_law(corner_force: Any, shear: float, element_bulk: float, entry_force: Any = None):
     """(vertex_force, implicit_row, static_row) of a tet law whose element force on a corner is
     `corner_force(F, dJ, p, pressure)` (p: the TetEntry; pressure: the tet's mean nodal pressure), and
     whose Gauss-Newton blocks are K_ab = V_0 (shear mu (b_a . b_b) I + (element_bulk mu + lambda_0)
-    (dJ b_a)(dJ b_b)^T): positive semi-definite in every state (neo_hookean.py's docstring)."""
+    (dJ b_a)(dJ b_b)^T): positive semi-definite in every state (neo_hookean.py's docstring).
+    `entry_force(x, t, p, q, pressure)`: the same force on the entry's vertex (at x) written for the
+    explicit kernels' gather (vertex_force), where a law has a cheaper form; default corner_force's."""
     SHEAR, ELEMENT_BULK = float(shear), float(element_bulk)
 
     @wp.func
@@ -136,6 +138,14 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float):
         # the tet's dJ/dF and its element force on the corner p.corner, at positions q
         F, dJ = tet_state(q, t, p)
         return dJ, corner_force(F, dJ, p, tet_pressure(t, pressure))
+
+    @wp.func
+    def corner_entry_force(x: wp.vec3, t: wp.vec4i, p: TetEntry, q: Any, pressure: Any):
+        # the tet's force on the entry's vertex, from corner_force
+        dJ, fc = tet_term(q, t, p, pressure)
+        return fc
+
+    ENTRY_FORCE = corner_entry_force if entry_force is None else entry_force
 
     @wp.func
     def block(p: TetEntry, g_a: wp.vec3, b_a: wp.vec3, b_c: wp.vec3, g_c: wp.vec3):
@@ -152,8 +162,7 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float):
         # data params[k + shift]; corner positions from q, nodal pressures from `pressure`, indexed as q)
         f = anchor_force(x, u, x_rest, ka, kda, scale)
         for k in range(begin, end):
-            dJ, fc = tet_term(q, topology[k], params[k + shift], pressure)
-            f += fc
+            f += ENTRY_FORCE(x, topology[k], params[k + shift], q, pressure)
         return f
 
     @wp.func
