@@ -66,7 +66,11 @@ def make_tets(kind: str, scene, mesh, near, probe_radius: float, depth: float):
     edge = pressed_edge(probe_radius, depth)
     if kind == "wall":
         mean = float(mesh.edge_rest_length.mean())
-        return extrude_wall(mesh, scene.tissue.thickness, edge=mean if edge is None else min(edge, mean))
+        wall = extrude_wall(mesh, scene.tissue.thickness, edge=mean if edge is None else min(edge, mean))
+        if scene.tissue.foundation > 0.0:  # anchors act on a surface: a tet mesh has none
+            wall.notes = (*wall.notes, f"the foundation ({scene.tissue.foundation * 1e-6:g} kPa/mm) is the membrane's: "
+                                       "a wall of tets has none, its inner surface is free")
+        return wall
     if edge is None or near is None or not len(np.asarray(near).reshape(-1, 3)):
         return tetrahedralize(mesh)
     return tetrahedralize(mesh, near=near, near_edge=edge)
