@@ -144,7 +144,7 @@ def _pytetwild():
 
 def tetrahedralize(surface: TissueMesh, *, edge: float | None = None, near=None, near_edge: float | None = None,
                    near_radius: float | None = None, epsilon: float = 1e-3, threads: int = 1,
-                   iterations: int = 20, max_tets: float = MAX_TETS) -> TissueMesh:
+                   iterations: int = 20, max_tets: float | None = None) -> TissueMesh:
     """The volume inside a closed surface, as a TissueMesh of positively oriented tets.
 
     edge: target edge away from the probe [m] (default: the bounding box's diagonal / 20).
@@ -155,7 +155,8 @@ def tetrahedralize(surface: TissueMesh, *, edge: float | None = None, near=None,
     threads: fTetWild's threads (1, the default, gives the same mesh on every run).
     iterations: fTetWild's optimization passes at most (its default 80 took twice as long on an
       icosphere for the same minimum mean ratio; docs/volume.md).
-    max_tets: refuse (InputError) a field that would make more tets than this (estimate_tets), before fTetWild runs.
+    max_tets: refuse (InputError) a field that would make more tets than this (estimate_tets), before fTetWild runs
+      (default MAX_TETS, read when called).
     Raises InputError for an open or non-manifold surface, or when fTetWild is not installed.
     """
     check_closed(surface)
@@ -174,7 +175,7 @@ def tetrahedralize(surface: TissueMesh, *, edge: float | None = None, near=None,
         background = {"bg_vertices": v, "bg_tets": t, "bg_values": s}
         count = len(np.asarray(near).reshape(-1, 3))
         sizing += f", {near_edge * 1e3:.3g} mm within {radius * 1e3:.3g} mm of {'the probe' if count == 1 else f'{count} points'}"
-    check_size(surface.name, estimate_tets(x, surface.triangles, v, s), max_tets, sizing)
+    check_size(surface.name, estimate_tets(x, surface.triangles, v, s), MAX_TETS if max_tets is None else max_tets, sizing)
     cwd = os.getcwd()
     with tempfile.TemporaryDirectory() as scratch:  # fTetWild writes __tracked_surface.stl into the cwd
         try:
