@@ -204,3 +204,20 @@ def test_dataset_spec_volume(tmp_path, ball_file):
     assert set(item.plan.vertices) <= set(mesh.surface_vertices.tolist())
     assert (mesh.vertices[item.plan.vertices, 2] >= item.plan.fixed_below).all()  # the tets' far-side support
     assert main(["sweep", "--dataset", str(spec), "--out", str(tmp_path / "o"), "--volume", "auto"]) == 2
+
+
+def test_touch_and_the_python_api_follow_the_scenes_wall(tmp_path, ball_file):
+    """A scene's [tissue] wall = "tets" is the same wall wherever the scene is read: touch's regions and the Python
+    API's palpation are on the wall's tets (palpate's --wall tets: the test above), the contact the same vertex."""
+    import almsdm_warp as am
+
+    scene = scene_file(tmp_path, ball_file, "", 'wall = "tets"\nrayleigh_alpha_per_s = 100.0\n[probe]\nradius_mm = 5.0\n'
+                                                "[press]\ndepth_mm = 2.0\n[region]\nrings = 2")
+    out = tmp_path / "touch.json"
+    assert main(["touch", str(scene), "--json", str(out)]) == 0
+    touched = json.loads(out.read_text())
+    assert touched["mesh"]["tetrahedra"] == 2880  # 320 triangles x 3 layers of 1 mm (0.45 sqrt(5 x 2) = 1.42 mm) x 3
+    pal = am.palpation(str(scene), integrator="implicit", dt=2e-3)
+    top = int(np.argmax(trimesh.load(ball_file).vertices[:, 2]))
+    assert pal.model.mesh.tet_count == 2880 and pal.model.law == "neo-hookean" and touched["contact"]["vertex"] == top
+    assert pal.press(2e-3, 0.04, 0.04, 0.02).hold_force_N > 0.0
