@@ -173,11 +173,6 @@ def _plan(args, devices, times):
     tol = auto_tol(args, rings, scene)
     radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
     depth = press.depth if args.depth_mm is None else args.depth_mm * 1e-3
-    check_limit(args.points, "points", "--points")
-    scene, mesh, pressed = _tets(args, scene0, scene, mesh, radius, depth)
-    scene = check_law(scene, mesh, args.integrator, "batch")
-    if tol is not None:
-        check_law(scene, mesh, args.integrator, "adaptive", "--rings auto (each region sized by an adaptive press): ")
     ramp = press.ramp if args.ramp_s is None else args.ramp_s
     hold = press.hold if args.hold_s is None else args.hold_s
     settle = press.settle if args.settle_s is None else args.settle_s
@@ -185,6 +180,11 @@ def _plan(args, devices, times):
     frames = check_protocol(depth, dt, ramp, hold, settle, 1, float(np.ptp(mesh.vertices, axis=0).max()))
     check_probe_radius(radius, mesh)  # before any work, as the batch checks it again
     check_sphere_travel(radius, depth, dt, ramp)
+    check_limit(args.points, "points", "--points")
+    scene, mesh, pressed = _tets(args, scene0, scene, mesh, radius, depth)  # the checks above hold on its tets too
+    scene = check_law(scene, mesh, args.integrator, "batch")
+    if tol is not None:
+        check_law(scene, mesh, args.integrator, "adaptive", "--rings auto (each region sized by an adaptive press): ")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     scales = scene.lesion.model_scales(mesh, scene.tissue, scene.law) if scene.lesion is not None else {}
     t0, sampling = time.perf_counter(), None
