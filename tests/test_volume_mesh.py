@@ -110,7 +110,8 @@ def test_real_liver_surface_meshes():
 
 
 def test_volume_auto_makes_a_volume_only_for_a_volumetric_law(ball):
-    from almsdm_warp.cli.volume_arg import needs_volume, volume_for_press
+    from almsdm_warp.cli.volume_arg import needs_volume
+    from almsdm_warp.scene.volume import make_tets
     from almsdm_warp.tissue.material import Material
     from almsdm_warp.tissue.params import TissueParams
 
@@ -121,8 +122,8 @@ def test_volume_auto_makes_a_volume_only_for_a_volumetric_law(ball):
     assert not needs_volume("auto", surface, material, "springs")  # today's default law: as read
     assert not needs_volume("auto", surface, TissueParams(), "neo-hookean")
     assert not needs_volume("auto", vol, material, "neo-hookean")
-    pressed = volume_for_press(surface, top, probe_radius=0.05, depth=0.005)  # a = 15.8 mm, edge 7.1 mm
-    assert pressed.is_volume and any("7.12 mm near the probe" in n for n in pressed.notes)
+    pressed = make_tets("volume", None, surface, top, probe_radius=0.05, depth=0.005)  # a = 15.8 mm, edge 7.1 mm
+    assert pressed.is_volume and any("7.12 mm within 28.5 mm of the probe" in n for n in pressed.notes)
 
 
 def test_bad_volume_choice_is_one_line_exit_2(capsys):

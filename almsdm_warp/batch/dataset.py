@@ -95,7 +95,7 @@ OWN = ("dataset.json", "items", "maps", "table.npz", "table.csv", "table.parquet
 """What a dataset folder holds (and temporary files starting with a dot): a folder with anything else is not resumed into."""
 SPEC_KEYS = {
     "dataset": ("scenes", "points", "rings", "integrator", "dt_ms", "scale_mm", "baseline", "maps", "csv", "parquet", "chunk",
-                "curve_points", "tactile_size", "lesion_labels"),
+                "curve_points", "tactile_size", "lesion_labels", "volume"),
     "press": ("depth_mm", "ramp_s", "hold_s", "settle_s"),
     "lesions": ("count", "depth_mm", "centers_mm", "radii_mm", "stiffness_factors"),
 }
@@ -136,6 +136,8 @@ class DatasetSpec:
     """The rows for learning each press keeps (batch/records.py): [dataset] curve_points, tactile_size, lesion_labels."""
     chunk: int | None = None
     """Points per resumable part (None: 64 on the CPU, an item's points on a GPU)."""
+    volume: str | None = None
+    """"auto" or "off" for every scene (scene/volume.py), or None: each scene's [mesh] volume."""
     source: dict = field(default_factory=dict)
     """The spec as read (interface units), kept in the manifest to say what changed on a refused resume."""
 
@@ -172,6 +174,11 @@ def load_spec(path) -> DatasetSpec:
 
         require_pyarrow(f"{where}: [dataset] parquet = true")
     spec.chunk = _int(ds, "chunk", where, "[dataset]", None, required=False)
+    if "volume" in ds:
+        from ..scene.loader import check_choice
+        from ..mesh.volume import VOLUME_CHOICES
+
+        spec.volume = check_choice(ds["volume"], VOLUME_CHOICES, f"{where}: [dataset] volume")
     press = data.get("press", {})
     spec.press = {k.rsplit("_", 1)[0]: _number(press, k, where, "[press]", None, "> 0" if k == "depth_mm" else ">= 0")
                   / (1000.0 if k == "depth_mm" else 1.0) for k in press}
@@ -356,6 +363,9 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
 
     rings = spec.rings if spec.rings is not None else scene.rings
     mesh = scene.load_mesh()
+    from ..scene.volume import scene_tets  # a surface made tets where the scene or spec asks: finest at its points
+
+    scene, mesh, pressed = scene_tets(scene, mesh, spec.points, spec.press.get("depth", scene.press.depth), spec.volume)
     scene = scene.with_support(mesh, float(mesh.vertices[top_vertex(mesh), 2]))
     scene = replace(scene, law=resolve_law(scene.law, mesh, scene.tissue))
     try:  # the scene's [tissue] law: a batch's kernels, before any work
@@ -369,7 +379,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     check_limit(spec.points, "points", "[dataset] points")
     check_probe_radius(scene.probe_radius, mesh)  # before any work, as the batch checks it again
     check_sphere_travel(scene.probe_radius, press["depth"], spec.dt, press["ramp"])
-    points, vertices = pressable_points(mesh, spec.points, scene.fixed_below)
+    points, vertices = pressed if pressed is not None else pressable_points(mesh, spec.points, scene.fixed_below)
     chunk = spec.chunk or (len(vertices) if cuda else 64)
     tol = (scene.tol or AUTO_TOL) if rings == AUTO else None
     plan = SweepPlan(mesh, scene.tissue, None, None, 1 if tol else int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],

@@ -372,7 +372,7 @@ def _material_from_flags(args, scene, mesh):
         from ..tissue.laws import LAWS, default_law
 
         law = getattr(args, "law", None) or scene.law or default_law(True, tissue)
-        if not (getattr(args, "volume", "off") == "auto" and law in LAWS and LAWS[law].volumetric):
+        if not ((getattr(args, "volume", None) or scene.volume) == "auto" and law in LAWS and LAWS[law].volumetric):
             raise InputError(f"{mesh.name} is a surface mesh: the material model needs a membrane --thickness-mm > 0 "
                              f"(or the scene's [tissue] thickness_mm)")
     return tissue

@@ -7,7 +7,8 @@ import time
 from pathlib import Path
 
 SPEC_DECIDES = ("scene", "points", "rings", "tol_mm", "depth_mm", "ramp_s", "hold_s", "settle_s", "dt_ms", "scale_mm", "png", "ray",
-                "law", "integrator", "probe_radius_mm", "tissue", "support", "fixed_below_mm", "curve_points", "tactile_size", "lesion_labels")
+                "law", "integrator", "probe_radius_mm", "tissue", "support", "fixed_below_mm", "curve_points", "tactile_size", "lesion_labels",
+                "volume", "wall")
 """sweep's arguments that a dataset spec decides (an error beside --dataset, not silently ignored)."""
 
 

@@ -36,7 +36,7 @@ from .args import (
     rings_text,
     scene_with_tissue_args,
 )
-from .volume_arg import add_volume_arg, needs_volume, volume_for_press
+from .volume_arg import add_volume_arg, on_tets, tets_for
 
 __all__ = ["AUTO_TOL_MM", "GLOBAL_RINGS", "add_parser", "cmd_palpate"]
 
@@ -102,16 +102,16 @@ def _contact(args, mesh, device):
     return v, mesh.vertices[v], {}
 
 
-def _volume(args, scene, mesh, point, depth, device):
-    """--volume auto: the surface tetrahedralized, finest at the press, and the contact found again on it."""
+def _on_tets(args, scene0, kind, scene, mesh, point, depth, device):
+    """--volume auto or --wall tets: the surface made tets, finest at the press, the scene's flags applied again
+    on them, and the contact found again there: (scene, mesh, vertex, point, extra)."""
     radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
-    mesh = volume_for_press(mesh, point, radius, depth)
-    print_notes(mesh)
+    scene, mesh = on_tets(args, scene0, kind, scene, mesh, point, radius, depth)
     if args.vertex is None:
-        return (mesh, *_contact(args, mesh, device))
-    surface = mesh.surface_vertices  # the surface's vertex ids are gone: the nearest new surface vertex
+        return (scene, mesh, *_contact(args, mesh, device))
+    surface = mesh.surface_vertices  # a volume's surface vertex ids are new (a wall keeps them): the nearest
     vertex = int(surface[np.argmin(np.linalg.norm(mesh.vertices[surface] - point, axis=1))])
-    return mesh, vertex, mesh.vertices[vertex], {}
+    return scene, mesh, vertex, mesh.vertices[vertex], {}
 
 
 @dataclass
@@ -178,8 +178,8 @@ def _resolve(args) -> _Run:
     """The device, scene, mesh, region, press protocol and contact that the arguments ask for."""
     quiet_warp()
     device = get_device(args.device)
-    scene, mesh = load_scene_and_mesh(args)
-    scene = scene_with_tissue_args(args, scene, mesh)
+    scene0, mesh = load_scene_and_mesh(args)
+    scene = scene_with_tissue_args(args, scene0, mesh)
 
     rings = scene.rings if args.rings is None else args.rings
     # more rings than vertices can only repeat the whole component (and 1e20 overflows the ring table)
@@ -192,8 +192,9 @@ def _resolve(args) -> _Run:
     dt = args.dt_ms * 1e-3
     check_protocol(depth, dt, ramp, hold, settle, args.presses, float(np.ptp(mesh.vertices, axis=0).max()))
     vertex, point, contact_extra = _contact(args, mesh, device)
-    if needs_volume(args.volume, mesh, scene.tissue, scene.law):
-        mesh, vertex, point, contact_extra = _volume(args, scene, mesh, point, depth, device)
+    kind = tets_for(args, scene, mesh)
+    if kind is not None:
+        scene, mesh, vertex, point, contact_extra = _on_tets(args, scene0, kind, scene, mesh, point, depth, device)
     scene = scene.with_support(mesh, float(mesh.vertices[vertex, 2]))  # a relative support, from this contact
     if scene.fixed_below is not None and mesh.vertices[vertex, 2] < scene.fixed_below:
         raise InputError(f"the contact vertex {vertex} (z {mesh.vertices[vertex, 2] * 1e3:.4g} mm) is supported: it lies below "

@@ -13,6 +13,7 @@ from ..checks import LIMITS, check_limit, check_protocol, check_region_steps, ch
 from ..errors import InputError
 from .dataset import add_dataset_arg, cmd_dataset
 from .args import rings_text as words_for_rings
+from .volume_arg import add_volume_arg, tets_for
 from .args import (auto_tol, add_integrator_arg, add_law_arg, add_tissue_args, check_law, count_arg, get_device, load_scene_and_mesh,
                    number_arg, quiet_warp, rings_arg, scene_with_tissue_args)
 
@@ -51,6 +52,7 @@ def add_parser(sub) -> None:
     p.add_argument("--curve-points", type=count_arg, default=None, metavar="N", help="rows for learning: the force curve, N samples along the ramp (columns force_curve_N and force_curve_depth_mm, N values a row)")
     p.add_argument("--lesion-labels", action="store_true", default=None, help="rows for learning, for a scene with a [lesion]: whether the lesion lies in the probe's footprint (lesion_in_footprint) and the contact vertex's distance to its surface (lesion_distance_mm)")
     p.add_argument("--tactile-size", type=count_arg, default=None, metavar="N", help="rows for learning, with a sphere: the contact patch's area (patch_area_mm2) and the contact pressure on an N x N grid over the sphere's footprint at the end of the hold (tactile_map_kPa, N*N values a row)")
+    add_volume_arg(p)
     add_tissue_args(p)
     add_dataset_arg(p)
     p.set_defaults(func=cmd_sweep, start_devices=True, integrator=None)  # None: not given (a dataset's spec decides it)
@@ -164,14 +166,11 @@ def _plan(args, devices, times):
     from ..batch.sweep_plan import SweepPlan, check_sphere_travel, default_chunk
     from ..protocol.palpation import check_probe_radius
     from ..batch.sweep_auto import rings_summary
-    scene, mesh = load_scene_and_mesh(args)
-    scene = scene_with_tissue_args(args, scene, mesh)
+    scene0, mesh = load_scene_and_mesh(args)
+    scene = scene_with_tissue_args(args, scene0, mesh)
     press = scene.press
     rings = scene.rings if args.rings is None else args.rings
     tol = auto_tol(args, rings, scene)
-    scene = check_law(scene, mesh, args.integrator, "batch")
-    if tol is not None:
-        check_law(scene, mesh, args.integrator, "adaptive", "--rings auto (each region sized by an adaptive press): ")
     radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
     depth = press.depth if args.depth_mm is None else args.depth_mm * 1e-3
     ramp = press.ramp if args.ramp_s is None else args.ramp_s
@@ -182,10 +181,16 @@ def _plan(args, devices, times):
     check_probe_radius(radius, mesh)  # before any work, as the batch checks it again
     check_sphere_travel(radius, depth, dt, ramp)
     check_limit(args.points, "points", "--points")
+    scene, mesh, pressed = _tets(args, scene0, scene, mesh, radius, depth)  # the checks above hold on its tets too
+    scene = check_law(scene, mesh, args.integrator, "batch")
+    if tol is not None:
+        check_law(scene, mesh, args.integrator, "adaptive", "--rings auto (each region sized by an adaptive press): ")
     check_ring_count(rings, mesh.vertex_count, "--rings" if args.rings is not None else "the scene's [region] rings")
     scales = scene.lesion.model_scales(mesh, scene.tissue, scene.law) if scene.lesion is not None else {}
     t0, sampling = time.perf_counter(), None
-    if tol is None:  # (--rings auto sizes each point's region first: every point is needed at once)
+    if pressed is not None:  # the points the tets were made finest at
+        points, vertices = pressed
+    elif tol is None:  # (--rings auto sizes each point's region first: every point is needed at once)
         points, vertices, sampling = start_sampling(mesh, args.points, scene.fixed_below)
     else:
         points, vertices = pressable_points(mesh, args.points, scene.fixed_below)
@@ -246,6 +251,21 @@ def check_records(records, radius: float, integrator: str) -> None:
             records.check(radius, integrator, names=("--curve-points", "--tactile-size"))
         except ValueError as exc:
             raise InputError(str(exc)) from None
+def _tets(args, scene0, scene, mesh, radius: float, depth: float):
+    """--volume auto or --wall tets (or the scene's keys): (scene, its tets, (points, vertices) pressed on them),
+    the points sampled on the surface and the tets made finest at each (scene/volume.py); else (scene, mesh, None)."""
+    from dataclasses import replace
+
+    from ..scene.volume import snap_to, sweep_tets
+    from .args import print_notes
+
+    kind = tets_for(args, scene, mesh)
+    if kind is None:
+        return scene, mesh, None
+    tets, points = sweep_tets(kind, replace(scene, probe_radius=radius), mesh, args.points, depth)
+    print_notes(tets)
+    scene = scene_with_tissue_args(args, scene0, tets)
+    return scene, tets, snap_to(tets, points, scene.fixed_below)
 
 
 def _substeps(plan) -> int:

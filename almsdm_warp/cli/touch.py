@@ -29,23 +29,19 @@ def add_parser(sub) -> None:
 def cmd_touch(args) -> int:
     """Load a scene or mesh, touch it with the probe, build the ring region and print it."""
     from ..export.writers import check_output, write_output
-    from ..region.contact import find_contacts, top_vertex
+    from ..region.contact import find_contacts
     from ..region.region import Region
 
     if args.json:
         check_output(args.json, "record", "--json")
     quiet_warp()
-    scene, mesh = load_scene_and_mesh(args)
-    scene = scene_with_tissue_args(args, scene, mesh)
+    scene0, mesh = load_scene_and_mesh(args)
+    scene = scene_with_tissue_args(args, scene0, mesh)
     device = get_device(args.device)
+    scene, mesh = _on_tets(args, scene0, scene, mesh, device)
     print(mesh.summary())
 
-    if args.probe_mm is not None:
-        probe = probe_position(args.probe_mm)
-    else:
-        # above the highest surface vertex: a press from the top
-        top = top_vertex(mesh)
-        probe = mesh.vertices[top] + np.array([0.0, 0.0, 5e-3])
+    probe = _probe(args, mesh)
     contact = find_contacts(mesh, probe, device=device)
     check_contact(contact, probe, mesh)
     print(
@@ -82,6 +78,30 @@ def cmd_touch(args) -> int:
         )
         print(f"wrote {args.json}")
     return 0
+
+
+def _on_tets(args, scene0, scene, mesh, device):
+    """(scene, mesh): the scene's surface made tets where its [mesh] volume or [tissue] wall asks (as palpate's
+    --volume and --wall, scene/volume.py), finest at the probe's contact for the scene's press; else as given."""
+    from ..region.contact import find_contacts
+    from .volume_arg import on_tets, tets_for
+
+    kind = tets_for(args, scene, mesh)
+    if kind is None:
+        return scene, mesh
+    contact = find_contacts(mesh, _probe(args, mesh), device=device)
+    check_contact(contact, _probe(args, mesh), mesh)
+    radius = scene.probe_radius if args.probe_radius_mm is None else args.probe_radius_mm * 1e-3
+    return on_tets(args, scene0, kind, scene, mesh, np.asarray(contact.point), radius, scene.press.depth)
+
+
+def _probe(args, mesh) -> np.ndarray:
+    """--probe-mm, else 5 mm above the highest surface vertex (a press from the top) [m]."""
+    from ..region.contact import top_vertex
+
+    if args.probe_mm is not None:
+        return probe_position(args.probe_mm)
+    return mesh.vertices[top_vertex(mesh)] + np.array([0.0, 0.0, 5e-3])
 
 
 def _patch(mesh, vertex: int, radius: float, depth: float) -> np.ndarray:

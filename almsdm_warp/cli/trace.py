@@ -27,6 +27,7 @@ from ..errors import InputError
 from ..export.tables import TableLayout, millimetres
 from ..mesh.validate import MAX_COORDINATE_M
 from .args import add_command, add_integrator_arg, add_law_arg, add_probe_radius_arg, add_tissue_args, check_law, count_arg
+from .volume_arg import add_volume_arg
 from .args import auto_tol, get_device, load_scene_and_mesh, number_arg, path_arg, quiet_warp, rings_arg, rings_text, scene_with_tissue_args
 
 PATH_COLUMNS = ("t_s", "x_mm", "y_mm", "z_mm")
@@ -87,6 +88,7 @@ def add_parser(sub) -> None:
     for flag, old, dest, rule, default, metavar, text in COUPLING_FLAGS:
         c.add_argument(flag, dest=dest, type=number_arg(rule), default=default, metavar=metavar, help=text)
         c.add_argument(old, dest=dest, type=number_arg(rule), default=default, help=argparse.SUPPRESS)
+    add_volume_arg(p)
     add_tissue_args(p)
     p.set_defaults(func=cmd_trace)
 
@@ -202,9 +204,9 @@ def cmd_trace(args) -> int:
     coupling = make_coupling(args, dt)
     quiet_warp()
     device = get_device(args.device)
-    scene, mesh = _scene(args)
+    scene, mesh, given = _scene(args, dt, given)
     stroke = _make_stroke(args, scene, mesh, dt, device)
-    t, centre = given if given is not None else _builtin_path(stroke, dt)
+    t, centre = given if given is not None else _builtin_path(stroke.mesh, stroke.radius, dt)
     times, centres = resample(t, centre, dt)
     check_path_clear(stroke, times, centres)
     src = args.path_csv or "the built-in stroke"
@@ -237,10 +239,22 @@ def make_coupling(args, dt):
         raise InputError(f"--coupling-stiffness-n-per-mm {args.coupling_k:g}: {exc}") from None
 
 
-def _scene(args):
-    """The scene (with the tissue flags) and its mesh."""
-    scene, mesh = load_scene_and_mesh(args)
-    return scene_with_tissue_args(args, scene, mesh), mesh
+def _scene(args, dt, given):
+    """(The scene (with the tissue flags), its mesh, the path): with --volume auto or --wall tets (or the scene's
+    keys), the mesh made tets finest along the path (its contacts with the surface at rest; the built-in
+    stroke's path is then made on the surface, before the tets)."""
+    from .volume_arg import on_tets, path_contacts, tets_for
+
+    scene0, mesh = load_scene_and_mesh(args)
+    scene = scene_with_tissue_args(args, scene0, mesh)
+    kind = tets_for(args, scene, mesh)
+    if kind is None:
+        return scene, mesh, given
+    radius = _probe_radius(args, scene)
+    given = given if given is not None else _builtin_path(mesh, radius, dt)
+    contacts, depth = path_contacts(mesh, given[1], radius)
+    scene, mesh = on_tets(args, scene0, kind, scene, mesh, contacts, radius, depth)
+    return scene, mesh, given
 
 
 def _make_stroke(args, scene, mesh, dt, device):
@@ -291,14 +305,14 @@ def _probe_radius(args, scene) -> float:
     return scene.probe_radius if scene.probe_radius > 0 else DEFAULT_PROBE_RADIUS_MM * 1e-3
 
 
-def _builtin_path(stroke, dt):
-    """The built-in stroke on the scene (protocol.stroke.builtin_stroke: touch down, press 8 mm, slide
-    60 mm at 20 mm/s, lift), starting at rest at t = 0: (t [s], centre [m])."""
+def _builtin_path(mesh, radius, dt):
+    """The built-in stroke of a sphere of `radius` [m] on `mesh` (protocol.stroke.builtin_stroke: touch down, press
+    8 mm, slide 60 mm at 20 mm/s, lift), starting at rest at t = 0: (t [s], centre [m])."""
     from ..protocol.stroke import builtin_stroke
 
     check_steps(BUILTIN_STROKE_S, dt, "the built-in stroke")  # before its arrays are made
     try:
-        path = builtin_stroke(stroke.mesh, stroke.radius, dt=dt)
+        path = builtin_stroke(mesh, radius, dt=dt)
     except ValueError as exc:
         raise InputError(f"the built-in stroke: {exc}") from exc
     return path.t - path.t[0], path.centre

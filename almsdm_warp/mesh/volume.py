@@ -20,6 +20,9 @@ from ..errors import InputError
 from . import topology as topo
 from .tissue_mesh import TissueMesh
 
+VOLUME_CHOICES = ("off", "auto")
+"""--volume and a scene's [mesh] volume: off, the mesh as read; auto, a closed surface given for a volumetric law
+tetrahedralized, finest where it is pressed."""
 RESOLVED_EDGE = 0.45
 """Edge / contact radius at which a press is resolved (docs/calibration.md, "Mesh independence", the rule)."""
 SPLIT_RATIO = 4.0 / 3.0
@@ -28,6 +31,12 @@ GRADING = 0.5
 """How fast the target edge grows with the distance beyond the probe's disc [m per m]."""
 BACKGROUND_CELLS = 40
 """Cells along the longest side of the sizing field's background grid."""
+TETS_PER_EDGE_CUBE = 8.5
+"""Tets fTetWild makes per cube of its target edge (a regular tet's volume is e^3 / 8.49; measured on
+icospheres R 15-50 mm: 8.4-15, more where the surface is a larger share): the estimate of a mesh's size."""
+MAX_TETS = 250_000
+"""The most tets a surface is made into (about the estimate): beyond, fTetWild runs for many minutes and the
+model's set-up with it (about 1,600 tets a second here: 52,000 in 33 s); the refusal says what makes it smaller."""
 
 # the six tets of a cube around its diagonal 0-7 (corner c = i + 2j + 4k), the Freudenthal split:
 # one per order of the axes, so that neighbouring cubes share their faces' diagonals
@@ -66,7 +75,8 @@ def check_closed(surface: TissueMesh) -> None:
 def sizing_field(lo, hi, edge: float, near=None, near_edge: float | None = None, near_radius: float = 0.0,
                  cells: int = BACKGROUND_CELLS):
     """A background tet grid over the box [lo, hi] and its target edge at each grid point [m]:
-    near_edge within near_radius of `near`, growing by GRADING with the distance beyond, at most `edge`.
+    near_edge within near_radius of `near` (a point [3] or points [k, 3]: the nearest counts), growing by
+    GRADING with the distance beyond, at most `edge`.
 
     Each point takes the field's value one cell diagonal nearer to `near`, so that the linear
     interpolation inside a grid tet never exceeds the field. Returns (points [p, 3], tets [t, 4], values [p])."""
@@ -84,9 +94,43 @@ def sizing_field(lo, hi, edge: float, near=None, near_edge: float | None = None,
     tets[flip] = tets[flip][:, [0, 1, 3, 2]]
     values = np.full(len(points), float(edge))
     if near is not None and near_edge is not None:
-        gap = np.linalg.norm(points - np.asarray(near, dtype=np.float64), axis=1) - near_radius - step * math.sqrt(3.0)
+        gap = nearest_distance(points, near) - near_radius - step * math.sqrt(3.0)
         values = np.minimum(values, near_edge + GRADING * np.maximum(gap, 0.0))
     return points, tets.astype(np.int32), values
+
+
+def nearest_distance(points, near) -> np.ndarray:
+    """Each of `points` [p, 3]'s distance to the nearest of `near` (a point [3] or points [k, 3])."""
+    from scipy.spatial import cKDTree
+
+    near = np.asarray(near, dtype=np.float64).reshape(-1, 3)
+    return cKDTree(near).query(np.asarray(points, dtype=np.float64))[0]
+
+
+def estimate_tets(surface_mm, triangles, points, values) -> float:
+    """About how many tets fTetWild makes of the closed surface (vertices [mm]) for the sizing field
+    (sizing_field's grid points [mm] and target edges there [mm]): TETS_PER_EDGE_CUBE x the integral of
+    1 / edge^3 over the inside, a cell's volume a grid point inside the surface (VTK's inside test,
+    through pyvista: fTetWild's own dependency)."""
+    import pyvista as pv
+
+    step = float(np.min([np.diff(np.unique(points[:, k])).min(initial=np.inf) for k in range(3)]))
+    faces = np.column_stack([np.full(len(triangles), 3), triangles]).ravel()
+    cloud, shell = pv.PolyData(np.asarray(points, dtype=np.float64)), pv.PolyData(np.asarray(surface_mm, dtype=np.float64), faces)
+    if hasattr(cloud, "select_interior_points"):  # pyvista >= 0.47
+        inside = cloud.select_interior_points(shell, check_surface=False)["selected_points"]
+    else:
+        inside = cloud.select_enclosed_points(shell, check_surface=False)["SelectedPoints"]
+    inside = np.asarray(inside, dtype=bool)
+    return float(TETS_PER_EDGE_CUBE * step**3 * (np.asarray(values)[inside] ** -3.0).sum())
+
+
+def check_size(name: str, estimate: float, max_tets: float, sizing: str) -> None:
+    """InputError where the estimated tets exceed `max_tets`; `sizing` says what asked for the edges."""
+    if estimate > max_tets:
+        raise InputError(f"{name}: the tets would be about {estimate:,.0f} ({sizing}), more than {max_tets:,.0f}: "
+                         f"press fewer points or a shorter path, with a larger probe or deeper (coarser edges), "
+                         f"or --volume off / --wall membrane")
 
 
 def _pytetwild():
@@ -100,17 +144,19 @@ def _pytetwild():
 
 def tetrahedralize(surface: TissueMesh, *, edge: float | None = None, near=None, near_edge: float | None = None,
                    near_radius: float | None = None, epsilon: float = 1e-3, threads: int = 1,
-                   iterations: int = 20) -> TissueMesh:
+                   iterations: int = 20, max_tets: float | None = None) -> TissueMesh:
     """The volume inside a closed surface, as a TissueMesh of positively oriented tets.
 
     edge: target edge away from the probe [m] (default: the bounding box's diagonal / 20).
-    near: a point [m] (the probe's contact) where the edges are to be near_edge [m] or shorter
+    near: a point [m] (the probe's contact), or points [k, 3] (a sweep's, a path's), where the edges are to be near_edge [m] or shorter
       (`contact_edge` gives the resolved one) within near_radius [m] (default 4 x near_edge), growing
       by GRADING beyond; without them the target edge is `edge` everywhere.
     epsilon: how far the new surface may lie from the input, as a fraction of the diagonal.
     threads: fTetWild's threads (1, the default, gives the same mesh on every run).
     iterations: fTetWild's optimization passes at most (its default 80 took twice as long on an
       icosphere for the same minimum mean ratio; docs/volume.md).
+    max_tets: refuse (InputError) a field that would make more tets than this (estimate_tets), before fTetWild runs
+      (default MAX_TETS, read when called).
     Raises InputError for an open or non-manifold surface, or when fTetWild is not installed.
     """
     check_closed(surface)
@@ -119,13 +165,17 @@ def tetrahedralize(surface: TissueMesh, *, edge: float | None = None, near=None,
     lo, hi = x.min(axis=0), x.max(axis=0)
     diag = float(np.linalg.norm(hi - lo))
     edge_mm = diag / 20.0 if edge is None else edge * 1e3
-    background = {}
-    if near is not None and near_edge is not None:
-        radius = 4.0 * near_edge if near_radius is None else near_radius
-        pad = 0.05 * (hi - lo) + edge_mm
-        v, t, s = sizing_field(lo - pad, hi + pad, edge_mm, np.asarray(near) * 1e3, near_edge * 1e3 / SPLIT_RATIO,
-                               radius * 1e3)
+    background, sizing = {}, f"target edge {edge_mm:.3g} mm"
+    graded = near is not None and near_edge is not None
+    radius = (4.0 * near_edge if near_radius is None else near_radius) if graded else 0.0
+    pad = 0.05 * (hi - lo) + edge_mm
+    v, t, s = sizing_field(lo - pad, hi + pad, edge_mm, np.asarray(near) * 1e3 if graded else None,
+                           near_edge * 1e3 / SPLIT_RATIO if graded else None, radius * 1e3)
+    if graded:
         background = {"bg_vertices": v, "bg_tets": t, "bg_values": s}
+        count = len(np.asarray(near).reshape(-1, 3))
+        sizing += f", {near_edge * 1e3:.3g} mm within {radius * 1e3:.3g} mm of {'the probe' if count == 1 else f'{count} points'}"
+    check_size(surface.name, estimate_tets(x, surface.triangles, v, s), MAX_TETS if max_tets is None else max_tets, sizing)
     cwd = os.getcwd()
     with tempfile.TemporaryDirectory() as scratch:  # fTetWild writes __tracked_surface.stl into the cwd
         try:
@@ -142,7 +192,5 @@ def tetrahedralize(surface: TissueMesh, *, edge: float | None = None, near=None,
     flip = topo.tet_signed_volumes(points, tets) < 0  # fTetWild's corner order is the other hand
     tets[flip] = tets[flip][:, [0, 1, 3, 2]]
     mesh = TissueMesh.from_arrays(points, None, tets, scale=1.0, path=surface.path)
-    sizing = f", {near_edge * 1e3:.3g} mm near the probe" if background else ""
-    mesh.notes = (f"tetrahedralized by fTetWild: {mesh.tet_count} tets, target edge {edge_mm:.3g} mm{sizing}",
-                  *mesh.notes)
+    mesh.notes = (f"tetrahedralized by fTetWild: {mesh.tet_count} tets, {sizing}", *mesh.notes)
     return mesh

@@ -19,10 +19,12 @@ from typing import TYPE_CHECKING
 from ..errors import InputError
 from ..checks import AUTO, check_rings, check_value, describe, rings_text
 from ..protocol.schedule import PressParams
+from ..mesh.volume import VOLUME_CHOICES
 from ..tissue.laws import LAWS
 from ..tissue.material import Material, material_as_dict
 from ..tissue.params import TissueParams
 from ..tissue.presets import DEFAULT_PRESET, tissue_preset
+from ..tissue.wall import WALL_CHOICES
 from .schema import DEFAULT_TISSUE_MODEL, SCHEMA, TISSUE_MODELS
 from .support import describe_support, parse_support, support_height
 
@@ -40,6 +42,13 @@ DEFAULT_SCENE = "stomach"
 DEFAULT_LAW = None
 """The tissue law of a scene that names none ([tissue] law): None, the model's default for its mesh and
 tissue (tissue.laws.default_law: neo-Hookean tets for a material on a tet mesh, else springs)."""
+
+
+def check_choice(value, choices, what: str) -> str:
+    """`value` if it is one of `choices`, else InputError naming them."""
+    if not isinstance(value, str) or value not in choices:
+        raise InputError(f"{what} = {value!r} is not one of {', '.join(map(repr, choices))}")
+    return value
 
 
 def check_law_name(law, what: str) -> str:
@@ -88,6 +97,12 @@ class Scene:
     `fixed_below` once the mesh and the contact are known; None: `fixed_below` as given."""
     preset: str | None = None
     """The tissue preset the tissue came from (tissue.presets.PRESETS), or None (the scene's own)."""
+    volume: str = "off"
+    """[mesh] volume (mesh.volume.VOLUME_CHOICES): "auto", a closed surface given for a volumetric law made a
+    volume of tets, finest where it is pressed (cli/volume_arg.py); "off", the mesh as read."""
+    wall: str = "membrane"
+    """[tissue] wall (tissue.wall.WALL_CHOICES): a surface of a material with a thickness as a "membrane" on a
+    foundation (springs), or as a layer of "tets" that thick (tissue/wall.py)."""
 
     def __post_init__(self):
         object.__setattr__(self, "mesh_path", Path(self.mesh_path))
@@ -104,6 +119,8 @@ class Scene:
             check_law_name(self.law, "Scene.law")
         if self.support not in (None, "auto"):
             object.__setattr__(self, "support", parse_support(self.support))
+        check_choice(self.volume, VOLUME_CHOICES, "Scene.volume")
+        check_choice(self.wall, WALL_CHOICES, "Scene.wall")
         if self.tol is not None:
             object.__setattr__(self, "tol", check_value(self.tol, float, "> 0", "Scene.tol"))
             if self.rings != AUTO:
@@ -171,7 +188,8 @@ class Scene:
         for section, keys in SCHEMA.items():
             out[section] = {}
             if section == "tissue":
-                out[section] = {"model": self.tissue_model, **({"law": self.law} if self.law is not None else {}), **self._tissue_dict()}
+                out[section] = {"model": self.tissue_model, **({"law": self.law} if self.law is not None else {}),
+                                **({"wall": self.wall} if self.wall != Scene.wall else {}), **self._tissue_dict()}
                 continue
             for key, (attr, _kind, factor, _rule) in keys.items():
                 value = _get(self, section, attr)
@@ -244,6 +262,8 @@ def load_scene(path) -> Scene:
     mesh_path = _mesh_path(values["mesh"].get("path"), p, where)
     law = values["tissue"].pop("law", DEFAULT_LAW)
     law = None if law is None else check_law_name(law, f"{where}: [tissue] law")
+    wall = check_choice(values["tissue"].pop("wall", Scene.wall), WALL_CHOICES, f"{where}: [tissue] wall")
+    volume = check_choice(values["mesh"].get("volume", Scene.volume), VOLUME_CHOICES, f"{where}: [mesh] volume")
     tissue = _tissue(data.get("tissue", {}), values["tissue"], where)
 
     try:  # the SI values are checked again: say which file they came from
@@ -260,6 +280,8 @@ def load_scene(path) -> Scene:
             support=values["support"].get("support"),
             probe_radius=values["probe"].get("probe_radius", 0.0),
             law=law,
+            volume=volume,
+            wall=wall,
         )
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None
@@ -272,10 +294,10 @@ def _tissue(table: dict, values: dict, where: str) -> TissueParams | Material:
         raise InputError(f"{where}: [tissue] model = {model!r} is not one of {', '.join(map(repr, TISSUE_MODELS))}")
     keys = TISSUE_MODELS[model]
     for key in table:
-        if key not in ("model", "law") and key not in keys:
+        if key not in ("model", "law", "wall") and key not in keys:
             default = " (the default)" if "model" not in table else ""
             raise InputError(f"{where}: [tissue] {key} is a key of another tissue model, not of model = {model!r}{default}; "
-                             f"allowed with it: model, law, {', '.join(keys)}")
+                             f"allowed with it: model, law, wall, {', '.join(keys)}")
     if model == "material" and "youngs_modulus" not in values:
         raise InputError(f"{where}: [tissue] model = 'material' needs youngs_modulus_kPa (Young's modulus [kPa])")
     try:

@@ -59,9 +59,28 @@ def palpation(source=None, *, tissue: str | None = None, support: str | None = N
     if support is not None:
         scene = replace(scene, support=support, fixed_below=None)
     vertex = top_vertex(mesh) if vertex is None else int(vertex)
+    scene, mesh, vertex = _on_tets(scene, mesh, vertex, options.get("probe_radius"))
     scene = scene.with_support(mesh, float(mesh.vertices[vertex, 2]))
     pal = build_palpation(scene, mesh, **options)
     radius = pal.probe_radius
     pal.touch(vertex, scene.press.depth if radius > 0 else None)
     pal.scene = scene
     return pal
+
+
+def _on_tets(scene: Scene, mesh, vertex: int, probe_radius: float | None):
+    """(scene, mesh, vertex): the surface made tets where the scene's [mesh] volume or [tissue] wall asks
+    (scene/volume.py), finest at `vertex` for the scene's press, and the contact the nearest surface vertex
+    of the tets; else as given."""
+    import numpy as np
+
+    from .volume import make_tets, snap_to, tets_wanted
+
+    kind = tets_wanted(scene, mesh)
+    if kind is None:
+        return scene, mesh, vertex
+    point = mesh.vertices[vertex]
+    radius = scene.probe_radius if probe_radius is None else probe_radius
+    tets = make_tets(kind, scene, mesh, point, radius, scene.press.depth)
+    return scene, tets, int(snap_to(tets, np.asarray([point]))[1][0])
+

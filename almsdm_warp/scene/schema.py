@@ -22,8 +22,10 @@ SCHEMA: dict[str, dict[str, tuple[str, type, float, str]]] = {
     "mesh": {
         "path": ("path", str, 1.0, "path"),
         "scale_mm": ("scale_mm", float, 1.0, "> 0"),
+        "volume": ("volume", str, 1.0, "path"),  # "off" or "auto" (mesh.volume.VOLUME_CHOICES)
     },
     "tissue": {"model": ("model", str, 1.0, "path"), "law": ("law", str, 1.0, "path"),  # law: tissue.laws.LAWS
+               "wall": ("wall", str, 1.0, "path"),  # a surface's wall: "membrane" or "tets" (tissue.wall.WALL_CHOICES)
                **TISSUE_KEYS, **MATERIAL_KEYS},  # per model: TISSUE_MODELS
     "region": {
         "rings": ("rings", int, 1.0, ">= 1"),  # or the string "auto"
