@@ -178,3 +178,100 @@ def test_sweep_options_the_spec_decides_are_refused_beside_it(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert "SCENE is decided by the dataset spec" in err[0] and "--depth-mm is decided" in err[1]
     assert not (tmp_path / "out").exists()
+
+
+# -- items pressed together: the bits of each item pressed as a sweep of its own -------------------
+LIVER = """
+[dataset]
+scenes = ["liver"]  # neo-Hookean tets over a support: one explicit step a frame, two in the 8x lesion
+points = 3
+rings = 2
+dt_ms = 1.0
+maps = "none"
+[press]
+depth_mm = 4.0
+ramp_s = 0.02
+hold_s = 0.01
+settle_s = 0.01
+[lesions]
+count = 1
+depth_mm = 5.0
+radii_mm = [60.0]
+stiffness_factors = [8.0]
+"""
+
+
+def pressed(spec_path, out, devices, together):
+    spec = ds.load_spec(spec_path)
+    items = ds.plan_items(spec)
+    folder = ds.DatasetFolder(out, items, spec)
+    ds.press_dataset(folder, folder.open(), devices, together=together)
+    return folder.gather()
+
+
+@pytest.mark.parametrize("text, devices", [
+    (SPEC, ["cpu"]),  # a sphere on a membrane, the paper's constants on tet edges; chunks of 3
+    (SPEC.replace('dt_ms = 0.25', 'dt_ms = 0.25\nintegrator = "implicit"'), ["cpu"]),
+    (LIVER, ["cpu"]),  # a tet law: the lesion's item needs more substeps than the baseline's
+    (SPEC.replace("chunk = 3", "chunk = 2"), ["cpu", "cpu"]),  # two devices, each pressing some items of each chunk
+])
+def test_items_pressed_together_give_the_bits_of_each_pressed_alone(tmp_path, text, devices):
+    spec = spec_file(tmp_path, text)
+    alone = pressed(spec, tmp_path / "alone", ["cpu"], together=False)
+    together = pressed(spec, tmp_path / "together", devices, together=True)
+    for c in ds.DATASET_COLUMNS:
+        np.testing.assert_array_equal(together[c], alone[c], err_msg=c)
+    assert len(together["vertex"]) > 0
+
+
+def test_the_liver_items_take_the_substeps_each_needs(tmp_path):
+    """The liver spec above groups its items by substeps: the baseline's and the lesion's differ (the
+    test above then holds each group to its own sweep's bits)."""
+    from almsdm_warp.batch.dataset_press import DeviceStack, ItemWork, stacks_of
+    from almsdm_warp.batch.sweep_times import SweepTimes
+
+    items = ds.plan_items(ds.load_spec(spec_file(tmp_path, LIVER)))
+    stack = stacks_of([ItemWork(item, None, {0}) for item in items])[0]
+    device = DeviceStack(stack, "cpu")
+    p = stack.plan
+    groups = device.substep_groups(int(p.point_rings[0]), p.vertices, range(len(items)), SweepTimes())
+    substeps = {k: key[1] for key, members in groups.items() for k in members}
+    # each item's own batch of the same presses, as its sweep plans it
+    from almsdm_warp.batch.sweep_lanes import RingBatches
+    from almsdm_warp.batch.sweep_plan import sweep_critical_dt
+
+    for k, item in enumerate(items):
+        batch = RingBatches(item.plan, item.plan.model("cpu"), sweep_critical_dt(item.plan)).get(int(p.point_rings[0]))
+        batch.touch(p.vertices, p.depth)
+        assert batch.substeps == substeps[k]
+    assert substeps[1] > substeps[0]
+
+
+@pytest.mark.parametrize("devices, points, chunk", [(1, 6, 3), (2, 6, 6), (4, 40000, 40000), (1, 40000, 40000)])
+def test_units_press_each_items_missing_chunks_once(devices, points, chunk):
+    """units_of: every (item, chunk) still to press in exactly one unit, none over LAUNCH_PRESSES presses,
+    and on several devices at least two units a device where the items allow."""
+    from types import SimpleNamespace
+
+    from almsdm_warp.batch.dataset_press import LAUNCH_PRESSES, SceneStack, units_of
+
+    plan = SimpleNamespace(chunks=[(b, min(b + chunk, points)) for b in range(0, points, chunk)])
+    todo = [set(range(len(plan.chunks))), {len(plan.chunks) - 1}, set(), set(range(len(plan.chunks)))] * 4
+    works = [SimpleNamespace(item=SimpleNamespace(plan=plan), todo=t) for t in todo]
+    units = units_of([SceneStack(works)], devices)
+    pressed = sorted((k, c) for _, c, members in units for k in members)
+    assert pressed == sorted((k, c) for k, w in enumerate(works) for c in w.todo)
+    assert all(len(m) * (plan.chunks[c][1] - plan.chunks[c][0]) <= LAUNCH_PRESSES for _, c, m in units)
+    assert len(units) >= min(2 * devices, sum(len(w.todo) for w in works))
+
+
+def test_a_scene_of_more_items_than_a_stack_holds_gives_the_same_bits(tmp_path, monkeypatch):
+    """A scene's items cut into stacks (each its own StackedModel: a large organ's) press as each alone."""
+    from almsdm_warp.batch import dataset_press
+
+    monkeypatch.setattr(dataset_press, "stack_limit", lambda mesh: 2)
+    spec = spec_file(tmp_path, SPEC.replace("chunk = 3", "chunk = 6"))
+    alone = pressed(spec, tmp_path / "alone", ["cpu"], together=False)
+    together = pressed(spec, tmp_path / "together", ["cpu"], together=True)
+    for c in ds.DATASET_COLUMNS:
+        np.testing.assert_array_equal(together[c], alone[c], err_msg=c)

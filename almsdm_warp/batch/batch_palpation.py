@@ -94,6 +94,20 @@ class DeviceBuffers:
         return out
 
 
+def union_critical_dt(model, free, frame_dt: float, bound, fixed, cache: dict) -> float:
+    """The critical step [s] of a batch's free vertices together (Model.critical_dt of their union, `free()`:
+    their mesh ids, asked only where needed), cached in `cache` by that set; `bound` (a lower bound of
+    every region's, or None) where one substep of `frame_dt` [s] is stable under it and the substeps are
+    not `fixed` (the union's step is no shorter: the same substeps)."""
+    if not fixed and bound is not None and substeps_for(frame_dt, (1 - 1e-4) * bound) == 1:
+        return bound
+    vertices = np.unique(free())
+    key = vertices.tobytes()
+    if key not in cache:
+        cache[key] = model.critical_dt(vertices)
+    return cache[key]
+
+
 def _pow2(n: int, minimum: int = 1) -> int:
     return max(minimum, 1 << max(int(n) - 1, 0).bit_length())
 
@@ -387,17 +401,11 @@ class BatchPalpation:
         self.integrator, self.substeps, self.critical_dt = plan.integrator, plan.substeps, plan.critical_dt
 
     def _union_critical_dt(self) -> float:
-        # the critical step of the union of the batch's free vertices (Model.critical_dt), cached by
-        # that set; critical_dt_bound where one substep is stable under it (no shorter: the same substeps)
-        bound = self.critical_dt_bound
-        if not self._fixed_substeps and bound is not None and substeps_for(self.frame_dt, (1 - 1e-4) * bound) == 1:
-            return bound
-        rv = host_copy(self.regions.region_vertex)
-        free = rv[np.arange(rv.shape[1])[None, :] < self.free_vertex_counts[:, None]]
-        key = np.unique(free).tobytes()
-        if key not in self._critical_cache:
-            self._critical_cache[key] = self.model.critical_dt(np.unique(free))
-        return self._critical_cache[key]
+        def free():
+            rv = host_copy(self.regions.region_vertex)
+            return rv[np.arange(rv.shape[1])[None, :] < self.free_vertex_counts[:, None]]
+
+        return union_critical_dt(self.model, free, self.frame_dt, self.critical_dt_bound, self._fixed_substeps, self._critical_cache)
 
     def _checked_vertices(self, vertices) -> np.ndarray:
         verts = np.asarray(vertices)

@@ -4,8 +4,9 @@ A dataset spec (a TOML file, docs/datasets.md) lists scenes or meshes, the point
 the press, and a lesion grid: lesion centres (farthest-point-spread surface vertices of each organ,
 moved a depth inward along the surface normal, or listed), radii and stiffness factors, every
 combination, plus a baseline without a lesion. Each (scene, lesion) pair is an *item*: a sweep of
-the same points of its scene (a SweepPlan pressed by run_local, resumable from its parts as a
-sweep is), written as its own table. The output folder holds::
+the same points of its scene (a SweepPlan, resumable from its parts as a sweep is), written as its
+own table; the items of a scene are pressed together, in shared launches on every device given
+(batch/dataset_press.py), with the numbers of each pressed as a sweep of its own. The output folder holds::
 
     dataset.json              the spec's key and each finished item's key and checksum
     items/<scene>_L<id>.npz   each item's sweep table (batch.sweep_plan.SWEEP_TABLE)
@@ -38,10 +39,11 @@ from ..export.tables import TableLayout, millimetres
 from ..solvers import integrators
 from ..tissue.laws import law_entry, resolve_law
 from .sampling import pressable_points, sample_points
-from .sweep import run_local
 from .records import UNITS, Records, lesion_columns
+from .sweep import Writer, run_local
 from .sweep_plan import COLUMNS, SweepPlan, check_sphere_travel, with_columns
 from .sweep_store import Parts, file_sha256
+from .sweep_times import SweepTimes
 
 FORMAT = "almsdm dataset 1"
 """The manifest's format tag: a folder of another format is not resumed into."""
@@ -524,15 +526,25 @@ class DatasetFolder:
         data = {"format": FORMAT, "key": self.key, "spec": self.spec.source, "items": self.done}
         atomic_write(self.manifest, lambda tmp: Path(tmp).write_text(json.dumps(data, indent=1, default=str) + "\n"))
 
-    def press(self, item: DatasetItem, devices: list[str], progress=None) -> None:
-        """Sweep one item (resuming its parts, as a sweep does), write its table, record it as done."""
-        path = self.item_path(item)
-        parts = Parts(path, item.plan)
+    def open_parts(self, item: DatasetItem) -> tuple[Parts, set]:
+        """The item's parts (sweep_store.Parts, opened: a note for any found damaged) and the chunks they hold."""
+        parts = Parts(self.item_path(item), item.plan)
         done = set(parts.open())
         for why in ([parts.dropped] if parts.dropped else []) + ([f"({len(parts.damaged)}) did not match their checksum"] if parts.damaged else []):
             print(f"note: the chunks in {parts.dir} {why}: pressed again", file=sys.stderr)
+        return parts, done
+
+    def press(self, item: DatasetItem, devices: list[str], progress=None) -> None:
+        """Sweep one item on its own (resuming its parts, as a sweep does), write its table, record it as done."""
+        parts, done = self.open_parts(item)
         run_local(item.plan, parts, [i for i in range(len(item.plan.chunks)) if i not in done], devices, progress)
-        item.plan.table.write(path, parts.gather())
+        self.finish_item(item, parts)
+
+    def finish_item(self, item: DatasetItem, parts: Parts, columns: dict | None = None) -> None:
+        """Write the item's table (`columns`, or its parts' when every chunk is written), remove the parts,
+        record it as done."""
+        path = self.item_path(item)
+        item.plan.table.write(path, parts.gather() if columns is None else columns)
         parts.remove()
         self.done[item.name] = {"key": item.key(), "sha256": file_sha256(path), "scene": item.scene,
                                 "lesion": None if item.lesion is None else item.lesion.as_dict()}
@@ -549,12 +561,61 @@ class DatasetFolder:
         return {c: np.concatenate([p[c] for p in parts]) for c in self.layout.dtypes}
 
 
-def press_dataset(folder: DatasetFolder, todo: list[DatasetItem], devices: list[str], progress=None, on_item=None) -> None:
-    """Press the items `todo` one after another (each a sweep on `devices`); on_item(item) after each."""
+def press_dataset(folder: DatasetFolder, todo: list[DatasetItem], devices: list[str], progress=None, on_item=None, *,
+                  together: bool = True, times: SweepTimes | None = None) -> None:
+    """Press the items `todo` on `devices`; on_item(item) after each is recorded done.
+
+    together: the items of a scene share launches (batch/dataset_press.py), each item's table and line
+    in dataset.json written as its last chunk is; False: one after another, each a sweep of its own (the
+    reference the tests hold the first to: the same bits). times: where the wall time goes (SweepTimes; together)."""
+    if not together:
+        for item in todo:
+            folder.press(item, devices, progress)
+            if on_item is not None:
+                on_item(item)
+        return
+    from .dataset_press import ItemWork, press_stacks, stacks_of
+
+    works = []
+    sink = ItemSink(folder, on_item)
     for item in todo:
-        folder.press(item, devices, progress)
-        if on_item is not None:
-            on_item(item)
+        parts, done = folder.open_parts(item)
+        works.append(ItemWork(item, parts, set(range(len(item.plan.chunks))) - done))
+        if not works[-1].todo:  # every chunk was written before its table: the table now
+            sink.finish(works.pop())
+    times = times if times is not None else SweepTimes()
+    try:
+        press_stacks(stacks_of(works), devices, Writer(sink, times), progress, times)
+    except BaseException:
+        for work in works:  # the parts folders opened for nothing go
+            if work.todo:
+                work.parts.discard_if_new()
+        raise
+
+
+class ItemSink:
+    """Where a dataset's pressed rows go (on sweep.Writer's thread, in order): each item's chunk into its
+    parts, and an item whose last chunk that was into its table and dataset.json (an item of one chunk:
+    its table at once, no parts written)."""
+
+    def __init__(self, folder: DatasetFolder, on_item=None):
+        self.folder, self.on_item = folder, on_item
+
+    def write(self, key, columns: dict) -> None:
+        work, chunk = key
+        if work.todo == {chunk} and len(work.item.plan.chunks) == 1:
+            work.todo.clear()
+            self.finish(work, columns)
+            return
+        work.parts.write(chunk, columns)
+        work.todo.discard(chunk)
+        if not work.todo:
+            self.finish(work)
+
+    def finish(self, work, columns: dict | None = None) -> None:
+        self.folder.finish_item(work.item, work.parts, columns)
+        if self.on_item is not None:
+            self.on_item(work.item)
 
 
 def draw_maps(folder: DatasetFolder) -> list[Path]:

@@ -129,10 +129,13 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
         groups = [models]
     else:  # a GPU named twice: one thread, two lanes or more over the models
         groups = [[models[k % len(models)] for k in range(max(2, len(models)))]]
-    _run_threads(work, groups, stop, writer)
+    run_threads(work, groups, stop, writer)
 
 
-def _run_threads(work, groups, stop, writer):
+def run_threads(work, groups, stop, writer):
+    """work(group) for each of `groups`, on a thread each where several; then writer.close() (Writer), which
+    raises its error; on an error or an interrupt, `stop` set (the other threads end after their current
+    piece of work), the writer closed without writing what is queued, and the error raised again."""
     from concurrent.futures import ThreadPoolExecutor
 
     try:

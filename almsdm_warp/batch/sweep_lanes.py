@@ -141,6 +141,7 @@ class Lane:
                     batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch,
                                       on_launch=frames(on_launch, batch, len(idx)))
                     events += self._record()
+                    self.times.add_steps(len(idx) * batch.total_steps)
                     self.times.mark("first press launched")
                     self.started.append((idx, batch, self._read_back(batch, int(k)), events))
         pressed = 0.0
@@ -185,11 +186,11 @@ class Lane:
             wp.copy(dst, src, stream=self.stream)
         return out
 
-    def finish(self, plan: SweepPlan, origin=None) -> dict:
-        """Wait for the chunk started last and return its checked columns."""
+    def results(self, origin=None) -> list:
+        """Wait for what the lane started last (its press intervals in `busy`), then [(what each batch was
+        started with, its BatchResult)], read from the pinned buffers."""
         import warp as wp
 
-        t0 = time.perf_counter()
         if self.stream is not None:
             with self.times.phase("waiting for the device"):
                 wp.synchronize_stream(self.stream)
@@ -197,17 +198,22 @@ class Lane:
             self.busy = [(at(e[0]), at(e[1])) for *_, e in self.started]
         else:
             self.busy = [(e[0], e[1]) for *_, e in self.started]
-        results = []
         with self.times.phase("read-back"):
-            for idx, batch, pinned, _ in self.started:
-                if pinned is None:
-                    result = batch.finish_press()
-                elif batch.records.on:  # the records read on this lane's stream (done), not waiting for the other lane
-                    with self.scope():
-                        result = batch.result_from(*(b.numpy() for b in pinned))
-                else:
-                    result = batch.result_from(*(b.numpy() for b in pinned))
-                results.append((idx, result))
+            return [(what, self._result(batch, pinned)) for what, batch, pinned, _ in self.started]
+
+    def _result(self, batch, pinned):
+        if pinned is None:
+            return batch.finish_press()
+        if batch.records.on:  # the records read on this lane's stream (done), not waiting for the other lane
+            with self.scope():
+                return batch.result_from(*(b.numpy() for b in pinned))
+        return batch.result_from(*(b.numpy() for b in pinned))
+
+    def finish(self, plan: SweepPlan, origin=None) -> dict:
+        """Wait for the chunk started last and return its checked columns."""
+        t0 = time.perf_counter()
+        results = self.results(origin)
+        with self.times.phase("read-back"):
             columns = plan.columns(*self.chunk, results)
         with self.times.phase("checks"):
             columns = checked_columns(columns)
@@ -219,7 +225,12 @@ class Lane:
 def run_device(plan: SweepPlan, batches: list, take, put, times: SweepTimes, on_launch=None) -> None:
     """Press the chunks that `take()` hands out (None: no more) on one device, a lane (Lane) for each
     of `batches`: with two, chunk i + 1 is launched before chunk i is read; put(i, columns) each when done."""
-    lanes = [Lane(b, times) for b in batches]
+    run_lanes(plan, [Lane(b, times) for b in batches], take, put, times, on_launch)
+
+
+def run_lanes(plan, lanes: list, take, put, times: SweepTimes, on_launch=None) -> None:
+    """run_device's loop over ready lanes: objects with Lane's clock_origin(), start(plan, i, on_launch,
+    origin), finish(plan, origin) (the work's result, handed to put(i, result)) and busy (its press intervals)."""
     origin = lanes[0].clock_origin()
     busy, flying, n = [], None, 0
 

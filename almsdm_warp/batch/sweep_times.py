@@ -9,8 +9,8 @@ from contextlib import contextmanager
 
 import numpy as np
 
-PHASES = ("sampling", "set-up", "waiting for the points", "region build", "planning", "launch", "waiting for the device", "read-back", "checks",
-          "writing", "waiting for the writer", "gather", "output")
+PHASES = ("sampling", "set-up", "waiting for the points", "region build", "critical steps", "planning", "launch", "waiting for the device",
+          "read-back", "checks", "writing", "waiting for the writer", "gather", "output")
 """The host phases of a sweep's wall time (SweepTimes); the device's press time is counted apart."""
 
 
@@ -33,6 +33,8 @@ class SweepTimes:
         events moved by the host time of a synchronised origin event: within a few microseconds)."""
         self.marks: dict[str, float] = {}
         """When [s since t0] each milestone of the way to the first press was first reached (mark())."""
+        self.region_steps = 0
+        """Region-steps launched (each press's steps, substeps counted), summed over the devices."""
         self.host_per_chunk: list[float] = []
         """Host time [s] of each chunk on its device's thread (build, plan, launch, read-back, checks)."""
         self._lock = threading.Lock()
@@ -48,6 +50,11 @@ class SweepTimes:
     def add(self, name: str, seconds: float) -> None:
         with self._lock:
             self.seconds[name] += seconds
+
+    def add_steps(self, count: int) -> None:
+        """`count` region-steps launched (presses x their steps)."""
+        with self._lock:
+            self.region_steps += int(count)
 
     def mark(self, name: str) -> None:
         """Note the first time `name` is reached (the way to the first press: what it waits for)."""

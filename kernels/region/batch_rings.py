@@ -253,3 +253,25 @@ def rest_states(batch):
         outputs=[batch.q_state, batch.qd_state],
         device=batch.device,
     )
+
+
+@wp.kernel
+def offset_item_regions(regions: BatchRegionArrays, item: wp.array(dtype=wp.int32), vertex_stride: int, edge_stride: int):
+    # palpation b presses item item[b] of a stack of models of one mesh (almsdm_warp/batch/item_batch.py): its
+    # region's vertices and springs become that item's, vertex v at item * vertex_stride + v, spring s at
+    # item * edge_stride + s; the local topology (neighbours, codes, counts) stays as built
+    b, j = wp.tid()
+    k = item[b]
+    if j < regions.region_count[b]:
+        regions.region_vertex[b, j] = regions.region_vertex[b, j] + k * vertex_stride
+    if j < regions.entry_count[b]:
+        regions.local_edge[b, j] = regions.local_edge[b, j] + k * edge_stride
+
+
+def offset_regions(regions, item, vertex_stride: int, edge_stride: int):
+    """Make each palpation b of `regions` (BatchRegions built on one mesh) read item item[b]'s copy of the
+    mesh in a stack of K copies (int32 device array [B]): vertex ids + item x vertex_stride, edge ids +
+    item x edge_stride (one launch, in place)."""
+    width = max(regions.region_vertex.shape[1], regions.local_edge.shape[1])
+    wp.launch(offset_item_regions, dim=(len(item), width), inputs=[regions.arrays, item, int(vertex_stride), int(edge_stride)],
+              device=item.device)
