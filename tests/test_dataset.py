@@ -201,6 +201,11 @@ stiffness_factors = [8.0]
 """
 
 
+RECORDS = SPEC.replace(f'scenes = ["stomach", "{SCENES / "paper_liver.toml"}"]', 'scenes = ["stomach"]').replace(
+    "csv = true", "csv = true\ncurve_points = 3\ntactile_size = 2\nlesion_labels = true")
+"""SPEC on the stomach (a sphere: the tactile map needs one) with every row for learning."""
+
+
 def pressed(spec_path, out, devices, together):
     spec = ds.load_spec(spec_path)
     items = ds.plan_items(spec)
@@ -214,12 +219,15 @@ def pressed(spec_path, out, devices, together):
     (SPEC.replace('dt_ms = 0.25', 'dt_ms = 0.25\nintegrator = "implicit"'), ["cpu"]),
     (LIVER, ["cpu"]),  # a tet law: the lesion's item needs more substeps than the baseline's
     (SPEC.replace("chunk = 3", "chunk = 2"), ["cpu", "cpu"]),  # two devices, each pressing some items of each chunk
+    (RECORDS, ["cpu"]),  # the rows for learning: force curves, contact patches and tactile maps, lesion labels
 ])
 def test_items_pressed_together_give_the_bits_of_each_pressed_alone(tmp_path, text, devices):
     spec = spec_file(tmp_path, text)
     alone = pressed(spec, tmp_path / "alone", ["cpu"], together=False)
     together = pressed(spec, tmp_path / "together", devices, together=True)
-    for c in ds.DATASET_COLUMNS:
+    assert list(together) == list(alone) and set(ds.DATASET_COLUMNS) <= set(alone)
+    assert ("tactile_map_kPa" in alone) == (text is RECORDS)
+    for c in alone:
         np.testing.assert_array_equal(together[c], alone[c], err_msg=c)
     assert len(together["vertex"]) > 0
 
