@@ -9,10 +9,11 @@ pressed in one launch a substep count (each (item, chunk) takes the substeps its
 batch_palpation.union_critical_dt over the chunk's free vertices with the item's model; the items of
 one count share a launch). Units go to a thread a device, in order, to whichever is free, two in
 flight on a GPU (ItemLane: one built and launched while the other presses, as a sweep's chunks);
-the items' models and critical steps are made ahead on a thread of their own. Each unit's rows are written as each item's part (batch/sweep_store.py's Parts, as a sweep
-writes its chunks), and an item whose last chunk is written becomes its table and its line in
-dataset.json at once: a run killed at any point resumes item by item, chunk by chunk, as before. The
-numbers are those of pressing each item as a sweep of its own (tests/test_dataset.py).
+the items' models and critical steps are made ahead on a thread of their own. Each unit's rows are
+written as each item's part (batch/sweep_store.py's Parts, as a sweep writes its chunks), and an
+item whose last chunk is written becomes its table and its line in dataset.json at once: a run
+killed at any point resumes item by item, chunk by chunk, as before. The numbers are those of
+pressing each item as a sweep of its own (tests/test_dataset.py).
 """
 
 from __future__ import annotations
