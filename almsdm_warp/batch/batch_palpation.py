@@ -29,6 +29,7 @@ from ..solvers.stepper import check_results, force_bound, plan_substeps
 from ..sim.model import Model
 from ..region.patch import sphere_patches
 from ..region.region import check_rings
+from .critical_step import certified_critical_dt
 
 
 KERNELS = ("fast", "exact")
@@ -98,10 +99,17 @@ def union_critical_dt(model, free, frame_dt: float, bound, fixed, cache: dict) -
     """The critical step [s] of a batch's free vertices together (Model.critical_dt of their union, `free()`:
     their mesh ids, asked only where needed), cached in `cache` by that set; `bound` (a lower bound of
     every region's, or None) where one substep of `frame_dt` [s] is stable under it and the substeps are
-    not `fixed` (the union's step is no shorter: the same substeps)."""
+    not `fixed` (the union's step is no shorter: the same substeps), or where a piece of the union gives
+    as many substeps as it (batch/critical_step.py)."""
     if not fixed and bound is not None and substeps_for(frame_dt, (1 - 1e-4) * bound) == 1:
         return bound
-    vertices = np.unique(free())
+    held = np.zeros(model.particle_count, dtype=bool)
+    held[free()] = True
+    vertices = np.flatnonzero(held)  # np.unique's, without sorting every region's entries
+    if not fixed and bound is not None:
+        certain = certified_critical_dt(model, vertices, frame_dt, bound, cache)
+        if certain is not None:
+            return certain
     key = vertices.tobytes()
     if key not in cache:
         cache[key] = model.critical_dt(vertices)

@@ -95,6 +95,14 @@ class TissueMesh:
         """Sorted ids of the vertices on the surface (all of them for a surface mesh), int32."""
         return np.unique(self.triangles).astype(np.int32)
 
+    @cached_property
+    def surface_tree(self):
+        """A k-d tree (scipy's cKDTree) of the surface vertices' rest positions, built once: its
+        point k is surface_vertices[k]."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.vertices[self.surface_vertices])
+
     def vertex_masses(self, density: float, thickness: float) -> np.ndarray:
         """Lumped vertex masses [kg], shape [vertex_count].
 

@@ -59,6 +59,16 @@ def csr_adjacency(edges: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.
     return offsets.astype(np.int32), cols[order].astype(np.int32), ids[order].astype(np.int32)
 
 
+def csr_entries(offsets: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The positions of rows `rows`' entries in a CSR structure of `offsets`, row after row, int64
+    (each row's in order): work that grows with those rows, not with the structure."""
+    rows = np.asarray(rows, dtype=np.int64)
+    begin = np.asarray(offsets, dtype=np.int64)[rows]
+    length = np.asarray(offsets, dtype=np.int64)[rows + 1] - begin
+    start = np.cumsum(length) - length  # each row's first slot in the result
+    return np.repeat(begin - start, length) + np.arange(int(length.sum()), dtype=np.int64)
+
+
 def csr_incidence(elements: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray]:
     """Vertex-to-element incidence in CSR form: (offsets [n+1], element id [k*m]), int32.
 

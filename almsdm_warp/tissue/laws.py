@@ -11,6 +11,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError
+from ..mesh.topology import csr_entries
 from ..kernels.laws import LAWS as KERNEL_LAWS
 
 
@@ -20,9 +21,12 @@ def stable_step(mass, K, C, vertices=None, what: str = "") -> float:
 
     The stiffest mode of M^-1/2 K M^-1/2 has eigenvalue w^2; with that mode's damping
     g = v^T M^-1/2 C M^-1/2 v, the scheme is stable while dt <= (-g + sqrt(g^2 + 4 w^2)) / w^2
-    (for g = 0: 2 / w). InputError where K or C over the mass is not finite (`what` says whose)."""
+    (for g = 0: 2 / w). Where the free vertices fall apart into pieces that share no entry of K or C
+    (the regions of a batch), each piece's stiffest mode is found on its own (the modes of the whole
+    are the pieces' modes: the same answer, without an eigensolver crawling through many equal
+    eigenvalues). InputError where K or C over the mass is not finite (`what` says whose)."""
     import scipy.sparse as sp
-    from scipy.sparse.linalg import ArpackError, eigsh
+    from scipy.sparse.csgraph import connected_components
 
     n = len(mass)
     free = np.arange(n) if vertices is None else np.unique(np.asarray(vertices, dtype=np.int64))
@@ -31,10 +35,29 @@ def stable_step(mass, K, C, vertices=None, what: str = "") -> float:
     dof = (3 * free[:, None] + np.arange(3)).ravel()
     Winv = sp.diags(np.repeat(1.0 / np.sqrt(mass), 3)[dof])
     with np.errstate(all="ignore"):  # an overflow is reported below, in words
-        K = Winv @ K[dof][:, dof] @ Winv
-        C = Winv @ C[dof][:, dof] @ Winv
+        K = (Winv @ K[dof][:, dof] @ Winv).tocsr()
+        C = (Winv @ C[dof][:, dof] @ Winv).tocsr()
     if not (np.all(np.isfinite(K.data)) and np.all(np.isfinite(C.data))):
         raise InputError(f"the model's stiffness or damping over mass is not finite ({what}): it has no stable step")
+    pieces, label = (1, None) if K.shape[0] <= 60 else connected_components(abs(K) + abs(C), directed=False)
+    if pieces == 1:
+        lam, g = stiffest_mode(K, C)
+    else:
+        order = np.argsort(label, kind="stable")
+        bounds = np.searchsorted(label[order], np.arange(pieces + 1))
+        modes = [stiffest_mode(K[idx][:, idx], C[idx][:, idx])
+                 for idx in (order[b:e] for b, e in zip(bounds[:-1], bounds[1:]))]
+        lam, g = max(modes, key=lambda m: m[0])
+    if lam <= 0:
+        return float("inf")
+    return float((-g + np.sqrt(g * g + 4.0 * lam)) / lam)
+
+
+def stiffest_mode(K, C) -> tuple[float, float]:
+    """(w^2, g): the largest eigenvalue of the symmetric K and its mode's damping v^T C v (stable_step);
+    where the eigensolver does not converge, Gershgorin's bounds of both (they under-estimate the step)."""
+    from scipy.sparse.linalg import ArpackError, eigsh
+
     if K.shape[0] <= 60:
         vals, vecs = np.linalg.eigh(K.toarray())
         lam, v = vals[-1], vecs[:, -1]
@@ -42,12 +65,9 @@ def stable_step(mass, K, C, vertices=None, what: str = "") -> float:
         try:
             vals, vecs = eigsh(K, k=1, which="LA", tol=1e-6)
             lam, v = vals[0], vecs[:, 0]
-        except ArpackError:  # no convergence: Gershgorin's bounds, which under-estimate the step
-            lam, v = float(abs(K).sum(axis=1).max()), None
-    if lam <= 0:
-        return float("inf")
-    g = float(v @ (C @ v)) if v is not None else float(abs(C).sum(axis=1).max())
-    return float((-g + np.sqrt(g * g + 4.0 * lam)) / lam)
+        except ArpackError:
+            return float(abs(K).sum(axis=1).max()), float(abs(C).sum(axis=1).max())
+    return float(lam), float(v @ (C @ v))
 
 
 def block_matrix(n: int, rows, cols, blocks, diagonal=None):
@@ -65,28 +85,52 @@ def block_matrix(n: int, rows, cols, blocks, diagonal=None):
     return sp.csr_matrix((values, (r, c)), shape=(3 * n, 3 * n))
 
 
-def springs_matrices(model, anchors: bool = True):
-    """(K, C): the springs law's stiffness and damping at rest, 3n x 3n (springs along their edges, anchors)."""
-    n = model.particle_count
+def springs_matrices(model, anchors: bool = True, vertices=None):
+    """(K, C): the springs law's stiffness and damping at rest (springs along their edges, anchors),
+    3n x 3n; with `vertices` (sorted, unique), only their rows and columns, 3m x 3m in their order
+    (the springs that touch them: work that grows with them, not with the mesh)."""
     e = model.mesh.edges.astype(np.int64)
-    d = model.mesh.vertices[e[:, 1]] - model.mesh.vertices[e[:, 0]]
+    ids = np.arange(len(e))
+    n = model.particle_count
+    slot = None
+    if vertices is not None:  # the springs with an end among them, in edge order, ends renumbered
+        offsets, _, edge_id = model.mesh.adjacency
+        v = np.asarray(vertices, dtype=np.int64)
+        ids = np.unique(edge_id[csr_entries(offsets, v)])
+        slot = np.full(n, -1, dtype=np.int64) if n <= 4 * len(v) + 1024 else None
+        if slot is None:
+            ends = np.unique(e[ids])
+            local = np.full(len(ends), -1, dtype=np.int64)
+            local[np.searchsorted(ends, v)] = np.arange(len(v))
+            e = local[np.searchsorted(ends, e[ids])]
+        else:
+            slot[v] = np.arange(len(v))
+            e = slot[e[ids]]
+        n = len(v)
+    p = model.mesh.vertices
+    d = p[model.mesh.edges[ids, 1]] - p[model.mesh.edges[ids, 0]]
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
     ddt = d[:, :, None] * d[:, None, :]  # [e, 3, 3]
     scale = 1.0 if anchors else 0.0
     sign = np.array([1.0, 1.0, -1.0, -1.0])[None, :, None, None]  # blocks (i, i), (j, j), (i, j), (j, i)
     rows, cols = e[:, [0, 1, 0, 1]], e[:, [0, 1, 1, 0]]
+    keep = (rows >= 0) & (cols >= 0)  # blocks between two of `vertices`
+    pick = (lambda a: a) if vertices is None else (lambda a: a[vertices])
     with np.errstate(all="ignore"):
-        return tuple(block_matrix(n, rows, cols, sign * (edge[:, None, None] * ddt)[:, None], vertex * scale)
+        return tuple(block_matrix(n, rows[keep], cols[keep], (sign * (edge[ids][:, None, None] * ddt)[:, None])[keep],
+                                  pick(vertex) * scale)
                      for edge, vertex in ((model.spring_ke_host, model.anchor_ke_host), (model.spring_kd_host, model.anchor_kd_host)))
 
 
 def springs_critical_dt(model, vertices=None, anchors: bool = True) -> float:
     """Largest stable step [s] of semi-implicit Euler for the springs law, linearized at rest (stable_step).
     An estimate: a deep press adds geometric stiffness to the stretched springs."""
-    K, C = springs_matrices(model, anchors)
-    return stable_step(model.particle_mass_host, K, C, vertices,
-                       f"largest spring {model.spring_ke_host.max():.3g} N/m, anchor {model.anchor_ke_host.max():.3g} N/m; "
-                       f"a lesion's stiffness_factor too large?")
+    what = (f"largest spring {model.spring_ke_host.max():.3g} N/m, anchor {model.anchor_ke_host.max():.3g} N/m; "
+            f"a lesion's stiffness_factor too large?")
+    if vertices is None:
+        return stable_step(model.particle_mass_host, *springs_matrices(model, anchors), None, what)
+    free = np.unique(np.asarray(vertices, dtype=np.int64))
+    return stable_step(model.particle_mass_host[free], *springs_matrices(model, anchors, free), None, what)
 
 
 def springs_entries(model):
