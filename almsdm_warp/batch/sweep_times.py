@@ -9,9 +9,10 @@ from contextlib import contextmanager
 
 import numpy as np
 
-PHASES = ("sampling", "set-up", "waiting for the points", "region build", "critical steps", "planning", "launch", "waiting for the device",
-          "read-back", "checks", "writing", "waiting for the writer", "gather", "output")
-"""The host phases of a sweep's wall time (SweepTimes); the device's press time is counted apart."""
+PHASES = ("loading", "sampling", "set-up", "waiting for the points", "region build", "critical steps", "planning", "launch",
+          "waiting for the device", "read-back", "checks", "writing", "waiting for the writer", "gather", "output")
+"""The host phases of a sweep's wall time (SweepTimes; "loading": the mesh read, checked and its topology); the
+device's press time is counted apart."""
 
 
 class SweepTimes:

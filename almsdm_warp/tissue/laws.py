@@ -32,17 +32,20 @@ def stable_step(mass, K, C, vertices=None, what: str = "") -> float:
     free = np.arange(n) if vertices is None else np.unique(np.asarray(vertices, dtype=np.int64))
     if len(free) == 0:
         return float("inf")
-    dof = (3 * free[:, None] + np.arange(3)).ravel()
-    Winv = sp.diags(np.repeat(1.0 / np.sqrt(mass), 3)[dof])
+    w = 1.0 / np.sqrt(np.asarray(mass, dtype=np.float64)[free])
     with np.errstate(all="ignore"):  # an overflow is reported below, in words
-        K = (Winv @ K[dof][:, dof] @ Winv).tocsr()
-        C = (Winv @ C[dof][:, dof] @ Winv).tocsr()
+        if vertices is not None:
+            dof = (3 * free[:, None] + np.arange(3)).ravel()
+            K, C = K.tocsr()[dof][:, dof], C.tocsr()[dof][:, dof]
+        K, C = over_mass(K, w), over_mass(C, w)
     if not (np.all(np.isfinite(K.data)) and np.all(np.isfinite(C.data))):
         raise InputError(f"the model's stiffness or damping over mass is not finite ({what}): it has no stable step")
-    pieces, label = (1, None) if K.shape[0] <= 60 else connected_components(abs(K) + abs(C), directed=False)
+    pieces, label = (1, None) if K.shape[0] <= 60 else connected_components(pattern(K, C), directed=False)
     if pieces == 1:
         lam, g = stiffest_mode(K, C)
     else:
+        if K.format == "bsr":
+            K, C, label = K.tocsr(), C.tocsr(), np.repeat(label, 3)
         order = np.argsort(label, kind="stable")
         bounds = np.searchsorted(label[order], np.arange(pieces + 1))
         modes = [stiffest_mode(K[idx][:, idx], C[idx][:, idx])
@@ -51,6 +54,27 @@ def stable_step(mass, K, C, vertices=None, what: str = "") -> float:
     if lam <= 0:
         return float("inf")
     return float((-g + np.sqrt(g * g + 4.0 * lam)) / lam)
+
+
+def over_mass(A, w: np.ndarray):
+    """W A W for W = diag(w) repeated over each vertex's 3 rows (w [n]: M^-1/2 of each vertex); a 3x3 block
+    matrix (BSR, a block a vertex pair) stays one, scaled block by block."""
+    import scipy.sparse as sp
+
+    if A.format == "bsr" and A.blocksize == (3, 3):
+        rows = np.repeat(np.arange(len(w)), np.diff(A.indptr))
+        return sp.bsr_matrix((A.data * (w[rows] * w[A.indices])[:, None, None], A.indices, A.indptr), shape=A.shape)
+    W = sp.diags(np.repeat(w, 3))
+    return (W @ A @ W).tocsr()
+
+
+def pattern(K, C):
+    """The graph of K's and C's nonzero couplings (of 3x3 blocks, a vertex each, for BSR; else of rows)."""
+    import scipy.sparse as sp
+
+    if K.format == "bsr":  # the springs' blocks: C's pattern is K's
+        return sp.csr_matrix((np.ones(len(K.indices), dtype=np.int8), K.indices, K.indptr), shape=(len(K.indptr) - 1,) * 2)
+    return abs(K) + abs(C)
 
 
 def stiffest_mode(K, C) -> tuple[float, float]:
@@ -87,39 +111,48 @@ def block_matrix(n: int, rows, cols, blocks, diagonal=None):
 
 def springs_matrices(model, anchors: bool = True, vertices=None):
     """(K, C): the springs law's stiffness and damping at rest (springs along their edges, anchors),
-    3n x 3n; with `vertices` (sorted, unique), only their rows and columns, 3m x 3m in their order
-    (the springs that touch them: work that grows with them, not with the mesh)."""
-    e = model.mesh.edges.astype(np.int64)
-    ids = np.arange(len(e))
+    3n x 3n as 3x3 blocks (BSR: a block a vertex pair, from the mesh's CSR adjacency, so no more memory
+    than the blocks); with `vertices` (sorted, unique), only their rows and columns, 3m x 3m in their
+    order (the springs that touch them: work that grows with them, not with the mesh)."""
+    import scipy.sparse as sp
+
+    offsets, neighbour, edge_id = model.mesh.adjacency
     n = model.particle_count
-    slot = None
-    if vertices is not None:  # the springs with an end among them, in edge order, ends renumbered
-        offsets, _, edge_id = model.mesh.adjacency
-        v = np.asarray(vertices, dtype=np.int64)
-        ids = np.unique(edge_id[csr_entries(offsets, v)])
-        slot = np.full(n, -1, dtype=np.int64) if n <= 4 * len(v) + 1024 else None
-        if slot is None:
-            ends = np.unique(e[ids])
-            local = np.full(len(ends), -1, dtype=np.int64)
-            local[np.searchsorted(ends, v)] = np.arange(len(v))
-            e = local[np.searchsorted(ends, e[ids])]
-        else:
-            slot[v] = np.arange(len(v))
-            e = slot[e[ids]]
-        n = len(v)
-    p = model.mesh.vertices
-    d = p[model.mesh.edges[ids, 1]] - p[model.mesh.edges[ids, 0]]
+    v = np.arange(n, dtype=np.int64) if vertices is None else np.asarray(vertices, dtype=np.int64)
+    at = np.arange(len(neighbour)) if vertices is None else csr_entries(offsets, v)
+    row = np.repeat(np.arange(len(v)), np.diff(offsets)[v])
+    col = neighbour[at].astype(np.int64)
+    if vertices is not None:  # local ids; -1 outside
+        slot = np.minimum(np.searchsorted(v, col), len(v) - 1)
+        col = np.where(v[slot] == col, slot, -1)
+    e = edge_id[at]
+    p, ends = model.mesh.vertices, model.mesh.edges
+    d = p[ends[e, 1]] - p[ends[e, 0]]
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
-    ddt = d[:, :, None] * d[:, None, :]  # [e, 3, 3]
+    ddt = d[:, :, None] * d[:, None, :]  # [entries, 3, 3]
+    del d
+    inside = col >= 0
+    # each row's blocks in column order, its diagonal block slotted in among the neighbours inside
+    count = np.bincount(row[inside], minlength=len(v))
+    indptr = np.concatenate([[0], np.cumsum(count + 1)])
+    rank = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)  # place among its row's inside
+    slot = indptr[row[inside]] + rank + (col[inside] > row[inside])
+    diagonal = indptr[:-1] + np.bincount(row[inside & (col < row)], minlength=len(v))
+    indices = np.empty(indptr[-1], dtype=np.int32)
+    indices[slot], indices[diagonal] = col[inside], np.arange(len(v))
     scale = 1.0 if anchors else 0.0
-    sign = np.array([1.0, 1.0, -1.0, -1.0])[None, :, None, None]  # blocks (i, i), (j, j), (i, j), (j, i)
-    rows, cols = e[:, [0, 1, 0, 1]], e[:, [0, 1, 1, 0]]
-    keep = (rows >= 0) & (cols >= 0)  # blocks between two of `vertices`
-    pick = (lambda a: a) if vertices is None else (lambda a: a[vertices])
-    with np.errstate(all="ignore"):
-        return tuple(block_matrix(n, rows[keep], cols[keep], (sign * (edge[ids][:, None, None] * ddt)[:, None])[keep],
-                                  pick(vertex) * scale)
-                     for edge, vertex in ((model.spring_ke_host, model.anchor_ke_host), (model.spring_kd_host, model.anchor_kd_host)))
+    out = []
+    for edge, vertex in ((model.spring_ke_host, model.anchor_ke_host), (model.spring_kd_host, model.anchor_kd_host)):
+        with np.errstate(all="ignore"):
+            blocks = edge[e][:, None, None] * ddt
+            data = np.empty((indptr[-1], 3, 3))
+            data[slot] = -blocks[inside]
+            diag = np.zeros((len(v), 9))
+            for k in range(9):
+                diag[:, k] = np.bincount(row, weights=blocks[:, k // 3, k % 3], minlength=len(v))
+            data[diagonal] = diag.reshape(-1, 3, 3) + (vertex[v] * scale)[:, None, None] * np.eye(3)
+        out.append(sp.bsr_matrix((data, indices, indptr), shape=(3 * len(v), 3 * len(v))))
+    return tuple(out)
 
 
 def springs_critical_dt(model, vertices=None, anchors: bool = True) -> float:
