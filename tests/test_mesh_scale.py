@@ -124,3 +124,46 @@ def test_sphere_patches_from_the_tree(model, radius, depth):
     assert len(offsets) == len(vertices) + 1
     for b, patch in enumerate(want):
         np.testing.assert_array_equal(ids[offsets[b]:offsets[b + 1]], patch)
+
+
+OBJ_CASES = {
+    "plain": (b"# a comment\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e-3 -2.5E+2 .5\n\nf 1 2 3\nf 3 2 4\n", True),
+    "crlf": (b"v 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 3\r\n", True),
+    "unused vertex": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 5 5\nf 1 2 3\n", False),
+    "quad": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 4 3\n", False),
+    "texture indices": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1\n", False),
+    "colours": (b"v 0 0 0 1 0 0\nv 1 0 0 1 0 0\nv 0 1 0 1 0 0\nf 1 2 3\n", False),
+    "object": (b"o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", False),
+    "index past the end": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", False),
+}
+
+
+@pytest.mark.parametrize("case", list(OBJ_CASES))
+def test_plain_obj_reads_as_trimesh_does(case):
+    """read_plain_obj takes only v/f files whose every vertex a face uses, and reads them as trimesh does."""
+    import io
+
+    import trimesh
+
+    from almsdm_warp.mesh.io import read_plain_obj
+
+    data, plain = OBJ_CASES[case]
+    got = read_plain_obj(data)
+    assert (got is not None) == plain
+    if plain:
+        want = trimesh.load_mesh(io.StringIO(data.decode()), file_type="obj", process=False)
+        np.testing.assert_array_equal(got[0], want.vertices)
+        np.testing.assert_array_equal(got[1], want.faces)
+
+
+def test_shipped_obj_reads_as_trimesh_does():
+    import trimesh
+
+    from almsdm_warp.mesh.io import read_plain_obj
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "scenes" / "stomach.obj"
+    got = read_plain_obj(path.read_bytes())
+    want = trimesh.load(path, process=False)
+    np.testing.assert_array_equal(got[0], want.vertices)
+    np.testing.assert_array_equal(got[1], want.faces)

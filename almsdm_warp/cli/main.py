@@ -68,12 +68,10 @@ def signals_as_interrupts():
             signal.signal(s, h)
 
 
-SHIELDED_IMPORTS = ("trimesh", "trimesh.graph", "trimesh.repair")
-"""Libraries imported at start-up with signals held: trimesh imports scipy inside `except
-BaseException`, so a Ctrl-C there would be swallowed and leave trimesh without its graph engine
-(a traceback later, in the mesh's repair)."""
 SHIELDED_USD_IMPORTS = ("pxr.Tf", "pxr.Sdf", "pxr.Usd", "pxr.UsdGeom", "pxr.Vt")
-"""With --usd, usd-core's modules too: its import turns an interrupt into a warning and goes on."""
+"""With --usd, usd-core's modules, imported at start-up with signals held: its import turns an interrupt
+into a warning and goes on. (trimesh, which swallows one in its import of scipy, is imported where it is
+needed, on a thread of its own: mesh.io.import_trimesh.)"""
 
 
 @contextlib.contextmanager
@@ -185,7 +183,7 @@ def _run(argv) -> int:
         if getattr(args, "usd", None):
             require_usd()
         with signals_held():
-            for name in SHIELDED_IMPORTS + (SHIELDED_USD_IMPORTS if getattr(args, "usd", None) else ()):
+            for name in SHIELDED_USD_IMPORTS if getattr(args, "usd", None) else ():
                 importlib.import_module(name)
         check_paths(args)
         return args.func(args)

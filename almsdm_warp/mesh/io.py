@@ -132,11 +132,13 @@ def _read_trimesh(p: Path, where: str, data: bytes):
     if suffix == ".stl":
         vertices, faces = read_stl(data, where)
         return vertices, faces, None, []
-    import trimesh
-
     data = strip_bom(data, where, text=suffix != ".ply")
     if suffix == ".obj":
+        plain = read_plain_obj(data)
+        if plain is not None:
+            return (*plain, None, [])
         check_obj_face_indices(data, where)
+    trimesh = import_trimesh()
     # OBJ and OFF are text: decoded here (UTF-8, else Latin-1 for stray bytes in comments), so that
     # trimesh never needs an encoding guesser; PLY's header is ASCII and its body may be binary.
     source = _stdio.BytesIO(data) if suffix == ".ply" else _stdio.StringIO(_decode_text(data))
@@ -149,6 +151,50 @@ def _read_trimesh(p: Path, where: str, data: bytes):
     faces = np.zeros((0, 3), dtype=np.int64) if faces is None else np.asarray(faces, dtype=np.int64)
     _check_announced_counts(suffix, data, where, len(vertices), len(faces))
     return vertices, faces, None, []
+
+
+def import_trimesh():
+    """The trimesh module with its graph engine and repair, imported on a thread of its own (once): trimesh
+    imports scipy inside `except BaseException`, so a Ctrl-C that reached that import would be swallowed
+    and leave trimesh without its graph engine (a traceback later, in a mesh's repair); signals reach
+    only the main thread, whose wait here takes the interrupt while the import completes."""
+    import importlib
+    import sys
+    import threading
+
+    names = ("trimesh", "trimesh.graph", "trimesh.repair")
+    if not all(n in sys.modules for n in names):
+        done = threading.Thread(target=lambda: [importlib.import_module(n) for n in names], name="import-trimesh", daemon=True)
+        done.start()
+        done.join()
+    return importlib.import_module("trimesh")
+
+
+_NUMBER = rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_PLAIN_V = re.compile(rb"^v[ \t]+(" + _NUMBER + rb"[ \t]+" + _NUMBER + rb"[ \t]+" + _NUMBER + rb")[ \t]*\r?$", re.MULTILINE)
+_PLAIN_F = re.compile(rb"^f[ \t]+([0-9]+[ \t]+[0-9]+[ \t]+[0-9]+)[ \t]*\r?$", re.MULTILINE)
+_NOT_PLAIN = re.compile(rb"^(?![vf][ \t]|#|[ \t]*\r?$)", re.MULTILINE)
+
+
+def read_plain_obj(data: bytes):
+    """(vertices [n, 3], faces [m, 3] from 0) of an OBJ that holds only `v x y z` and `f i j k` lines
+    (plain 1-based vertex indices, each naming a vertex, every vertex named), comments and blank lines,
+    as trimesh reads it (the vertices in file order); None for any other OBJ (trimesh reads it, and
+    says what is wrong). No import of trimesh and its dependencies for the common case."""
+    if _NOT_PLAIN.search(data):
+        return None
+    vertex_lines = len(_OBJ_VERTEX.findall(data))
+    face_lines = len(_OBJ_FACE.findall(data))
+    v, f = _PLAIN_V.findall(data), _PLAIN_F.findall(data)
+    if len(v) != vertex_lines or len(f) != face_lines:
+        return None
+    if not v or not f:
+        return None
+    vertices = np.array(b" ".join(v).split(), dtype=np.float64).reshape(-1, 3)
+    faces = np.array(b" ".join(f).split(), dtype=np.int64).reshape(-1, 3) - 1
+    if faces.min() < 0 or faces.max() >= len(vertices) or np.bincount(faces.ravel(), minlength=len(vertices)).min() == 0:
+        return None  # an index out of range, or a vertex no face uses (trimesh drops it)
+    return vertices, faces
 
 
 _BOMS = ((b"\xef\xbb\xbf", "utf-8"), (b"\xff\xfe", "utf-16-le"), (b"\xfe\xff", "utf-16-be"))

@@ -40,7 +40,9 @@ def _orient(vertices: np.ndarray, tets: np.ndarray) -> np.ndarray:
 # -- sphere surface --------------------------------------------------------------------------------
 def icosphere_arrays(radius_mm: float, subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
     """A subdivided icosahedron on a sphere centred at the origin: (vertices [m], triangles)."""
-    import trimesh
+    from .io import import_trimesh
+
+    trimesh = import_trimesh()
 
     radius_mm = _positive("radius_mm", radius_mm)
     if int(subdivisions) != subdivisions or not 0 <= subdivisions <= 7:

@@ -562,8 +562,9 @@ class RestSurface:
 
     def project(self, points):
         """(closest points on the surface [m], their unit normals), shapes [k, 3]."""
-        from trimesh.triangles import points_to_barycentric
+        from ..mesh.io import import_trimesh
 
+        points_to_barycentric = import_trimesh().triangles.points_to_barycentric
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         hit = self.query(points)
         tri = self.triangles[hit.face]
