@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,6 +14,9 @@ import numpy as np
 from ..errors import InputError
 from ..export.tables import TableLayout, millimetres
 from .sampling import Sampling
+
+_CPU_MODEL_LOCK = threading.Lock()
+"""Held while a plan's CPU model is made (SweepPlan.model: the critical step's thread and the models' may ask at once)."""
 
 COLUMNS = ("x_mm", "y_mm", "z_mm", "vertex", "peak_force_N", "hold_force_N", "stiffness_N_per_mm", "recovery_error_mm", "rings")
 """The table's columns; `hold_force_N`: the force at the end of the hold (BatchResult.hold_force); `rings`: the
@@ -88,7 +92,7 @@ class SweepPlan:
     def __getstate__(self) -> dict:
         # pickled (Ray) with every point sampled and without the sampling's threads
         self.wait()
-        return {**self.__dict__, "sampling": None}
+        return {k: v for k, v in self.__dict__.items() if k != "_cpu_model"} | {"sampling": None}
 
     def contacts(self, rings: int) -> np.ndarray | None:
         """The contacts whose regions of `rings` rings a sweep builds once and gathers (a RegionTable's,
@@ -151,14 +155,21 @@ class SweepPlan:
         return self.__dict__["_critical_dt"]
 
     def model(self, device):
+        """The plan's Model on `device`: made for each call, but the CPU's once a plan (the whole mesh's
+        critical step and a CPU sweep's lanes read the same one: one model of a large mesh in memory)."""
         from ..sim.model import Model
         from ..warp_init import devices_started
 
         if str(device) != "cpu":
             devices_started()  # a context the command line started (warp_init.start_devices)
-
-        return Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale,
-                     fixed_below=self.fixed_below, law=self.law, element_scale=self.element_scale)
+        make = lambda: Model(self.mesh, self.tissue, device, edge_scale=self.edge_scale, anchor_scale=self.anchor_scale,
+                             fixed_below=self.fixed_below, law=self.law, element_scale=self.element_scale)
+        if str(device) != "cpu":
+            return make()
+        with _CPU_MODEL_LOCK:
+            if "_cpu_model" not in self.__dict__:
+                self.__dict__["_cpu_model"] = make()
+            return self.__dict__["_cpu_model"]
 
     def columns(self, begin: int, end: int, results) -> dict:
         """The output columns of points begin..end from [(indices in the chunk, BatchResult)], one per ring count."""
