@@ -120,7 +120,7 @@ def springs_matrices(model, anchors: bool = True, vertices=None):
     n = model.particle_count
     v = np.arange(n, dtype=np.int64) if vertices is None else np.asarray(vertices, dtype=np.int64)
     at = np.arange(len(neighbour)) if vertices is None else csr_entries(offsets, v)
-    row = np.repeat(np.arange(len(v)), np.diff(offsets)[v])
+    row = np.repeat(np.arange(len(v)), offsets[v + 1] - offsets[v])
     col = neighbour[at].astype(np.int64)
     if vertices is not None:  # local ids; -1 outside
         slot = np.minimum(np.searchsorted(v, col), len(v) - 1)
