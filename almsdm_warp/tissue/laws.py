@@ -58,12 +58,12 @@ def stable_step(mass, K, C, vertices=None, what: str = "") -> float:
 
 def over_mass(A, w: np.ndarray):
     """W A W for W = diag(w) repeated over each vertex's 3 rows (w [n]: M^-1/2 of each vertex); a 3x3 block
-    matrix (BSR, a block a vertex pair) stays one, scaled block by block."""
+    matrix (BSR, a block a vertex pair) is scaled in place, block by block (no second copy of a large mesh's)."""
     import scipy.sparse as sp
 
     if A.format == "bsr" and A.blocksize == (3, 3):
-        rows = np.repeat(np.arange(len(w)), np.diff(A.indptr))
-        return sp.bsr_matrix((A.data * (w[rows] * w[A.indices])[:, None, None], A.indices, A.indptr), shape=A.shape)
+        A.data *= (np.repeat(w, np.diff(A.indptr)) * w[A.indices])[:, None, None]
+        return A
     W = sp.diags(np.repeat(w, 3))
     return (W @ A @ W).tocsr()
 
@@ -129,8 +129,6 @@ def springs_matrices(model, anchors: bool = True, vertices=None):
     p, ends = model.mesh.vertices, model.mesh.edges
     d = p[ends[e, 1]] - p[ends[e, 0]]
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
-    ddt = d[:, :, None] * d[:, None, :]  # [entries, 3, 3]
-    del d
     inside = col >= 0
     # each row's blocks in column order, its diagonal block slotted in among the neighbours inside
     count = np.bincount(row[inside], minlength=len(v))
@@ -143,14 +141,12 @@ def springs_matrices(model, anchors: bool = True, vertices=None):
     scale = 1.0 if anchors else 0.0
     out = []
     for edge, vertex in ((model.spring_ke_host, model.anchor_ke_host), (model.spring_kd_host, model.anchor_kd_host)):
+        k_e, data = edge[e], np.empty((indptr[-1], 3, 3))
         with np.errstate(all="ignore"):
-            blocks = edge[e][:, None, None] * ddt
-            data = np.empty((indptr[-1], 3, 3))
-            data[slot] = -blocks[inside]
-            diag = np.zeros((len(v), 9))
-            for k in range(9):
-                diag[:, k] = np.bincount(row, weights=blocks[:, k // 3, k % 3], minlength=len(v))
-            data[diagonal] = diag.reshape(-1, 3, 3) + (vertex[v] * scale)[:, None, None] * np.eye(3)
+            for i, j in np.ndindex(3, 3):  # a component of every block at a time: k d_i d_j [entries]
+                part = k_e * (d[:, i] * d[:, j])
+                data[slot, i, j] = -part[inside]
+                data[diagonal, i, j] = np.bincount(row, weights=part, minlength=len(v)) + (vertex[v] * scale if i == j else 0.0)
         out.append(sp.bsr_matrix((data, indices, indptr), shape=(3 * len(v), 3 * len(v))))
     return tuple(out)
 
