@@ -86,7 +86,7 @@ def test_patch_and_map_of_a_sphere_on_a_winkler_plate(device):
     tactile = result.records["tactile"][0].reshape(n, n)
     direction = -batch.model.vertex_normal_rest[centre_vertex]
     along = -float(np.dot(batch.hold_reaction.numpy()[0].astype(np.float64), direction))
-    np.testing.assert_allclose(tactile.sum() * side * side, along, rtol=1e-6)
+    np.testing.assert_allclose(tactile.sum() * side * side, along, rtol=1e-5)  # float32 sums (CUDA: 1.03e-6 apart)
     c = (np.arange(n) + 0.5) * side - R
     assert abs((tactile.sum(0) * c).sum() / tactile.sum()) < side / 4 and abs((tactile.sum(1) * c).sum() / tactile.sum()) < side / 4
     assert tactile[0].max() == 0 and tactile[n // 2 - 1 : n // 2 + 1, n // 2 - 1 : n // 2 + 1].min() > 0  # rim empty, centre loaded
