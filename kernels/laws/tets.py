@@ -51,7 +51,8 @@ VOLUMETRIC = True
 nodal pressure pass (`nodal_pressure`) before its forces."""
 
 ENTRY_TOPOLOGY = wp.array(dtype=wp.vec4i)
-"""Entry k: the four vertex ids of its tet."""
+"""Entry k: the four vertex ids of its tet, in its vertex's order (i, a, j, k): the vertex second, the
+tet's orientation kept (tissue/laws.py CORNER_ORDER)."""
 ENTRY_PARAMS = wp.array(dtype=TetEntry)
 """Entry k: its tet's rest data and corner."""
 
