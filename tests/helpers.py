@@ -65,3 +65,20 @@ def write_tet_ball(path, radius_mm: float, edge_mm: float):
     vertices, tets = tet_ball_arrays(radius_mm, edge_mm)
     meshio.write(path, meshio.Mesh(vertices * 1e3, [("tetra", tets)]))
     return path
+
+
+def stop_after_writes(monkeypatch, count: int = 2):
+    """A sweep killed mid-run: Parts.write writes `count` chunks, then raises KeyboardInterrupt.
+    Returns the real Parts.write (to put back with monkeypatch.setattr before a resume)."""
+    from almsdm_warp.batch.sweep_store import Parts
+
+    real, calls = Parts.write, []
+
+    def write_then_stop(self, i, columns):
+        if len(calls) == count:
+            raise KeyboardInterrupt
+        calls.append(i)
+        real(self, i, columns)
+
+    monkeypatch.setattr(Parts, "write", write_then_stop)
+    return real

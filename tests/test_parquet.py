@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 from fuzzing import check_outcome, run_main
+from helpers import stop_after_writes
 
 from almsdm_warp.batch.dataset import DATASET_TABLE
 from almsdm_warp.batch.sweep_plan import SWEEP_TABLE, mesh_sha256
@@ -140,15 +141,7 @@ def test_an_interrupted_sweep_resumes_to_the_same_parquet(tmp_path, monkeypatch)
 
     args = ["sweep", "--points", "20", "--chunk", "6", *FAST]
     assert run_main([*args, "--out", tmp_path / "whole.parquet"])[0] == 0
-    real, calls = Parts.write, []
-
-    def write_then_stop(self, i, columns):
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        calls.append(i)
-        real(self, i, columns)
-
-    monkeypatch.setattr(Parts, "write", write_then_stop)
+    real = stop_after_writes(monkeypatch, 2)
     out = tmp_path / "resumed.parquet"
     assert run_main([*args, "--out", out])[0] == 130 and not out.exists()
     monkeypatch.setattr(Parts, "write", real)

@@ -13,6 +13,7 @@ from almsdm_warp.batch.sweep_times import SweepTimes, union_length
 from almsdm_warp.cli.main import main
 from almsdm_warp.scene.loader import resolve_scene_or_mesh
 from conftest import SCENES, load_cached
+from helpers import stop_after_writes
 
 FAST = ["--ramp-s", "0.05", "--hold-s", "0.05", "--settle-s", "0.05", "--dt-ms", "0.5"]
 
@@ -158,16 +159,7 @@ def test_interrupted_sweep_resumes_to_the_same_file(tmp_path, monkeypatch, capsy
     whole = tmp_path / "whole.csv"
     assert main(["sweep", "--points", "20", "--chunk", "6", "--out", str(whole), *FAST]) == 0
     out = tmp_path / "resumed.csv"
-    real_write = Parts.write
-    calls = []
-
-    def write_then_stop(self, i, columns):
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        calls.append(i)
-        real_write(self, i, columns)
-
-    monkeypatch.setattr(Parts, "write", write_then_stop)
+    real_write = stop_after_writes(monkeypatch, 2)
     assert main(["sweep", "--points", "20", "--chunk", "6", "--out", str(out), *FAST]) == 130
     assert not out.exists()
     assert len(list((tmp_path / "resumed.csv.parts").glob("chunk_*.npz"))) == 2
