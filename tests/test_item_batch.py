@@ -75,3 +75,39 @@ def test_auto_substeps_are_those_of_the_stiffest_items_own_batch():
     batch = ItemBatch(StackedModel(models, "cpu"), rings=2, dt=4e-3).build(np.repeat(top, 3), None, np.tile([0, 1, 2], 3)).plan()
     alone = [BatchPalpation(mesh, tissue, rings=2, dt=4e-3, device="cpu", **s).touch(top).substeps for s in scales]
     assert batch.substeps == max(alone) and max(alone) > min(alone)  # the 4x lesion's item needs more
+
+
+def _nh_ball_items(device):
+    mesh = tet_ball(30.0, 8.0)
+    tissue = Material(youngs_modulus=5e3, density=1000.0, rayleigh_alpha=60.0)
+    models, scales = item_models(mesh, tissue, "neo-hookean")
+    top = np.intersect1d(np.argsort(mesh.vertices[:, 2])[::-1][:40], mesh.surface_vertices)[:2]
+    return mesh, tissue, models, scales, top
+
+
+def test_a_press_that_diverged_is_pressed_again_at_twice_the_substeps(device):
+    """A plan too bold for the 4x lesion's item (its step planned from the baseline's critical step) diverges
+    there and holds at twice the substeps: those rows are the lesion's own batch at twice the substeps, bit
+    for bit, and the baseline's rows its own batch at the plan's."""
+    from almsdm_warp.solvers.stepper import SimulationDiverged
+
+    mesh, tissue, models, scales, top = _nh_ball_items(device)
+    base = BatchPalpation(mesh, tissue, rings=2, dt=1e-3, device=device, law="neo-hookean").touch(top)
+    dt = 1.5 * base.critical_dt  # the baseline: 2 substeps (0.75 of its step); the 4x lesion's step is about half
+    vertices, items = np.repeat(top, 2), np.tile([0, 1], len(top))
+    batch = ItemBatch(StackedModel(models, device), rings=2, dt=dt)
+    batch.known_critical_dt = base.critical_dt
+    result = batch.build(vertices, None, items).plan().press(**PRESS)
+    assert batch.substeps == 2 and result.substeps.tolist() == [2, 4] * len(top)
+    for k, n in ((0, 2), (1, 4)):
+        alone = BatchPalpation(mesh, tissue, rings=2, dt=dt, device=device, substeps=n, law="neo-hookean", **scales[k]).touch(top)
+        expected = alone.press(**PRESS)
+        for field in ("peak_force", "hold_force", "recovery_error"):
+            np.testing.assert_array_equal(getattr(result, field)[items == k], getattr(expected, field), err_msg=f"{field} of item {k}")
+    with pytest.raises(SimulationDiverged, match="at 2 of 2 contacts"):  # the lesion alone at the plan's substeps diverges
+        BatchPalpation(mesh, tissue, rings=2, dt=dt, device=device, substeps=2, law="neo-hookean", **scales[1]).touch(top).press(**PRESS)
+    # fixed substeps are the caller's: never pressed again; nor past REPRESSES doublings
+    bold = ItemBatch(StackedModel(models, device), rings=2, dt=16 * dt)
+    bold.known_critical_dt = 16 * base.critical_dt
+    with pytest.raises(SimulationDiverged, match="in 8 substep"):
+        bold.build(vertices, None, items).plan().press(**PRESS)

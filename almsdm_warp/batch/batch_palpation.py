@@ -21,11 +21,11 @@ from ..kernels.arrays import BatchElements, BatchPress, BatchRegionArrays, Batch
 from ..kernels.explicit import batch as bk
 from ..kernels.explicit import batch_fast as bkf
 from ..kernels.region import batch_rings as br
-from ..checks import fixed_substeps, substeps_for
+from ..checks import LIMITS, fixed_substeps, substeps_for
 from ..checks import check_value
 from ..protocol.palpation import PATCH_DEPTH, check_probe_radius
 from ..solvers import integrators, solver_class
-from ..solvers.stepper import check_results, force_bound, plan_substeps
+from ..solvers.stepper import check_results, diverged_rows, force_bound, plan_substeps
 from ..sim.model import Model
 from ..region.patch import sphere_patches
 from ..region.region import check_rings
@@ -33,6 +33,12 @@ from .critical_step import certified_critical_dt
 
 
 KERNELS = ("fast", "exact")
+
+REPRESSES = 2
+"""How many times a press of planned substeps (substeps "auto") that diverged is pressed again, each
+time at twice the substeps (4x the plan's at most, and never past LIMITS["substeps"]): the plan's
+margin (0.9 of the critical step) is taken at rest, and a deep press stiffens a tet law's compressed
+elements past it (a stiff lesion pressed 10 mm: docs/datasets.md)."""
 
 
 def host_copy(a: wp.array) -> np.ndarray:
@@ -139,6 +145,9 @@ class BatchResult:
     records: dict = field(default_factory=dict, repr=False)
     """The learning records asked for (batch/records.py's BatchRecordArrays.read: force_curve [N] and
     curve_depth [m], [B, points]; patch_area [m^2], [B]; tactile [Pa], [B, n * n]), else empty."""
+    substeps: np.ndarray | None = field(default=None, repr=False)
+    """The integrator's steps a frame each press took, int [B]: the batch's plan, or more where a press
+    diverged at the plan and was pressed again (REPRESSES)."""
 
     # the names of PressResult, each with its unit (the fields above are SI, named without one)
     @property
@@ -252,7 +261,9 @@ class BatchPalpation:
     0.9 x the critical step of the batch's free vertices together (Model.critical_dt of their union,
     which no single region's exceeds); past LIMITS["substeps"] the batch runs the implicit
     integrator and says so in `notes`. substeps: "auto" (that) or a fixed int >= 1.
-    The press raises SimulationDiverged where a result is not finite or beyond force_bound.
+    A press whose result is not finite or beyond force_bound diverged: where its substeps were planned
+    ("auto"), it is pressed again at twice the substeps, up to REPRESSES times (BatchResult.substeps
+    says each press's); else, or still, the press raises SimulationDiverged.
     kernel (explicit): "fast" (CUDA's default where the regions fit: one block per palpation, its
     threads sharing the springs, each computed once, with an approximate reciprocal square root
     and no division in the step: forces within 5e-6 relative of the exact kernel's) or "exact" (a
@@ -306,6 +317,11 @@ class BatchPalpation:
         # substeps (explicit steps a frame), critical_dt [s] of the batch's free vertices and notes (what
         # the batch changed on its own): as Palpation's, set by plan_substeps at each touch()
         self.substeps, self.critical_dt, self.notes = 1, math.inf, []
+        self.represses = REPRESSES if self._fixed_substeps is None else 0
+        """How many more times a press that diverged is pressed again at twice the substeps (REPRESSES)."""
+        self.known_critical_dt = None
+        """The critical step [s] of the contacts' free vertices where the caller knows it (a re-press:
+        the batch's that diverged), or None: estimated at each touch()."""
         self._critical_cache, self._bound = {}, force_bound(self.model)
         self.critical_dt_bound = None
         """A lower bound [s] of every region's critical step (the whole mesh's Model.critical_dt()),
@@ -409,6 +425,9 @@ class BatchPalpation:
         self.integrator, self.substeps, self.critical_dt = plan.integrator, plan.substeps, plan.critical_dt
 
     def _union_critical_dt(self) -> float:
+        if self.known_critical_dt is not None:
+            return self.known_critical_dt
+
         def free():
             rv = host_copy(self.regions.region_vertex)
             return rv[np.arange(rv.shape[1])[None, :] < self.free_vertex_counts[:, None]]
@@ -605,7 +624,7 @@ class BatchPalpation:
         if self.records.spec.tactile_size and self.integrator != "explicit":
             raise ValueError(f"the tactile map is recorded by the explicit integrator only; the batch took the implicit "
                              f"fall-back ({'; '.join(self.notes)}): give a smaller dt")
-        self.depth = float(depth)
+        self.depth, self.press_args = float(depth), (depth, ramp, hold, settle)
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
         self.press_arrays = struct_from(BatchPress, self)
         if self.records.on:
@@ -633,8 +652,7 @@ class BatchPalpation:
         h64 = hold.astype(np.float64)
         hold_n = np.sqrt(h64[:, 0] ** 2 + h64[:, 1] ** 2 + h64[:, 2] ** 2)
         recovery = np.linalg.norm(q0 - rest, axis=1)
-        self._check_results(peak_n, hold_n, recovery)
-        return BatchResult(
+        result = BatchResult(
             vertex=self.vertices.copy(),
             depth=self.depth,
             peak_force=peak_n,
@@ -643,12 +661,51 @@ class BatchPalpation:
             region_vertices=self.region_vertex_counts.copy(),
             free_vertices=self.free_vertex_counts.copy(),
             records=self.records.read(self.depth, self.ramp_steps, host_copy) if self.records.on else {},
+            substeps=np.full(self.batch_size, self.substeps, dtype=np.int32),
         )
+        bad = np.flatnonzero(diverged_rows(peak_n, recovery, self._row_bounds(), self._mesh_size(), hold_n))
+        if len(bad):
+            if not (self.represses > 0 and self.integrator == "explicit" and 2 * self.substeps <= LIMITS["substeps"]):
+                self._check_results(peak_n, hold_n, recovery)
+            self._press_again(result, bad)
+        return result
+
+    def _press_again(self, result: BatchResult, rows: np.ndarray) -> None:
+        """Press the palpations `rows` again at twice the substeps (a batch of their own: the same model,
+        regions and press, the next re-press its own) and put their results in `result`'s rows."""
+        again = self._sibling(2 * self.substeps)
+        again.region_table, again.critical_dt_bound = self.region_table, self.critical_dt_bound
+        again.known_critical_dt, again.represses = self.critical_dt, self.represses - 1
+        self._build_rows(again, rows).plan()
+        redo = again.press(*self.press_args)
+        for name in ("peak_force", "hold_force", "recovery_error", "region_vertices", "free_vertices", "substeps"):
+            getattr(result, name)[rows] = getattr(redo, name)
+        for name, values in redo.records.items():
+            result.records[name][rows] = values
+
+    def _sibling(self, substeps: int) -> "BatchPalpation":
+        """A batch of this one's model, rings, frame, kernel and probe that steps `substeps` substeps."""
+        return BatchPalpation(**self._sibling_kw(substeps))
+
+    def _sibling_kw(self, substeps: int) -> dict:
+        return dict(model=self.model, rings=self.rings, dt=self.frame_dt, integrator=self.requested_integrator, kernel=self._kernel,
+                    threads=self._threads, capacity=self._capacity, probe_radius=self.probe_radius, substeps=substeps,
+                    records=self.records.spec if self.records.on else None)
+
+    def _build_rows(self, batch: "BatchPalpation", rows: np.ndarray) -> "BatchPalpation":
+        """`batch` built for this batch's palpations `rows`."""
+        return batch.build(self.vertices[rows], self.depth)
+
+    def _row_bounds(self):
+        """The force [N] past which a palpation's press diverged (solvers.stepper.force_bound): one for all."""
+        return self._bound
+
+    def _mesh_size(self) -> float:
+        return float(np.ptp(self.mesh.vertices, axis=0).max())
 
     def _check_results(self, peak, hold, recovery) -> None:
         """SimulationDiverged naming the first palpation whose force or recovery is not finite or runs away."""
-        size = float(np.ptp(self.mesh.vertices, axis=0).max())
-        check_results(f"batch's {self.integrator}", self.vertices, peak, recovery, self._bound, size, self.frame_dt,
+        check_results(f"batch's {self.integrator}", self.vertices, peak, recovery, self._bound, self._mesh_size(), self.frame_dt,
                       self.substeps, self.critical_dt, hold=hold)
 
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0, **kw) -> BatchResult:

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..solvers import solver_class
 from ..solvers.stepper import force_bound, plan_substeps
-from .batch_palpation import host_copy, union_critical_dt
+from .batch_palpation import REPRESSES, host_copy, union_critical_dt
 from .item_batch import ItemBatch, StackedModel, result_rows, stack_limit
 from .sweep import run_threads
 from .sweep_lanes import Lane, checked_columns, frames, run_lanes
@@ -134,7 +134,7 @@ class DeviceStack:
         if key not in self.batches:
             # the implicit fall-back takes one step a frame (its plan's own)
             batch = self._new_batch(rings, integrator, substeps if integrator == self.stack.plan.integrator else "auto")
-            batch.region_table = self.table(rings)[0]
+            batch.region_table, batch.represses = self.table(rings)[0], REPRESSES  # the substeps are a plan's: "auto"
             self.batches[key] = batch
         return self.batches[key]
 

@@ -165,6 +165,8 @@ class ItemBatch(BatchPalpation):
 
     def _union_critical_dt(self) -> float:
         # the caller's estimates, else each item's over its own palpations' free vertices: the shortest
+        if self.known_critical_dt is not None:
+            return self.known_critical_dt
         if self.item_critical_dt:
             return min(self.item_critical_dt.values())
         rv = host_copy(self.regions.region_vertex) % self.model.vertex_stride
@@ -173,9 +175,21 @@ class ItemBatch(BatchPalpation):
         return min(union_critical_dt(self.model.models[k], lambda k=k: rv[self.items == k][free[self.items == k]], self.frame_dt,
                                      None, self._fixed_substeps, caches.setdefault(int(k), {})) for k in np.unique(self.items))
 
+    def _sibling(self, substeps: int) -> "ItemBatch":
+        kw = self._sibling_kw(substeps)
+        batch = ItemBatch(kw.pop("model"), **kw)
+        batch.item_critical_dt = self.item_critical_dt
+        return batch
+
+    def _build_rows(self, batch: "ItemBatch", rows: np.ndarray) -> "ItemBatch":
+        return batch.build(self.vertices[rows], self.depth, self.items[rows])
+
+    def _row_bounds(self) -> np.ndarray:
+        return np.array([self.model.force_bound(int(k)) for k in range(self.model.item_count)])[self.items]
+
     def _check_results(self, peak, hold, recovery) -> None:
         """SimulationDiverged naming the first palpation whose result is not finite or past its item's bound."""
-        size = float(np.ptp(self.mesh.vertices, axis=0).max())
+        size = self._mesh_size()
         for k in np.unique(self.items):
             sel = self.items == k
             check_results(f"batch's {self.integrator}", self.vertices[sel], peak[sel], recovery[sel], self.model.force_bound(int(k)),
@@ -187,4 +201,5 @@ def result_rows(result: BatchResult, begin: int, end: int) -> BatchResult:
     return BatchResult(vertex=result.vertex[begin:end], depth=result.depth, peak_force=result.peak_force[begin:end],
                        hold_force=result.hold_force[begin:end], recovery_error=result.recovery_error[begin:end],
                        region_vertices=result.region_vertices[begin:end], free_vertices=result.free_vertices[begin:end],
-                       records={name: values[begin:end] for name, values in result.records.items()})
+                       records={name: values[begin:end] for name, values in result.records.items()},
+                       substeps=None if result.substeps is None else result.substeps[begin:end])

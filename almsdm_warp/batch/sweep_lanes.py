@@ -199,7 +199,9 @@ class Lane:
         else:
             self.busy = [(e[0], e[1]) for *_, e in self.started]
         with self.times.phase("read-back"):
-            return [(what, self._result(batch, pinned)) for what, batch, pinned, _ in self.started]
+            out = [(what, self._result(batch, pinned)) for what, batch, pinned, _ in self.started]
+        self.times.add_repressed(sum(int(np.count_nonzero(r.substeps > s[1].substeps)) for s, (_, r) in zip(self.started, out)))
+        return out
 
     def _result(self, batch, pinned):
         if pinned is None:

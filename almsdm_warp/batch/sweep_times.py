@@ -37,6 +37,8 @@ class SweepTimes:
         self.region_steps = 0
         """Region-steps launched (each press's steps, substeps counted), summed over the devices."""
         self.host_per_chunk: list[float] = []
+        self.repressed = 0
+        """Presses that diverged at their planned substeps and were pressed again at more (BatchResult.substeps)."""
         """Host time [s] of each chunk on its device's thread (build, plan, launch, read-back, checks)."""
         self._lock = threading.Lock()
 
@@ -56,6 +58,17 @@ class SweepTimes:
         """`count` region-steps launched (presses x their steps)."""
         with self._lock:
             self.region_steps += int(count)
+
+    def add_repressed(self, count: int) -> None:
+        with self._lock:
+            self.repressed += int(count)
+
+    def note(self) -> str | None:
+        """The command line's note of the presses pressed again, or None."""
+        if not self.repressed:
+            return None
+        return (f"{self.repressed} press(es) diverged at their planned substeps (0.9 of the critical step at rest) and were "
+                f"pressed again at twice or four times as many: each of their rows is that press's")
 
     def mark(self, name: str) -> None:
         """Note the first time `name` is reached (the way to the first press: what it waits for)."""

@@ -21,6 +21,7 @@ def add_dataset_arg(parser) -> None:
 def cmd_dataset(args, devices: list[str]) -> int:
     """Run the dataset spec args.dataset into the folder args.out on `devices` (resuming what is there)."""
     from ..batch import dataset as ds
+    from ..batch.sweep_times import SweepTimes
     from ..errors import InputError
     from ..progress import Progress
     from ..solvers.stepper import SimulationDiverged
@@ -55,10 +56,10 @@ def cmd_dataset(args, devices: list[str]) -> int:
     if folder.note:
         print(f"note: {folder.note}", file=sys.stderr)
     total = sum(len(i.plan.vertices) * press_steps(i.plan) for i in todo)
-    t0 = time.perf_counter()
+    t0, times = time.perf_counter(), SweepTimes()
     try:
         with Progress(total, enabled=args.progress, label="dataset") as bar:
-            ds.press_dataset(folder, todo, devices, bar, on_item=lambda item: print(f"item {item.name}: done"))
+            ds.press_dataset(folder, todo, devices, bar, on_item=lambda item: print(f"item {item.name}: done"), times=times)
     except KeyboardInterrupt:
         print(f"almsdm: interrupted; the items done are in {folder.dir}: run the same command again to resume", file=sys.stderr)
         return 130
@@ -68,4 +69,6 @@ def cmd_dataset(args, devices: list[str]) -> int:
     columns = ds.finish_dataset(folder)
     print(f"pressed {len(todo)} item(s) in {time.perf_counter() - t0:.2f} s; "
           f"wrote {Path(folder.dir) / 'table.npz'} ({len(columns['vertex'])} rows)")
+    if times.note():
+        print(f"note: {times.note()}")
     return 0

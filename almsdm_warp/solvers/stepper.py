@@ -83,16 +83,23 @@ def remedies(integrator: str) -> str:
             f"(see its quality note) or a tissue stiffer than the mesh resolves may need remeshing")
 
 
-def check_results(integrator: str, vertices, peak, recovery, bound: float, size: float, dt: float, substeps: int,
-                  critical_dt: float = math.inf, hold=None) -> None:
-    """SimulationDiverged naming the first of several presses (at mesh `vertices`) whose peak force [N] (or
-    `hold` force), or recovery [m], is not finite, or whose force is past `bound` [N] or recovery past
-    twice the mesh's `size` [m]."""
+def diverged_rows(peak, recovery, bound: float, size: float, hold=None) -> np.ndarray:
+    """Which of several presses diverged (bool): a peak force [N] (or `hold` force) or recovery [m] not
+    finite, a force past `bound` [N] or a recovery past twice the mesh's `size` [m]."""
     peak, recovery = np.asarray(peak, dtype=np.float64), np.asarray(recovery, dtype=np.float64)
     bad = ~(np.isfinite(peak) & np.isfinite(recovery)) | (peak > bound) | (recovery > 2.0 * size)
     if hold is not None:
         bad |= ~np.isfinite(np.asarray(hold, dtype=np.float64))
+    return bad
+
+
+def check_results(integrator: str, vertices, peak, recovery, bound: float, size: float, dt: float, substeps: int,
+                  critical_dt: float = math.inf, hold=None) -> None:
+    """SimulationDiverged naming the first of several presses (at mesh `vertices`) that diverged
+    (diverged_rows)."""
+    bad = diverged_rows(peak, recovery, bound, size, hold)
     if np.any(bad):
+        peak, recovery = np.asarray(peak, dtype=np.float64), np.asarray(recovery, dtype=np.float64)
         b = int(np.flatnonzero(bad)[0])
         raise diverged(integrator, f" at {int(bad.sum())} of {len(bad)} contacts, the first at vertex {int(vertices[b])}: peak force "
                                    f"{peak[b]:.3g} N, recovery {recovery[b] * 1e3:.3g} mm", dt, substeps, critical_dt)
