@@ -255,4 +255,4 @@ def run_lanes(plan, lanes: list, take, put, times: SweepTimes, on_launch=None) -
         if i is None:
             break
         flying = (i, lane)
-    times.add_press(busy)
+    times.add_press(busy, str(lanes[0].device))

@@ -37,9 +37,11 @@ class SweepTimes:
         self.region_steps = 0
         """Region-steps launched (each press's steps, substeps counted), summed over the devices."""
         self.host_per_chunk: list[float] = []
+        """Host time [s] of each chunk on its device's thread (build, plan, launch, read-back, checks)."""
+        self.device_spans: dict[str, tuple[float, float]] = {}
+        """Each device's first press's start and last press's end [s since t0]."""
         self.repressed = 0
         """Presses that diverged at their planned substeps and were pressed again at more (BatchResult.substeps)."""
-        """Host time [s] of each chunk on its device's thread (build, plan, launch, read-back, checks)."""
         self._lock = threading.Lock()
 
     @contextmanager
@@ -75,12 +77,15 @@ class SweepTimes:
         with self._lock:
             self.marks.setdefault(name, time.perf_counter() - self.t0)
 
-    def add_press(self, intervals) -> None:
+    def add_press(self, intervals, device: str = "") -> None:
         """One device's presses, (begin, end) [s] on the host's clock (time.perf_counter)."""
         intervals = [(b - self.t0, e - self.t0) for b, e in intervals]
         with self._lock:
             self.press_s += union_length(intervals)
             self.pressing += intervals
+            if intervals:
+                span = self.device_spans.get(device, (math.inf, -math.inf))
+                self.device_spans[device] = (min(span[0], *(b for b, _ in intervals)), max(span[1], *(e for _, e in intervals)))
 
     def timeline(self, wall_s: float) -> dict:
         """When the devices pressed [s]: the first press's start, the idle time between the first and the
@@ -101,6 +106,8 @@ class SweepTimes:
             lines.append(f"{name[:-2].replace('_', ' '):<26}{s:10.3f} s{100 * s / wall_s:7.1f} %")
         if self.marks:
             lines.append("on the way to the first press: " + ", ".join(f"{name} {s:.3f} s" for name, s in sorted(self.marks.items(), key=lambda m: m[1])))
+        if len(self.device_spans) > 1:
+            lines.append("each device pressed: " + ", ".join(f"{d} {b:.3f}..{e:.3f} s" for d, (b, e) in sorted(self.device_spans.items())))
         if self.host_per_chunk:
             h = np.array(self.host_per_chunk)
             lines.append(f"host time per chunk: median {np.median(h) * 1e3:.1f} ms, max {h.max() * 1e3:.1f} ms ({len(h)} chunks)")
