@@ -53,7 +53,7 @@ def press_dataset(spec, devices, together, tmp):
     from almsdm_warp.batch.sweep_times import SweepTimes
 
     t0 = time.perf_counter()
-    items = ds.plan_items(spec, cuda=devices[0] != "cpu")
+    items = ds.plan_items(spec, cuda=devices[0] != "cpu", gpus=len(set(devices)))
     planned = time.perf_counter() - t0
     folder = ds.DatasetFolder(Path(tempfile.mkdtemp(dir=tmp)) / "ds", items, spec)
     todo = folder.open()

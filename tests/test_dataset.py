@@ -283,3 +283,28 @@ def test_a_scene_of_more_items_than_a_stack_holds_gives_the_same_bits(tmp_path, 
     together = pressed(spec, tmp_path / "together", ["cpu"], together=True)
     for c in ds.DATASET_COLUMNS:
         np.testing.assert_array_equal(together[c], alone[c], err_msg=c)
+
+
+@pytest.mark.parametrize("items, points, gpus", [(13, 10000, 2), (13, 100000, 2), (26, 100000, 2), (13, 100000, 4), (13, 40000, 3)])
+def test_units_on_several_gpus_split_evenly(items, points, gpus):
+    """The default chunks of several GPUs (item_chunk) and units_of's order: the GPUs, each taking the next
+    unit when free (a unit's time its presses), finish within 5% of an even split; one chunk an item (one
+    GPU's default) would leave 13 items on two GPUs at 7 against 6 (+7.7%)."""
+    import heapq
+    from types import SimpleNamespace
+
+    from almsdm_warp.batch.dataset import item_chunk
+    from almsdm_warp.batch.dataset_press import SceneStack, units_of
+
+    def makespan(chunk):
+        plan = SimpleNamespace(chunks=[(b, min(b + chunk, points)) for b in range(0, points, chunk)])
+        works = [SimpleNamespace(item=SimpleNamespace(plan=plan), todo=set(range(len(plan.chunks)))) for _ in range(items)]
+        free = [0.0] * gpus
+        for _, c, members in units_of([SceneStack(works)], gpus):
+            heapq.heappush(free, heapq.heappop(free) + len(members) * (plan.chunks[c][1] - plan.chunks[c][0]))
+        return max(free)
+
+    even = items * points / gpus
+    assert makespan(item_chunk(points, True, gpus)) <= 1.05 * even
+    if (items, gpus) == (13, 2):
+        assert makespan(item_chunk(points, True, 1)) == 7 * points

@@ -323,7 +323,7 @@ def lesion_centers(mesh, count: int, depth: float) -> np.ndarray:
     return points - depth * vertex_normals(mesh.vertices, mesh.triangles)[vertices]
 
 
-def plan_items(spec: DatasetSpec, cuda: bool = False, on_item=None) -> list[DatasetItem]:
+def plan_items(spec: DatasetSpec, cuda: bool = False, on_item=None, gpus: int = 1) -> list[DatasetItem]:
     """Every item of the spec, in order: per scene its baseline, then each centre x radius x factor;
     on_item() after each item is planned (a progress bar: each lesion takes a pass over the whole mesh)."""
     from ..tissue.lesion import Lesion
@@ -333,7 +333,7 @@ def plan_items(spec: DatasetSpec, cuda: bool = False, on_item=None) -> list[Data
         seen[scene.name] = seen.get(scene.name, 0) + 1
         name = scene.name if seen[scene.name] == 1 else f"{scene.name}_{seen[scene.name]}"
         name = name.replace(",", "_")  # a CSV cell
-        mesh, base, scene = _scene_plan(spec, scene, name, cuda)
+        mesh, base, scene = _scene_plan(spec, scene, name, cuda, gpus)
         if spec.centers:
             centers = spec.centers.get(scene.name, np.zeros((0, 3)))
         else:
@@ -356,7 +356,17 @@ def plan_items(spec: DatasetSpec, cuda: bool = False, on_item=None) -> list[Data
     return items
 
 
-def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
+def item_chunk(points: int, cuda: bool, gpus: int = 1) -> int:
+    """Points a chunk of an item when the spec gives none: 64 on the CPU (a resume loses little); on one
+    GPU the item's points in one chunk (each item one launch with its scene's others); on several, two
+    chunks a GPU, so that the items' (item, chunk) units split evenly over the GPUs (13 items of one
+    chunk on two GPUs: 7 and 6)."""
+    if not cuda:
+        return 64
+    return max(1, -(-points // (2 * gpus))) if gpus > 1 else max(points, 1)
+
+
+def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool, gpus: int = 1):
     """(The scene's mesh, its baseline plan (no lesion), the scene with its support made a plane for a
     press from above, as a sweep's), after the checks a sweep makes."""
     from ..checks import check_ring_count
@@ -382,7 +392,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool):
     check_probe_radius(scene.probe_radius, mesh)  # before any work, as the batch checks it again
     check_sphere_travel(scene.probe_radius, press["depth"], spec.dt, press["ramp"])
     points, vertices = pressed if pressed is not None else pressable_points(mesh, spec.points, scene.fixed_below)
-    chunk = spec.chunk or (len(vertices) if cuda else 64)
+    chunk = spec.chunk or item_chunk(len(vertices), cuda, gpus)
     tol = (scene.tol or AUTO_TOL) if rings == AUTO else None
     plan = SweepPlan(mesh, scene.tissue, None, None, 1 if tol else int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
                      press["settle"], points, vertices, chunk, spec.integrator, tol, probe_radius=scene.probe_radius,

@@ -250,7 +250,9 @@ stay the size of a sweep's chunk's; a chunk of many items is cut into several un
 def units_of(stacks: list[SceneStack], devices: int) -> list[tuple]:
     """The work as (stack, chunk, items) units, in order: each chunk's items that lack it, in one unit of
     at most LAUNCH_PRESSES presses, or, where a stack has fewer than two chunks a device, cut into that
-    many parts so every device gets work."""
+    many parts so every device gets work. On several devices the largest units go first (each to
+    whichever device is free), so that the last ones, which one device may press while another waits,
+    are the smallest."""
     units = []
     for s, stack in enumerate(stacks):
         chunks = sorted(set().union(*(w.todo for w in stack.works)))
@@ -260,6 +262,9 @@ def units_of(stacks: list[SceneStack], devices: int) -> list[tuple]:
             begin, end = stack.plan.chunks[c]
             parts = max(min(cut, len(members)), -(-len(members) // max(1, LAUNCH_PRESSES // (end - begin))))
             units += [(s, c, [int(k) for k in part]) for part in np.array_split(np.asarray(members), parts)]
+    if devices > 1:
+        size = lambda u: len(u[2]) * np.subtract(*stacks[u[0]].plan.chunks[u[1]][::-1])
+        units.sort(key=size, reverse=True)  # stable: in order within a size
     return units
 
 

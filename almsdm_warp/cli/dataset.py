@@ -43,7 +43,7 @@ def cmd_dataset(args, devices: list[str]) -> int:
     count = ds.spec_cost(spec)[0]
     print(f"planning {count} item(s) of {len(spec.scenes)} scene(s)", flush=True)
     with Progress(count, enabled=args.progress, label="planning") as bar:
-        items = ds.plan_items(spec, cuda=devices[0] != "cpu", on_item=bar.advance)
+        items = ds.plan_items(spec, cuda=devices[0] != "cpu", on_item=bar.advance, gpus=len(set(devices)))
     from ..batch.sweep_plan import press_steps
 
     check_region_steps(sum(len(i.plan.vertices) * press_steps(i.plan) for i in items), 1, 1, args.max_region_steps)
