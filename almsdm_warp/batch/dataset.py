@@ -357,13 +357,19 @@ def plan_items(spec: DatasetSpec, cuda: bool = False, on_item=None, gpus: int = 
 
 
 def item_chunk(points: int, cuda: bool, gpus: int = 1) -> int:
-    """Points a chunk of an item when the spec gives none: 64 on the CPU (a resume loses little); on one
-    GPU the item's points in one chunk (each item one launch with its scene's others); on several, two
-    chunks a GPU, so that the items' (item, chunk) units split evenly over the GPUs (13 items of one
-    chunk on two GPUs: 7 and 6)."""
+    """Points a chunk of an item when the spec gives none: 64 on the CPU (a resume loses little); on a GPU
+    the item's points in one chunk (each item one launch with its scene's others); on several, where
+    each would still hold SPLIT_POINTS, a chunk a GPU: the (item, chunk) pairs are then a multiple of the
+    GPUs and split evenly over them (13 items of one chunk on two GPUs go 7 against 6). Smaller items stay
+    whole: the parts a chunked item writes, and its table made from them at the end, would cost more."""
     if not cuda:
         return 64
-    return max(1, -(-points // (2 * gpus))) if gpus > 1 else max(points, 1)
+    return -(-points // gpus) if gpus > 1 and points >= SPLIT_POINTS * gpus else max(points, 1)
+
+
+SPLIT_POINTS = 16384
+"""The fewest points a chunk of an item is cut to on several GPUs (item_chunk): a sweep chunk's least
+on a GPU (sweep_plan.default_chunk)."""
 
 
 def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool, gpus: int = 1):
