@@ -267,3 +267,35 @@ def test_a_sliver_is_named_at_load(tmp_path):
     assert note.startswith("1 sliver tetrahedron of 2 (quality under 0.02") and "worst: tetrahedron 1, vertices (1, 2, 3, 4)" in note
     assert f"quality {q:.3g}" in note
     assert mesh.tet_count == 2  # kept: only zero-volume tets are dropped
+
+
+# -- the sphere near the fixed ring -----------------------------------------------------------------
+
+
+def test_a_sphere_near_the_fixed_ring_is_measured_and_warned_of():
+    """A 10 mm sphere pressed 10 mm into a 25 mm tet ball on a support: with 2 rings of 8 mm edges the region's
+    fixed ring lies about a millimetre from the sphere at full depth and the force collapses to under half the
+    global model's (the reference); with 4 rings the ring is far and the force the global model's to 2%.
+    PressResult.ring_gap is the brute-force distance, and only the first is warned of."""
+    from almsdm_warp.cli.palpate import press_warnings
+    from almsdm_warp.evaluation.depth_layers import PRESS, ball_case
+    from almsdm_warp.protocol.palpation import Palpation
+
+    case = ball_case(8.0)
+    results = {}
+    for rings in (2, 4, "global"):
+        pal = Palpation(case.mesh, case.material(), rings=rings, law="neo-hookean", integrator="implicit", dt=PRESS["dt"],
+                        device="cpu", fixed_below=case.fixed_below, probe_radius=case.sphere)
+        pal.touch(case.vertex, case.depth)
+        result = results[rings] = pal.press(case.depth, ramp=PRESS["ramp"], hold=PRESS["hold"], settle=PRESS["dt"])
+        if rings == "global":
+            assert result.ring_gap is None
+            continue
+        centre = pal.rest_position() + pal.inward_normal() * (case.depth - case.sphere)
+        ring = pal.region.boundary()
+        assert result.ring_gap == pytest.approx(min(np.linalg.norm(case.mesh.vertices[v] - centre) for v in ring) - case.sphere, abs=1e-9)
+    reference = results["global"].hold_force_N
+    assert results[2].ring_gap < 0.5 * case.sphere and results[2].hold_force_N < 0.5 * reference
+    assert results[4].ring_gap > case.sphere and results[4].hold_force_N == pytest.approx(reference, rel=0.02)
+    assert any("fixed ring" in w for w in press_warnings(results[2], case.mesh.tet_count, case.sphere))
+    assert press_warnings(results[4], case.mesh.tet_count, case.sphere) == []

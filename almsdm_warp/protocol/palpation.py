@@ -89,6 +89,9 @@ class PressResult:
     inverted_tets: int | None = None
     """Tets inverted (det F <= 0) at the end of the hold, the deepest frame (mesh.topology.inverted_tets);
     None on a surface mesh or where nothing was counted."""
+    ring_gap: float | None = None
+    """The sphere's least distance [m] at full depth from a vertex of the region's fixed outer ring
+    (negative: it reaches into the ring, which it cannot move); None for the paper's probe or the global model."""
 
     @property
     def peak_force_N(self) -> float:
@@ -541,7 +544,16 @@ class Palpation:
                 record(s + 1, total)
         self.check_finite(total)
         return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=release, force=force, displacement=disp,
-                           step_peak=peak, inverted_tets=inverted)
+                           step_peak=peak, inverted_tets=inverted, ring_gap=self._ring_gap(start + direction * depth, drive))
+
+    def _ring_gap(self, centre, drive) -> float | None:
+        # PressResult.ring_gap: the fixed ring's vertices stay at rest, so their distance from the centre at full depth
+        if drive != PROBE_SPHERE or self.region is None:
+            return None
+        ring = self.region.boundary()
+        if len(ring) == 0:
+            return None
+        return float(np.linalg.norm(self.mesh.vertices[ring] - centre, axis=1).min()) - self.probe_radius
 
     def press_force(self, force=2.4, ramp=0.1, hold=0.2, settle=1.0, *, check_every=50, record=None, record_every=1) -> PressResult:
         """Force-controlled press: push the touched vertex along the inward normal with a force
