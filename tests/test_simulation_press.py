@@ -433,3 +433,35 @@ def test_replay_keeps_its_graph_alive(device):
     for _ in range(20):
         force = pal.step()
     assert np.all(np.isfinite(force)) and np.linalg.norm(force) > 0
+
+
+def test_a_press_that_diverged_is_pressed_again_from_where_it_began(device):
+    """A plan too bold (its critical step taken 2.2x too long: one substep of 1.6x the true one) diverges;
+    the press is pressed again from the state it began in at twice the substeps, and gives the numbers of a
+    palpation whose substeps are fixed there, bit for bit; the contact keeps them. Fixed substeps are never
+    pressed again."""
+    from almsdm_warp.mesh.primitives import tet_ball
+    from almsdm_warp.tissue.material import Material
+
+    mesh, tissue = tet_ball(30.0, 8.0), Material(youngs_modulus=5e3, density=1000.0, rayleigh_alpha=60.0)
+    top = int(np.argmax(mesh.vertices[:, 2]))
+    made = lambda **kw: Palpation(mesh, tissue, rings=2, device=device, law="neo-hookean", fixed_below=-0.02, **kw)
+    probe = made(dt=1e-3)
+    probe.touch(top)
+    dt = 1.6 * probe.region_critical_dt()
+    bold = made(dt=dt)
+    bold.region_critical_dt = lambda: 2.2 * dt / 1.6  # the plan's estimate: 2.2x the region's
+    bold.touch(top)
+    assert bold.substeps == 1
+    press = dict(depth=4e-3, ramp=0.02, hold=0.01, settle=0.01)
+    got = bold.press(**press)
+    fixed = made(dt=dt, substeps=2)
+    fixed.touch(top)
+    want = fixed.press(**press)
+    assert got.substeps == 2 and bold.substeps == 2
+    np.testing.assert_array_equal(got.force, want.force)
+    assert got.peak_force_N == want.peak_force_N and got.recovery_error_mm == want.recovery_error_mm
+    once = made(dt=dt, substeps=1)
+    once.touch(top)
+    with pytest.raises(SimulationDiverged):
+        once.press(**press)

@@ -25,7 +25,7 @@ from ..checks import LIMITS, fixed_substeps, substeps_for
 from ..checks import check_value
 from ..protocol.palpation import PATCH_DEPTH, check_probe_radius
 from ..solvers import integrators, solver_class
-from ..solvers.stepper import check_results, diverged_rows, force_bound, plan_substeps
+from ..solvers.stepper import REPRESSES, check_results, diverged_rows, force_bound, plan_substeps
 from ..sim.model import Model
 from ..region.patch import sphere_patches
 from ..region.region import check_rings
@@ -33,12 +33,6 @@ from .critical_step import certified_critical_dt
 
 
 KERNELS = ("fast", "exact")
-
-REPRESSES = 2
-"""How many times a press of planned substeps (substeps "auto") that diverged is pressed again, each
-time at twice the substeps (4x the plan's at most, and never past LIMITS["substeps"]): the plan's
-margin (0.9 of the critical step) is taken at rest, and a deep press stiffens a tet law's compressed
-elements past it (a stiff lesion pressed 10 mm: docs/datasets.md)."""
 
 
 def host_copy(a: wp.array) -> np.ndarray:

@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..solvers import solver_class
-from ..solvers.stepper import force_bound, plan_substeps
-from .batch_palpation import REPRESSES, host_copy, union_critical_dt
+from ..solvers.stepper import REPRESSES, force_bound, plan_substeps
+from .batch_palpation import host_copy, union_critical_dt
 from .item_batch import ItemBatch, StackedModel, result_rows, stack_limit
 from .sweep import run_threads
 from .sweep_lanes import Lane, checked_columns, frames, run_lanes

@@ -290,6 +290,7 @@ def _press(args, run: _Run, pal) -> list:
         try:
             for i in range(args.presses):
                 bar.label = f"press {i + 1}/{args.presses}"
+                planned = pal.substeps
                 try:
                     result = pal.press(run.depth, ramp, hold, settle, **recording.press_kwargs())
                 except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
@@ -304,6 +305,9 @@ def _press(args, run: _Run, pal) -> list:
                     f"press {i + 1}: peak force {result.peak_force_N:.3f} N, hold force {result.hold_force_N:.3f} N, "
                     f"recovery error {result.recovery_error_mm:.3f} mm, recovery time {rt_text}{auto}"
                 )
+                if result.substeps is not None and result.substeps > planned:
+                    print(f"note: press {i + 1} diverged at {planned} substep(s) of {run.dt / planned * 1e3:.3g} ms (planned at "
+                          f"0.9 of the critical step at rest) and was pressed again at {result.substeps}: these are its numbers")
                 for line in press_warnings(result, run.mesh.tet_count, run.probe_radius):
                     print(f"warning: press {i + 1}: {line}", file=sys.stderr)
         finally:

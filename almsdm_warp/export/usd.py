@@ -117,7 +117,7 @@ class UsdRecorder:
         remap[self.point_vertex] = np.arange(len(self.point_vertex))
         self._rest_mm = (mesh.vertices[self.point_vertex] * 1e3).astype(np.float32)
         self._base = 0  # steps taken by the presses before this one
-        self._frames = 0
+        self._codes = set()  # the time codes written (a press pressed again writes its codes again)
         self._unsaved = 0
         self._last_code = None
         self._colors = None
@@ -213,8 +213,8 @@ class UsdRecorder:
 
     @property
     def frames(self) -> int:
-        """Frames recorded so far."""
-        return self._frames
+        """Frames recorded so far (distinct time codes)."""
+        return len(self._codes)
 
     # -- frames --------------------------------------------------------------------------------
     def on_press_step(self, k: int, total: int) -> None:
@@ -235,7 +235,7 @@ class UsdRecorder:
         n = self.normals.vertex_normal.numpy()
         with np.errstate(all="ignore"):  # a diverging run is recorded as it is, then discarded
             self._write_frame(code, q, n, probe_center, force)
-        self._frames += 1
+        self._codes.add(step)
         self._unsaved += 1
         self._last_code = max(step, self._last_code or 0)
         if self._unsaved >= self.flush_every:

@@ -22,8 +22,8 @@ from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE
 from ..region.patch import sphere_patches
 from ..region.region import Region
 from ..solvers import make_solver
-from ..solvers.stepper import SimulationDiverged, capture_step_pair, diverged, force_bound, plan_substeps, remedies
-from ..checks import check_value, fixed_substeps
+from ..solvers.stepper import REPRESSES, SimulationDiverged, capture_step_pair, diverged, force_bound, plan_substeps, remedies
+from ..checks import LIMITS, check_value, fixed_substeps
 from ..errors import InputError
 from .schedule import PressSchedule, check_press
 
@@ -89,6 +89,9 @@ class PressResult:
     inverted_tets: int | None = None
     """Tets inverted (det F <= 0) at the end of the hold, the deepest frame (mesh.topology.inverted_tets);
     None on a surface mesh or where nothing was counted."""
+    substeps: int | None = None
+    """The integrator's steps a frame this press took: the plan's, or more where the press diverged at the
+    plan and was pressed again (REPRESSES); None where not counted."""
     ring_gap: float | None = None
     """The sphere's least distance [m] at full depth from a vertex of the region's fixed outer ring
     (negative: it reaches into the ring, which it cannot move); None for the paper's probe or the global model."""
@@ -189,6 +192,7 @@ class Palpation:
         self.notes = []
         """What the palpation changed on its own (a fall-back to the implicit integrator), one line each."""
         self._parity = 1  # substeps % 2: whether a frame ends in the other state
+        self._substeps_floor = 1  # the fewest substeps a plan takes at this contact (raised by a press pressed again)
         self._critical_cache = {}
         self._bound = force_bound(self.model)
         self.states = [self.model.state(), self.model.state()]
@@ -254,6 +258,7 @@ class Palpation:
             check_value(depth, float, "> 0", "depth [m]")
         if self.model.support_count and 0 <= vertex < self.model.particle_count and self.model.support_mask[vertex]:
             raise ValueError(f"vertex {vertex} is held by the support (below the fixed plane): the probe cannot move it")
+        self._substeps_floor = 1
         if self.region is not None:
             old = self.region
             old_count = old.vertex_count
@@ -321,7 +326,8 @@ class Palpation:
                 self.solver.set_global(anchors=(self.rings == "global"))
         if math.isfinite(plan.critical_dt):
             self.critical_dt = plan.critical_dt
-        self.substeps, self._parity = plan.substeps, plan.substeps & 1
+        n = max(plan.substeps, self._substeps_floor) if self.solver.conditionally_stable else plan.substeps
+        self.substeps, self._parity = n, n & 1
 
     # -- stepping ------------------------------------------------------------------------------
     def _launch_step(self, a, b):
@@ -495,11 +501,42 @@ class Palpation:
         normal over `ramp` [s], hold `hold` [s], release and settle `settle` [s].
         With n substeps a frame the probe moves in n even steps (as the batch's press), and the peak
         force is the largest over every substep (the continuous press's peak, which frame ends can
-        miss); `force` holds the frame ends.
+        miss); `force` holds the frame ends. A press that diverges where its substeps were planned
+        (substeps "auto", the explicit integrator) is pressed again from where it began at twice the
+        substeps, up to REPRESSES times, as a batch's is (PressResult.substeps; the contact keeps them).
 
         record: called as ``record(k, total)`` after step k (1..total) of the press when k is a
         multiple of `record_every`, and after the last step; it reads the state itself (a USD
-        recorder, say). None (the default) costs one test per step."""
+        recorder, say; a press pressed again records its steps again). None (the default) costs one
+        test per step."""
+        start = self._snapshot() if self._may_press_again(REPRESSES) else None
+        for left in range(REPRESSES, -1, -1):
+            try:
+                return self._press(depth, ramp, hold, settle, check_every, record, record_every)
+            except SimulationDiverged:
+                if start is None or not self._may_press_again(left):
+                    raise
+                self._restore(start)
+                self._substeps_floor = 2 * self.substeps
+                self.plan_substeps()
+
+    def _may_press_again(self, left: int) -> bool:
+        # a planned explicit press with re-presses left and room for twice the substeps
+        return (left > 0 and self._fixed_substeps is None and self.solver.conditionally_stable
+                and 2 * self.substeps <= LIMITS["substeps"])
+
+    def _snapshot(self):
+        # the states as a press finds them (positions and velocities of both, and which is current)
+        return self._cur, [(wp.clone(s.particle_q), wp.clone(s.particle_qd)) for s in self.states]
+
+    def _restore(self, snapshot) -> None:
+        self._cur, saved = snapshot[0], snapshot[1]
+        for state, (q, qd) in zip(self.states, saved):
+            wp.copy(state.particle_q, q)
+            wp.copy(state.particle_qd, qd)
+
+    def _press(self, depth, ramp, hold, settle, check_every, record, record_every) -> PressResult:
+        # press()'s protocol at the current substeps
         schedule, rest, direction = self._begin_press(ramp, hold, settle, record, record_every, depth=depth)
         drive, start = PROBE_DISPLACEMENT, rest
         if self.probe_radius > 0:
@@ -544,7 +581,8 @@ class Palpation:
                 record(s + 1, total)
         self.check_finite(total)
         return PressResult(vertex=v, depth=float(depth), dt=dt, release_step=release, force=force, displacement=disp,
-                           step_peak=peak, inverted_tets=inverted, ring_gap=self._ring_gap(start + direction * depth, drive))
+                           step_peak=peak, inverted_tets=inverted, ring_gap=self._ring_gap(start + direction * depth, drive),
+                           substeps=int(self.substeps))
 
     def _ring_gap(self, centre, drive) -> float | None:
         # PressResult.ring_gap: the fixed ring's vertices stay at rest, so their distance from the centre at full depth

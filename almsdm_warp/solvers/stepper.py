@@ -83,6 +83,14 @@ def remedies(integrator: str) -> str:
             f"(see its quality note) or a tissue stiffer than the mesh resolves may need remeshing")
 
 
+REPRESSES = 2
+"""How many times a press of planned substeps (substeps "auto") that diverged is pressed again from where
+it began, each time at twice the substeps (4x the plan's at most, never past LIMITS["substeps"]): the
+plan's margin (0.9 of the critical step) is taken at rest, and a deep press stiffens a tet law's
+compressed elements past it (a stiff lesion pressed 10 mm: docs/datasets.md). Palpation.press and the
+batches' presses (batch/batch_palpation.py) both."""
+
+
 def diverged_rows(peak, recovery, bound: float, size: float, hold=None) -> np.ndarray:
     """Which of several presses diverged (bool): a peak force [N] (or `hold` force) or recovery [m] not
     finite, a force past `bound` [N] or a recovery past twice the mesh's `size` [m]."""
