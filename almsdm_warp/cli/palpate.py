@@ -368,6 +368,8 @@ def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:
                 "peak_force_N": finite(r.peak_force_N),
                 "hold_force_N": finite(r.hold_force_N),
                 "inverted_tets": r.inverted_tets,
+                "substeps": r.substeps,
+                "ring_gap_mm": None if r.ring_gap is None else finite(r.ring_gap * 1e3),
                 "recovery_error_mm": finite(r.recovery_error_mm),
                 "recovery_time_s": finite(r.recovery_time_s),
                 **({"rings_chosen": log["rings"]} if tol is not None else {}),
