@@ -299,3 +299,33 @@ def test_a_sphere_near_the_fixed_ring_is_measured_and_warned_of():
     assert results[4].ring_gap > case.sphere and results[4].hold_force_N == pytest.approx(reference, rel=0.02)
     assert any("fixed ring" in w for w in press_warnings(results[2], case.mesh.tet_count, case.sphere))
     assert press_warnings(results[4], case.mesh.tet_count, case.sphere) == []
+
+
+def test_a_batch_measures_each_presss_ring_gap_as_one_palpation_does(device):
+    """BatchResult.ring_gap: each press's sphere's distance at full depth from its region's fixed ring, the
+    device kernel against PressResult.ring_gap of the same contacts pressed one by one (the same regions),
+    on the deep ball at 2 rings (near) and 4 rings (far); a sweep's count of those near (sweep_lanes.near_ring)."""
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
+    from almsdm_warp.batch.sweep_lanes import near_ring
+    from almsdm_warp.evaluation.depth_layers import ball_case
+    from almsdm_warp.protocol.palpation import NEAR_RING, Palpation
+
+    case = ball_case(8.0)
+    top = np.argsort(case.mesh.vertices[:, 2])[::-1]
+    contacts = np.intersect1d(top[:30], case.mesh.surface_vertices)[:3]
+    press = dict(depth=case.depth, ramp=0.02, hold=0.002, settle=0.002)
+    for rings in (2, 4):
+        batch = BatchPalpation(case.mesh, case.material(), rings=rings, dt=2e-3, device=device, law="neo-hookean", integrator="implicit",
+                               fixed_below=case.fixed_below, probe_radius=case.sphere)
+        result = batch.touch(contacts, case.depth).press(**press)
+        one = []
+        for v in contacts:
+            pal = Palpation(case.mesh, case.material(), rings=rings, law="neo-hookean", integrator="implicit", dt=2e-3, device=device,
+                            fixed_below=case.fixed_below, probe_radius=case.sphere)
+            pal.touch(int(v), case.depth)
+            one.append(pal.press(**press).ring_gap)
+        np.testing.assert_allclose(result.ring_gap, one, atol=1e-6)
+        assert near_ring(result, case.sphere) == int(np.sum(np.array(one) < NEAR_RING * case.sphere))
+        if rings == 2:
+            assert near_ring(result, case.sphere) >= 1  # the top contact's ring 1.4 mm from the sphere
+    assert near_ring(result, case.sphere) == 0 and min(one) > case.sphere  # 4 rings: every ring far

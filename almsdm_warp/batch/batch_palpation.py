@@ -142,6 +142,9 @@ class BatchResult:
     substeps: np.ndarray | None = field(default=None, repr=False)
     """The integrator's steps a frame each press took, int [B]: the batch's plan, or more where a press
     diverged at the plan and was pressed again (REPRESSES)."""
+    ring_gap: np.ndarray | None = field(default=None, repr=False)
+    """Each press's PressResult.ring_gap [m], [B]: its sphere's least distance at full depth from a vertex
+    of its region's fixed outer ring; None but for a sphere on a tet mesh."""
 
     # the names of PressResult, each with its unit (the fields above are SI, named without one)
     @property
@@ -619,12 +622,23 @@ class BatchPalpation:
             raise ValueError(f"the tactile map is recorded by the explicit integrator only; the batch took the implicit "
                              f"fall-back ({'; '.join(self.notes)}): give a smaller dt")
         self.depth, self.press_args = float(depth), (depth, ramp, hold, settle)
+        self.ring_gap = self._ring_gaps(float(depth))
         self.ramp_steps, self.press_steps, self.total_steps = ramp_n, press_n, total
         self.press_arrays = struct_from(BatchPress, self)
         if self.records.on:
             self.records.allocate(self.batch_size)  # zeroed: the patch and the map are sums
         br.rest_states(self)
         solver_class(self.integrator).press_batch(self, total, steps_per_launch, on_launch)
+
+    def _ring_gaps(self, depth: float):
+        # each palpation's BatchResult.ring_gap on the device (a [B] float array), or None: a sphere on tets only
+        if self.probe_radius <= 0 or not self.mesh.tet_count:
+            return None
+        # the sphere's centre at full depth: touching the surface at rest, then `depth` along the inward normal
+        centres = self.mesh.vertices[self.vertices] - self.model.vertex_normal_rest[self.vertices] * (depth - self.probe_radius)
+        out = self.buffers.array("ring_gap", self.batch_size, wp.float32, zero=False)
+        br.ring_gaps(self, self.buffers.upload("ring_gap.centre", centres.astype(np.float32), wp.vec3), out)
+        return out
 
     def launch_steps(self, begin: int, count: int) -> None:
         """Launch steps begin..begin+count of the explicit press scheduled by start_press (no wait)."""
@@ -633,11 +647,13 @@ class BatchPalpation:
     def finish_press(self) -> BatchResult:
         """Wait for the press and read it back (the force magnitudes as Palpation's host code takes them)."""
         q0 = bk.contact_positions(self).numpy()
-        return self.result_from(self.peak_reaction.numpy(), self.hold_reaction.numpy(), q0)
+        gap = None if self.ring_gap is None else host_copy(self.ring_gap)
+        return self.result_from(self.peak_reaction.numpy(), self.hold_reaction.numpy(), q0, gap)
 
-    def result_from(self, peak: np.ndarray, hold: np.ndarray, q0: np.ndarray) -> BatchResult:
+    def result_from(self, peak: np.ndarray, hold: np.ndarray, q0: np.ndarray, ring_gap: np.ndarray | None = None) -> BatchResult:
         """The press's result from host copies of peak_reaction, hold_reaction and each contact vertex's
-        position (q_state at contact_local), as read when the press is done; SimulationDiverged as finish_press."""
+        position (q_state at contact_local), as read when the press is done, and of ring_gap where it has
+        one; SimulationDiverged as finish_press."""
         rest = self.mesh.vertices[self.vertices].astype(np.float32).astype(np.float64)
         # PressResult's expressions, vectorized: float32 components squared in float64 (Python's
         # x ** 2 and NumPy's agree), summed left to right; the norm of the float64 difference
@@ -656,6 +672,7 @@ class BatchPalpation:
             free_vertices=self.free_vertex_counts.copy(),
             records=self.records.read(self.depth, self.ramp_steps, host_copy) if self.records.on else {},
             substeps=np.full(self.batch_size, self.substeps, dtype=np.int32),
+            ring_gap=None if ring_gap is None else np.asarray(ring_gap, dtype=np.float64).copy(),
         )
         bad = np.flatnonzero(diverged_rows(peak_n, recovery, self._row_bounds(), self._mesh_size(), hold_n))
         if len(bad):
@@ -672,8 +689,9 @@ class BatchPalpation:
         again.known_critical_dt, again.represses = self.critical_dt, self.represses - 1
         self._build_rows(again, rows).plan()
         redo = again.press(*self.press_args)
-        for name in ("peak_force", "hold_force", "recovery_error", "region_vertices", "free_vertices", "substeps"):
-            getattr(result, name)[rows] = getattr(redo, name)
+        for name in ("peak_force", "hold_force", "recovery_error", "region_vertices", "free_vertices", "substeps", "ring_gap"):
+            if getattr(result, name) is not None:
+                getattr(result, name)[rows] = getattr(redo, name)
         for name, values in redo.records.items():
             result.records[name][rows] = values
 

@@ -202,4 +202,5 @@ def result_rows(result: BatchResult, begin: int, end: int) -> BatchResult:
                        hold_force=result.hold_force[begin:end], recovery_error=result.recovery_error[begin:end],
                        region_vertices=result.region_vertices[begin:end], free_vertices=result.free_vertices[begin:end],
                        records={name: values[begin:end] for name, values in result.records.items()},
-                       substeps=None if result.substeps is None else result.substeps[begin:end])
+                       substeps=None if result.substeps is None else result.substeps[begin:end],
+                       ring_gap=None if result.ring_gap is None else result.ring_gap[begin:end])

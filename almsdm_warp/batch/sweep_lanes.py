@@ -26,6 +26,13 @@ def checked_columns(columns: dict) -> dict:
     return columns
 
 
+def near_ring(result, radius: float) -> int:
+    """How many of a BatchResult's presses came near their region's fixed ring (protocol/palpation.py NEAR_RING)."""
+    from ..protocol.palpation import NEAR_RING
+
+    return 0 if result.ring_gap is None else int(np.count_nonzero(result.ring_gap < NEAR_RING * radius))
+
+
 class RingBatches:
     """A plan's BatchPalpations on one device, one per ring count (made when first asked for).
 
@@ -184,6 +191,12 @@ class Lane:
         out = [b[:n] for b in buffers]
         for dst, src in zip(out, (batch.peak_reaction, batch.hold_reaction, contact_positions(batch))):
             wp.copy(dst, src, stream=self.stream)
+        if batch.ring_gap is not None:  # a sphere on tets: each press's distance from its fixed ring
+            gaps = self._pinned.get(("gap", rings))
+            if gaps is None or len(gaps) < n:
+                gaps = self._pinned[("gap", rings)] = wp.empty(n, dtype=wp.float32, device="cpu", pinned=True)
+            out.append(gaps[:n])
+            wp.copy(out[-1], batch.ring_gap, stream=self.stream)
         return out
 
     def results(self, origin=None) -> list:
@@ -201,6 +214,7 @@ class Lane:
         with self.times.phase("read-back"):
             out = [(what, self._result(batch, pinned)) for what, batch, pinned, _ in self.started]
         self.times.add_repressed(sum(int(np.count_nonzero(r.substeps > s[1].substeps)) for s, (_, r) in zip(self.started, out)))
+        self.times.add_near_ring(sum(near_ring(r, s[1].probe_radius) for s, (_, r) in zip(self.started, out)))
         return out
 
     def _result(self, batch, pinned):

@@ -42,6 +42,8 @@ class SweepTimes:
         """Each device's first press's start and last press's end [s since t0]."""
         self.repressed = 0
         """Presses that diverged at their planned substeps and were pressed again at more (BatchResult.substeps)."""
+        self.near_ring = 0
+        """Presses whose sphere came near their region's fixed ring on tets (sweep_lanes.near_ring)."""
         self._lock = threading.Lock()
 
     @contextmanager
@@ -65,12 +67,21 @@ class SweepTimes:
         with self._lock:
             self.repressed += int(count)
 
-    def note(self) -> str | None:
-        """The command line's note of the presses pressed again, or None."""
-        if not self.repressed:
-            return None
-        return (f"{self.repressed} press(es) diverged at their planned substeps (0.9 of the critical step at rest) and were "
-                f"pressed again at twice or four times as many: each of their rows is that press's")
+    def add_near_ring(self, count: int) -> None:
+        with self._lock:
+            self.near_ring += int(count)
+
+    def notes(self) -> list[str]:
+        """The command line's notes: the presses pressed again, and those whose sphere came near their fixed ring."""
+        out = []
+        if self.repressed:
+            out.append(f"{self.repressed} press(es) diverged at their planned substeps (0.9 of the critical step at rest) and were "
+                       f"pressed again at twice or four times as many: each of their rows is that press's")
+        if self.near_ring:
+            out.append(f"{self.near_ring} press(es) brought the sphere within half its radius of their region's fixed ring at full "
+                       f"depth (tets), which holds still tissue the press moves: their forces may be far off the global model's; "
+                       f"more rings, or --rings auto")
+        return out
 
     def mark(self, name: str) -> None:
         """Note the first time `name` is reached (the way to the first press: what it waits for)."""

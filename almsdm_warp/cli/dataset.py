@@ -69,6 +69,6 @@ def cmd_dataset(args, devices: list[str]) -> int:
     columns = ds.finish_dataset(folder)
     print(f"pressed {len(todo)} item(s) in {time.perf_counter() - t0:.2f} s; "
           f"wrote {Path(folder.dir) / 'table.npz'} ({len(columns['vertex'])} rows)")
-    if times.note():
-        print(f"note: {times.note()}")
+    for note in times.notes():
+        print(f"note: {note}")
     return 0

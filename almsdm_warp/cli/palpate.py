@@ -320,6 +320,8 @@ def _press(args, run: _Run, pal) -> list:
 def press_warnings(result, tet_count: int, probe_radius: float) -> list[str]:
     """What a press on tets says against itself: tets inverted, and a sphere that came near the region's fixed
     ring (within NEAR_RING of its radius, PressResult.ring_gap), which holds still tissue the press moves."""
+    from ..protocol.palpation import NEAR_RING
+
     gap, out = result.ring_gap, []
     ring = None
     if tet_count and gap is not None and gap < NEAR_RING * probe_radius:
@@ -332,12 +334,6 @@ def press_warnings(result, tet_count: int, probe_radius: float) -> list[str]:
     elif ring is not None:
         out.append(ring)
     return out
-
-
-NEAR_RING = 0.5
-"""The sphere-to-fixed-ring distance, in sphere radii, under which a press on tets is warned of (a 10 mm
-sphere pressed 10 mm into a 25 mm ball on a support collapsed to 0.23-0.36 of the global model's force with
-the ring 1.2-1.4 mm from it, and held, 13-17% high, at 8.8 mm: docs/calibration.md)."""
 
 
 def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:

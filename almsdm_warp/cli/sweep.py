@@ -145,8 +145,8 @@ def _run(args, plan, scene, rings_text, models, devices, parts, left, times, t_s
             plan.table.write(out, columns, args.table_info)
         parts.remove()
     _report(columns, left, steps, elapsed)
-    if times.note():
-        print(f"note: {times.note()}")
+    for note in times.notes():
+        print(f"note: {note}")
     if args.profile:
         print(f"where the sweep's wall time went (from loading the mesh to the written table):\n{times.table(time.perf_counter() - t_start)}")
     print(f"wrote {out}")

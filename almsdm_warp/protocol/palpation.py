@@ -42,6 +42,13 @@ PROBE_MODES = {PROBE_OFF: "PROBE_OFF", PROBE_DISPLACEMENT: "PROBE_DISPLACEMENT",
 """The probe's modes (sim.model), by value: set_probe takes these and no other."""
 
 
+NEAR_RING = 0.5
+"""A press whose sphere comes within this many of its radii of the region's fixed ring (PressResult.ring_gap)
+on a tet mesh is warned of: the ring holds still tissue the press moves (a 10 mm sphere pressed
+10 mm into a 25 mm ball on a support collapsed to 0.23-0.39 of the global model's force with the ring
+1.2-1.4 mm from it, and held, 13-17% high, at 8.8 mm: docs/calibration.md)."""
+
+
 def check_probe_radius(radius, mesh=None) -> float:
     """The probe's radius [m]: a number >= 0 (0: the paper's probe, one driven vertex) of the magnitude every
     parameter is held to (checks.check_value) and, with `mesh`, at most PROBE_RADIUS_FACTOR x its extent.

@@ -256,6 +256,30 @@ def rest_states(batch):
 
 
 @wp.kernel
+def batch_ring_gaps(regions: BatchRegionArrays, rings: int, q_rest: wp.array(dtype=wp.vec3), centre: wp.array(dtype=wp.vec3),
+                    radius: float, gap: wp.array(dtype=float)):
+    # palpation b's sphere at `centre` [b]: its least distance from a vertex (at rest) of the region's outer
+    # ring (the last non-empty one; support-held vertices are not a ring's), less the radius; 1e30 with none
+    b = wp.tid()
+    count = regions.region_count[b]
+    start = count
+    for r in range(rings, 0, -1):
+        if start == count and regions.ring_offsets[b, r] < count:
+            start = regions.ring_offsets[b, r]
+    best = float(1.0e30)
+    for k in range(start, count):
+        best = wp.min(best, wp.length(q_rest[regions.region_vertex[b, k]] - centre[b]))
+    gap[b] = best - radius
+
+
+def ring_gaps(batch, centres: wp.array, out: wp.array) -> None:
+    """PressResult.ring_gap of each palpation of `batch` (its regions, rings, model and sphere), its
+    sphere's centre at full depth given, into `out` (a [B] float device array)."""
+    wp.launch(batch_ring_gaps, dim=batch.batch_size, inputs=[batch.regions.arrays, batch.rings, batch.model.particle_q_rest, centres,
+                                                            float(batch.probe_radius)], outputs=[out], device=batch.device)
+
+
+@wp.kernel
 def offset_item_regions(regions: BatchRegionArrays, item: wp.array(dtype=wp.int32), vertex_stride: int, edge_stride: int):
     # palpation b presses item item[b] of a stack of models of one mesh (almsdm_warp/batch/item_batch.py): its
     # region's vertices and springs become that item's, vertex v at item * vertex_stride + v, spring s at
