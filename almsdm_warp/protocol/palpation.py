@@ -516,6 +516,8 @@ class Palpation:
         multiple of `record_every`, and after the last step; it reads the state itself (a USD
         recorder, say; a press pressed again records its steps again). None (the default) costs one
         test per step."""
+        if self.probe_radius > 0:
+            self._patch_at(depth)  # before the snapshot: a press pressed again starts on its region
         start = self._snapshot() if self._may_press_again(REPRESSES) else None
         for left in range(REPRESSES, -1, -1):
             try:
@@ -526,6 +528,11 @@ class Palpation:
                 self._restore(start)
                 self._substeps_floor = 2 * self.substeps
                 self.plan_substeps()
+
+    def _patch_at(self, depth: float) -> None:
+        # the region grown from the patch the sphere covers at `depth` (touched again where it is another's)
+        if self.region is not None and self.patch_depth != depth:
+            self.touch(self.vertex, depth)
 
     def _may_press_again(self, left: int) -> bool:
         # a planned explicit press with re-presses left and room for twice the substeps
@@ -547,8 +554,7 @@ class Palpation:
         schedule, rest, direction = self._begin_press(ramp, hold, settle, record, record_every, depth=depth)
         drive, start = PROBE_DISPLACEMENT, rest
         if self.probe_radius > 0:
-            if self.region is not None and self.patch_depth != depth:
-                self.touch(self.vertex, depth)  # the patch the sphere covers at this depth
+            self._patch_at(depth)
             travel = depth / max(schedule.ramp_n, 1)
             if travel >= self.probe_radius:
                 raise ValueError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its radius "
