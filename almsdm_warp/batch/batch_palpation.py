@@ -416,15 +416,14 @@ class BatchPalpation:
     def plan_substeps(self) -> None:
         """Substeps of the explicit integrator for the batch's regions (or the implicit fall-back):
         solvers.stepper.plan_substeps over the critical step of the batch's free vertices together."""
-        plan = plan_substeps(self.requested_integrator, self.frame_dt, self._union_critical_dt, self._fixed_substeps, "the batch")
+        known = self.known_critical_dt
+        critical = self._union_critical_dt if known is None else (lambda: known)
+        plan = plan_substeps(self.requested_integrator, self.frame_dt, critical, self._fixed_substeps, "the batch")
         if plan.note and plan.note not in self.notes:
             self.notes.append(plan.note)
         self.integrator, self.substeps, self.critical_dt = plan.integrator, plan.substeps, plan.critical_dt
 
     def _union_critical_dt(self) -> float:
-        if self.known_critical_dt is not None:
-            return self.known_critical_dt
-
         def free():
             rv = host_copy(self.regions.region_vertex)
             return rv[np.arange(rv.shape[1])[None, :] < self.free_vertex_counts[:, None]]

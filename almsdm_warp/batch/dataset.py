@@ -41,7 +41,7 @@ from ..tissue.laws import law_entry, resolve_law
 from .sampling import pressable_points, sample_points
 from .records import UNITS, Records, lesion_columns
 from .sweep import Writer, run_local
-from .sweep_plan import COLUMNS, SweepPlan, check_sphere_travel, with_columns
+from .sweep_plan import COLUMNS, GPU_CHUNK, SweepPlan, check_sphere_travel, with_columns
 from .sweep_store import Parts, file_sha256
 from .sweep_times import SweepTimes
 
@@ -367,9 +367,9 @@ def item_chunk(points: int, cuda: bool, gpus: int = 1) -> int:
     return -(-points // gpus) if gpus > 1 and points >= SPLIT_POINTS * gpus else max(points, 1)
 
 
-SPLIT_POINTS = 16384
+SPLIT_POINTS = GPU_CHUNK[0]
 """The fewest points a chunk of an item is cut to on several GPUs (item_chunk): a sweep chunk's least
-on a GPU (sweep_plan.default_chunk)."""
+on a GPU (sweep_plan.GPU_CHUNK)."""
 
 
 def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool, gpus: int = 1):

@@ -29,6 +29,7 @@ from .batch_palpation import host_copy, union_critical_dt
 from .item_batch import ItemBatch, StackedModel, result_rows, stack_limit
 from .sweep import run_threads
 from .sweep_lanes import Lane, checked_columns, frames, run_lanes
+from .sweep_plan import GPU_CHUNK
 from .sweep_times import SweepTimes
 
 
@@ -242,8 +243,8 @@ def stacks_of(works: list[ItemWork]) -> list[SceneStack]:
     return stacks
 
 
-LAUNCH_PRESSES = 65536
-"""Presses of one unit at most (a GPU sweep's largest chunk, sweep_plan.default_chunk): its batch's arrays
+LAUNCH_PRESSES = GPU_CHUNK[1]
+"""Presses of one unit at most (a GPU sweep's largest chunk, sweep_plan.GPU_CHUNK): its batch's arrays
 stay the size of a sweep's chunk's; a chunk of many items is cut into several units."""
 
 

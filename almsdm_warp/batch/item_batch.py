@@ -165,8 +165,6 @@ class ItemBatch(BatchPalpation):
 
     def _union_critical_dt(self) -> float:
         # the caller's estimates, else each item's over its own palpations' free vertices: the shortest
-        if self.known_critical_dt is not None:
-            return self.known_critical_dt
         if self.item_critical_dt:
             return min(self.item_critical_dt.values())
         rv = host_copy(self.regions.region_vertex) % self.model.vertex_stride

@@ -27,6 +27,10 @@ SWEEP_TABLE = TableLayout("sweep table", {c: "int64" if c in ("vertex", "rings")
 hold_force_N column has none."""
 
 
+GPU_CHUNK = (16384, 65536)
+"""The fewest and most points of a GPU's chunk (default_chunk; a dataset's units and item chunks keep to them)."""
+
+
 def default_chunk(points: int, devices: list[str]) -> int:
     """Points a chunk when the command line gives none: 64 on the CPU (the progress moves, a resume
     loses little); on GPUs at least four chunks a device where the points allow (so the next chunk is
@@ -37,7 +41,7 @@ def default_chunk(points: int, devices: list[str]) -> int:
     if all(d == "cpu" for d in devices):
         return 64
     per_device = -(-points // len(devices))
-    return max(1, min(per_device, max(16384, min(-(-per_device // 4), 65536))))
+    return max(1, min(per_device, max(GPU_CHUNK[0], min(-(-per_device // 4), GPU_CHUNK[1]))))
 
 
 @dataclass
