@@ -214,6 +214,56 @@ def test_duplicate_vertices_merged():
     check_surface_outward(mesh, np.prod(EXTENT_MM) * 1e-9)
 
 
+def _pairs_within(points, reach):
+    d = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=2)
+    return int(np.triu(d <= reach, 1).sum())
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_duplicate_pre_check_never_misses_a_pair(seed):
+    """The merge's pre-check (one grid sort before any k-d tree) against brute-force distances: pairs
+    planted across its cells' faces, on them and inside a cell are each found; clouds without one pass."""
+    from almsdm_warp.mesh.validate import MERGE_CELL, _may_have_duplicates
+
+    rng = np.random.default_rng(seed)
+    reach = 1e-6
+    cell = MERGE_CELL * reach
+    across = 0  # the planted pairs that lie in two cells
+    for trial in range(40):
+        points = rng.uniform(0.0, 50 * cell, (60, 3))
+        points[0] = 0.0  # the grid's origin: its faces at whole cells
+        if trial % 4:  # plant a pair: across a face (in 1-3 axes), on one, or inside a cell
+            a = rng.uniform(cell, 49 * cell, 3)
+            axes = rng.random(3) < 0.5
+            a[axes] = np.round(a[axes] / cell) * cell + rng.choice([-1, 0, 1]) * rng.uniform(0, 0.5) * reach
+            offset = rng.normal(size=3)
+            b = a + offset / np.linalg.norm(offset) * reach * rng.uniform(0.0, 0.999)
+            if trial % 4 == 1 and axes.any():  # across the faces of those axes, 0.87 x reach apart at most
+                a[axes] = np.round(a[axes] / cell) * cell - 0.25 * reach
+                b = a + np.where(axes, 0.5, rng.uniform(-0.5, 0.5, 3)) * reach
+            points = np.vstack([points, a, b])
+        truth = _pairs_within(points, reach)
+        assert _may_have_duplicates(points, reach) or truth == 0, (seed, trial)
+        across += truth > 0 and len(np.unique(np.floor(points / cell), axis=0)) == len(points)
+    assert across >= 5
+    lattice = np.stack(np.meshgrid(*[np.arange(4) * 3.3 * cell + 0.5 * cell] * 3), -1).reshape(-1, 3)
+    assert _pairs_within(lattice, reach) == 0 and not _may_have_duplicates(lattice, reach)
+
+
+def test_a_mesh_without_duplicates_loads_without_the_kd_tree():
+    """The stomach's OBJ, with no two vertices within the merge distance, is read without importing
+    scipy.spatial (0.4-0.7 s of a sweep's start-up); a subprocess, so that nothing imported before counts."""
+    code = ("import sys; from almsdm_warp.mesh.io import load_mesh; m = load_mesh(sys.argv[1]); "
+            "print(m.vertex_count, 'scipy.spatial' in sys.modules)")
+    from pathlib import Path
+    import subprocess
+    import sys
+
+    obj = Path(__file__).resolve().parent.parent / "scenes" / "stomach.obj"
+    out = subprocess.run([sys.executable, "-c", code, str(obj)], capture_output=True, text=True, check=True).stdout.split()
+    assert out[1] == "False" and int(out[0]) > 1000
+
+
 def test_degenerate_and_duplicate_triangles_dropped():
     v, f = box_surface()
     v2 = np.vstack([v, (v[0] + v[1]) / 2])  # 8: midpoint of an edge, used only by a flat triangle

@@ -8,6 +8,7 @@ Element and vertex numbers in messages are those of the input, so that they can 
 
 from __future__ import annotations
 
+import itertools
 import math
 import numbers
 
@@ -238,7 +239,7 @@ def _merge_duplicates(v: np.ndarray, used: np.ndarray, diag: float, notes: list[
     anything (coordinates of 1e300 overflow the tree's distances)."""
     n = len(v)
     identity = np.arange(n)
-    if len(used) < 2:
+    if len(used) < 2 or not _may_have_duplicates(v[used], MERGE_TOL * diag):
         return identity
     from scipy.spatial import cKDTree
 
@@ -257,6 +258,35 @@ def _merge_duplicates(v: np.ndarray, used: np.ndarray, diag: float, notes: list[
         f"(first: vertex {i} onto vertex {remap[i]}, {dist:.3g} apart)"
     )
     return remap
+
+
+MERGE_CELL = 1.0e3
+"""The pre-check's cells (_may_have_duplicates) are this x the merge distance on a side."""
+
+
+def _may_have_duplicates(points: np.ndarray, reach: float) -> bool:
+    """False only when no two of `points` are within `reach` of each other, found by sorting, with no k-d
+    tree: the usual mesh has no duplicates, and scipy.spatial's import (0.4-0.7 s) is then left to whatever
+    needs it later. In a grid of MERGE_CELL x reach a side, two points that close share a cell, or lie
+    across a face, both within reach of it; those near a face (about 1% of them) share a cell in one of
+    the grids shifted by half a cell along the axes they straddle. True: the k-d tree decides."""
+    if reach <= 0.0:
+        return True
+    q = (points - points.min(axis=0)) / (MERGE_CELL * reach)
+    if q.max() >= 2.0**20 or _share_a_cell(q):  # the keys hold 21 bits an axis
+        return True
+    frac = q - np.floor(q)
+    slack = 2.0 / MERGE_CELL  # reach in cells, doubled against the rounding of q
+    near = q[((frac < slack) | (frac > 1.0 - slack)).any(axis=1)]
+    shifts = [s for s in itertools.product((0.0, 0.5), repeat=3) if any(s)]
+    return len(near) > 1 and any(_share_a_cell(near + np.array(s)) for s in shifts)
+
+
+def _share_a_cell(q: np.ndarray) -> bool:
+    """True when two rows of q (coordinates in cells, under 2**21) fall in one unit cell."""
+    i = np.floor(q).astype(np.int64)
+    key = (i[:, 0] << 42) | (i[:, 1] << 21) | i[:, 2]
+    return len(np.unique(key)) < len(key)
 
 
 def _drop_degenerate(v, elements, ids, diag, where, notes):
