@@ -47,38 +47,44 @@ def init_warp(quiet: bool | None = None) -> None:
             os.close(saved)
 
 
-_device_start = None  # the thread of start_devices, while it runs
+_device_start = []  # the threads of start_devices, while they run
 
 
 def start_devices(spec: str | None) -> None:
     """Start the CUDA contexts that `spec` (a --device value: cpu, cuda:N, a comma list, or all) names
-    on a thread of its own: a context takes 0.12-0.15 s on an H200 the first time, which the caller's
-    imports and mesh reading then overlap. Warp is initialized here first (init_warp). Code that
-    makes CUDA arrays of those devices calls devices_started() first (two threads must not start a
-    context at once). A bad name is left to the command, which says what is wrong with it."""
-    global _device_start
+    on threads of their own, one a device: a context takes 0.12-0.15 s on an H200 the first time, which
+    the caller's imports and mesh reading then overlap, and two devices' start at once. Warp is initialized
+    here first (init_warp). Code that makes CUDA arrays of those devices calls devices_started() first
+    (two threads must not start one context at once). A bad name is left to the command, which says what
+    is wrong with it."""
     import threading
 
     names = [n.strip() for n in (spec or "").split(",") if n.strip()]
     if not any(n == "all" or n.startswith("cuda") for n in names):
         return
     init_warp()
+    import warp as wp
 
-    def start():
-        import warp as wp
-
+    devices = wp.get_cuda_devices() if "all" in names else []
+    for name in names if "all" not in names else ():
         try:
-            devices = wp.get_cuda_devices() if "all" in names else [wp.get_device(n) for n in names if n.startswith("cuda")]
-            for device in devices:
-                device.context  # noqa: B018 (the property starts the context)
+            devices += [wp.get_device(name)] if name.startswith("cuda") else []
         except Exception:  # noqa: BLE001 (the command reports a bad --device)
             pass
 
-    _device_start = threading.Thread(target=start, name="device-start", daemon=True)
-    _device_start.start()
+    def start(device):
+        try:
+            device.context  # noqa: B018 (the property starts the context)
+        except Exception:  # noqa: BLE001 (the command reports a device that does not start)
+            pass
+
+    for device in {d.alias: d for d in devices}.values():  # a device named twice starts once
+        thread = threading.Thread(target=start, args=(device,), name=f"device-start-{device}", daemon=True)
+        thread.start()
+        _device_start.append(thread)
 
 
 def devices_started() -> None:
-    """Wait for start_devices' thread, if one runs."""
-    if _device_start is not None:
-        _device_start.join()
+    """Wait for start_devices' threads, if any run."""
+    for thread in list(_device_start):
+        thread.join()

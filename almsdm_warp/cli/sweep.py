@@ -55,7 +55,7 @@ def add_parser(sub) -> None:
     add_volume_arg(p)
     add_tissue_args(p)
     add_dataset_arg(p)
-    p.set_defaults(func=cmd_sweep, start_devices=True, integrator=None)  # None: not given (a dataset's spec decides it)
+    p.set_defaults(func=cmd_sweep, start_devices=True, integrator=None, preload=("scipy.spatial", "scipy.sparse.linalg"))  # None: not given (a dataset's spec decides it)
 
 
 def _devices(text: str) -> list[str]:
@@ -165,7 +165,7 @@ def _plan(args, devices, times):
     may still be being sampled (plan.sampling), and the models made, while the caller goes on."""
     from ..batch.sampling import pressable_points, start_sampling
     from ..batch.sweep import models_behind
-    from ..batch.sweep_plan import SweepPlan, check_sphere_travel, default_chunk
+    from ..batch.sweep_plan import SweepPlan, check_sphere_travel, default_chunk, default_tail
     from ..protocol.palpation import check_probe_radius
     from ..batch.sweep_auto import rings_summary
     with times.phase("loading"):
@@ -202,10 +202,11 @@ def _plan(args, devices, times):
         times.add("sampling", time.perf_counter() - t0)
     cuda = devices[0] != "cpu"
     chunk = args.chunk or default_chunk(len(vertices), devices)
+    tail = 0 if args.chunk else default_tail(len(vertices), chunk, devices)
     plan = SweepPlan(mesh, scene.tissue, scales.get("edge_scale"), scales.get("anchor_scale"), 1 if tol else rings, dt, depth,
                      ramp, hold, settle, points, vertices, chunk, args.integrator, tol, radius, scene.fixed_below,
                      sampling=sampling, law=scene.law, element_scale=scales.get("element_scale"), records=_records(args, radius, ramp, dt, scene),
-                     lesion=scene.lesion if args.lesion_labels else None)
+                     lesion=scene.lesion if args.lesion_labels else None, tail=tail)
     times.mark("plan")
     models = None if args.ray or not args.pipeline else models_behind(plan, devices)
     print(mesh.summary())
