@@ -140,7 +140,12 @@ def test_device_buffers_upload_and_reuse(device):
     z = buffers.array("z", (2, 3), wp.float32)
     z.fill_(7.0)
     assert buffers.array("z", (2, 3), wp.float32) is z and not z.numpy().any()  # the same, zeroed again
+    z.fill_(7.0)
+    first = buffers.array("z", (1, 3), wp.float32)  # fewer rows: a view of the held array's first, zeroed
+    assert first.ptr == z.ptr and first.shape == (1, 3) and not first.numpy().any() and z.numpy()[1].all()
+    assert buffers.array("z", (2, 3), wp.float32) is z  # still held
     assert buffers.array("z", (3, 3), wp.float32) is not z
+    assert buffers.array("z", (3, 2), wp.float32).shape == (3, 2)  # another row length: a new array
 
 
 @pytest.mark.parametrize("radius", [0.0, 0.004])

@@ -81,10 +81,10 @@ def test_sweep_table_goes_through_the_one_writer(tmp_path, monkeypatch):
 
     published = []
     real = output.publish
-    monkeypatch.setattr(output, "publish", lambda tmp, path: published.append(Path(path).name) or real(tmp, path))
+    monkeypatch.setattr(output, "publish", lambda tmp, path, sync=True: published.append((Path(path).name, sync)) or real(tmp, path, sync))
     columns = {c: [1.0, 2.0] for c in COLUMNS}
     out = SWEEP_TABLE.write(tmp_path / "s.csv", columns)
-    assert published == ["s.csv"] and (out.stat().st_mode & 0o777) == _new_file_mode()
+    assert published == [("s.csv", True)] and (out.stat().st_mode & 0o777) == _new_file_mode()  # synced
     assert SWEEP_TABLE.read(out)["peak_force_N"].tolist() == [1.0, 2.0]
 
 
@@ -291,10 +291,11 @@ def test_ctrl_c_in_the_first_second(tmp_path, after_s):
 
     _attempts(check)
 
-@pytest.mark.parametrize("order", ["shuffled", "in order"])
+@pytest.mark.parametrize("order", ["shuffled", "in order", "shuffled, every block"])
 def test_npz_written_by_rows_reads_back_as_savez(tmp_path, order):
-    # rows in any order (in order: the CRCs taken as they come), some left to finish(): np.load and
-    # zipfile's CRC check read what np.savez writes
+    # rows in any order (the CRCs taken as the rows before them have come), some left to finish() (not
+    # in the last case, whose CRCs are then complete before it): np.load and zipfile's CRC check read
+    # what np.savez writes
     import zipfile
 
     from almsdm_warp.export.npz_rows import NpzRows
@@ -305,8 +306,9 @@ def test_npz_written_by_rows_reads_back_as_savez(tmp_path, order):
     path = tmp_path / "t.npz"
     table = NpzRows(path, n, {c: v.dtype for c, v in columns.items()})
     blocks = list(range(0, n, 1000))
-    for b in (rng.permutation(blocks) if order == "shuffled" else blocks)[:-3]:
+    for b in rng.permutation(blocks) if order == "shuffled, every block" else (rng.permutation(blocks) if order == "shuffled" else blocks)[:-3]:
         table.rows(int(b), {c: v[b : b + 1000] for c, v in columns.items()})
+    assert (table.crc_rows == n) == (order == "shuffled, every block")
     assert not path.exists()  # nothing at the target before finish()
     table.finish(columns)
     table.discard()  # after finish(): nothing to remove, the table stays

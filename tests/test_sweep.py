@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 from almsdm_warp.batch.sampling import Sampling, area_uniform_points, pressable_points, sample_points
 from almsdm_warp.batch.sweep import SweepDevice, run_local
 from almsdm_warp.batch.sweep_lanes import Lane, RingBatches, press_chunk
-from almsdm_warp.batch.sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, default_chunk, sweep_critical_dt
+from almsdm_warp.batch.sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, default_chunk, default_tail, sweep_critical_dt
 from almsdm_warp.batch.sweep_store import Parts
 from almsdm_warp.batch.sweep_times import SweepTimes, union_length
 from almsdm_warp.cli.main import main
@@ -199,6 +199,63 @@ def test_pipelined_sweep_gives_the_serial_bits(stomach, tmp_path):
     np.testing.assert_array_equal(results[0]["rings"], rings)
 
 
+def test_a_tail_of_small_chunks_gives_the_same_table(stomach, tmp_path, device):
+    # a GPU sweep's last points in chunks of a quarter (SweepPlan.tail): the chunks cover the points in
+    # order, and the pipelined lanes (whose device arrays are then views of the larger chunks') press the
+    # same bits as the same plan in whole chunks, on the same device
+    from dataclasses import replace
+
+    from almsdm_warp.tissue.params import TissueParams
+
+    points, vertices = sample_points(stomach, 20)
+    whole = SweepPlan(stomach, TissueParams(), None, None, 2, 5e-4, 0.01, 0.02, 0.02, 0.02, points, vertices, 8)
+    tail = replace(whole, tail=9)
+    assert tail.chunks == [(0, 8), (8, 11), (11, 13), (13, 15), (15, 17), (17, 19), (19, 20)]
+    assert tail.key() != whole.key()
+    tables = []
+    for plan in (whole, tail):
+        parts = Parts(tmp_path / f"t{plan.tail}.npz", plan)
+        parts.open()
+        run_local(plan, parts, list(range(len(plan.chunks))), [device], pipeline=True, times=SweepTimes())
+        tables.append(parts.gather())
+    for c in COLUMNS:
+        np.testing.assert_array_equal(tables[1][c], tables[0][c])
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".parquet"])
+def test_writers_on_several_threads_write_the_table_and_its_parts(stomach, tmp_path, suffix):
+    # a sweep on several GPUs writes with a thread a device (sweep.Writer): chunks handed over in any order
+    # give the table's rows in place, each part file with its checksum, and the same table as np.savez's
+    from almsdm_warp.batch.sweep import Writer
+    from almsdm_warp.tissue.params import TissueParams
+
+    if suffix == ".parquet":
+        pytest.importorskip("pyarrow")
+    n, rng = 4000, np.random.default_rng(3)
+    points, vertices = sample_points(stomach, n)
+    plan = SweepPlan(stomach, TissueParams(), None, None, 2, 5e-4, 0.01, 0.02, 0.02, 0.02, points, vertices, 400, tail=1200)
+    table = {c: (rng.integers(0, 1 << 40, n) if c in ("vertex", "rings") else rng.random(n)) for c in COLUMNS}
+    out = tmp_path / f"t{suffix}"
+    parts = Parts(out, plan)
+    parts.open()
+    parts.rows_file = plan.table.rows(out, n)
+    writer = Writer(parts, SweepTimes(), threads=3)
+    for i in rng.permutation(len(plan.chunks)):
+        b, e = plan.chunks[i]
+        writer.put(int(i), {c: v[b:e] for c, v in table.items()})
+    writer.close()
+    if parts.rows_file is not None:
+        parts.rows_file.finish(parts.gather())
+    else:
+        plan.table.write(out, parts.gather())
+    assert sorted(parts.sums) == list(range(len(plan.chunks)))
+    again = Parts(out, plan)
+    assert sorted(again.open()) == list(range(len(plan.chunks)))  # every part verified by its checksum
+    got = SWEEP_TABLE.read(out)
+    for c in COLUMNS:
+        np.testing.assert_array_equal(got[c], table[c])
+
+
 def test_ray_actor_presses_the_serial_bits(stomach, tmp_path):
     # what a Ray actor of one device runs (here in process, on the CPU): the serial path's columns
     points, vertices = sample_points(stomach, 10)
@@ -308,6 +365,10 @@ def test_default_chunk_fills_the_devices():
     assert default_chunk(1_000_000, ["cuda:0", "cuda:1"]) == 65536  # 8 chunks a device
     assert default_chunk(200_000, ["cuda:0", "cuda:1"]) == 25000  # 4 chunks a device
     assert default_chunk(100_000, ["cuda:0"]) == 25000
+    # the last two chunks a device in quarters, where a quarter keeps a launch's fill (16,384 points)
+    assert default_tail(4_000_000, 65536, ["cuda:0", "cuda:1"]) == 4 * 65536
+    assert default_tail(1_000_000, 65536, ["cuda:0"]) == 2 * 65536
+    assert default_tail(100_000, 25000, ["cuda:0"]) == 0 and default_tail(10_000, 64, ["cpu"]) == 0
 
 
 def test_sweep_on_ray_gives_the_same_file(tmp_path):

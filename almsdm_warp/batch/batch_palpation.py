@@ -67,13 +67,17 @@ class DeviceBuffers:
         self._staging: dict = {}
 
     def array(self, name: str, shape, dtype, zero: bool = True) -> wp.array:
-        """A device array of `shape` and `dtype` under `name` (the one of the last call with the same
-        shape, else a new one), zeroed on the current stream when `zero`."""
+        """A device array of `shape` and `dtype` under `name`: the one held there where it has the same
+        trailing shape and at least as many rows (its first rows: a sweep's smaller last chunks free
+        nothing), else a new one, held; zeroed on the current stream when `zero`."""
         shape = tuple(int(n) for n in np.atleast_1d(shape))
         held = self._arrays.get(name)
-        if held is None or held.shape != shape or held.dtype != dtype:
+        if held is None or held.shape[1:] != shape[1:] or held.shape[0] < shape[0] or held.dtype != dtype:
             held = self._arrays[name] = (wp.zeros if zero else wp.empty)(shape, dtype=dtype, device=self.device)
-        elif zero:
+            return held
+        if held.shape[0] > shape[0]:
+            held = held[: shape[0]]
+        if zero:
             held.zero_()
         return held
 

@@ -27,18 +27,20 @@ from .sweep_times import SweepTimes
 
 
 class Writer:
-    """Writes the chunks' part files on a thread of its own, in the order given (at most `depth` waiting).
+    """Writes the chunks' part files on `threads` threads of its own (a sweep's: one a device), in the order
+    given where one (at most `depth` a thread waiting).
 
     An error there (a full disk; an interrupt in tests) is raised again in the sweep's thread by
     put() or close(); after it nothing more is written."""
 
-    def __init__(self, parts: Parts, times: SweepTimes, depth: int = 4):
+    def __init__(self, parts: Parts, times: SweepTimes, depth: int = 4, threads: int = 1):
         import queue
 
         self.parts, self.times, self.error = parts, times, None
-        self.queue = queue.Queue(depth)
-        self.thread = threading.Thread(target=self._run, name="sweep-writer", daemon=True)
-        self.thread.start()
+        self.queue = queue.Queue(depth * threads)
+        self.threads = [threading.Thread(target=self._run, name=f"sweep-writer-{k}", daemon=True) for k in range(threads)]
+        for thread in self.threads:
+            thread.start()
 
     def _run(self):
         while (item := self.queue.get()) is not None:
@@ -64,8 +66,10 @@ class Writer:
             while not self.queue.empty():
                 self.queue.get_nowait()
         with self.times.phase("waiting for the writer"):
-            self.queue.put(None)
-            self.thread.join()
+            for thread in self.threads:
+                self.queue.put(None)
+            for thread in self.threads:
+                thread.join()
         if wait:
             self.check()
 
@@ -111,8 +115,7 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
             bound.set_exception(exc)
 
     threading.Thread(target=critical_dt, name="sweep-critical-dt", daemon=True).start()
-    writer, lock, queue = Writer(parts, times), threading.Lock(), iter(todo)
-    stop = threading.Event()
+    lock, queue, stop = threading.Lock(), iter(todo), threading.Event()
 
     def take():
         with lock:
@@ -129,6 +132,7 @@ def run_local(plan: SweepPlan, parts: Parts, todo: list[int], devices: list[str]
         groups = [models]
     else:  # a GPU named twice: one thread, two lanes or more over the models
         groups = [[models[k % len(models)] for k in range(max(2, len(models)))]]
+    writer = Writer(parts, times, threads=len(groups))  # a writing thread a device's
     run_threads(work, groups, stop, writer)
 
 

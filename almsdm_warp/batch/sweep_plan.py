@@ -44,6 +44,16 @@ def default_chunk(points: int, devices: list[str]) -> int:
     return max(1, min(per_device, max(GPU_CHUNK[0], min(-(-per_device // 4), GPU_CHUNK[1]))))
 
 
+def default_tail(points: int, chunk: int, devices: list[str]) -> int:
+    """The points at a GPU sweep's end pressed in chunks of a quarter (SweepPlan.tail): each device's last two
+    chunks' worth, so that the devices finish within a small chunk of each other and the last chunk's read-back
+    and writing, which nothing overlaps, are a quarter as long. 0 on the CPU, or where a quarter chunk would be
+    under GPU_CHUNK[0] points."""
+    if all(d == "cpu" for d in devices) or chunk // 4 < GPU_CHUNK[0]:
+        return 0
+    return min(points, 2 * len(devices) * chunk)
+
+
 @dataclass
 class SweepPlan:
     """Everything that decides a sweep's numbers (its key names the parts a resume may reuse)."""
@@ -81,6 +91,8 @@ class SweepPlan:
     lesion: object = None
     """The scene's lesion (tissue.lesion.Lesion) where the table labels each press with it (records.lesion_labels),
     else None; its effect on the numbers is in the scales above."""
+    tail: int = 0
+    """The last `tail` points are pressed in chunks of a quarter of `chunk` (default_tail), the others in chunks of `chunk`."""
 
     @property
     def table(self) -> TableLayout:
@@ -131,6 +143,8 @@ class SweepPlan:
             scalars += [self.probe_radius, self.fixed_below]
         if self.law != "springs":
             scalars += [self.law]
+        if self.tail:
+            scalars += [f"tail {self.tail}"]
         if self.records is not None and (self.records.on or self.records.lesion_labels):  # other columns: other parts
             scalars += [f"records {self.records.curve_points} {self.records.tactile_size} {self.records.lesion_labels}"]
         h.update(json.dumps([str(s) for s in scalars] + [repr(self.tissue)]).encode())
@@ -142,12 +156,14 @@ class SweepPlan:
 
     @property
     def chunks(self) -> list[tuple[int, int]]:
-        """(begin, end) of each chunk of points (made once for the plan's point count and chunk size:
+        """(begin, end) of each chunk of points (made once for the plan's point count, chunk size and tail:
         a CPU sweep of 1e6 points has 15,625 chunks, each looked up here)."""
         n = len(self.vertices)
-        key = (n, self.chunk)
+        key = (n, self.chunk, self.tail)
         if self.__dict__.get("_chunks_key") != key:
-            self.__dict__["_chunks"] = [(i, min(i + self.chunk, n)) for i in range(0, n, self.chunk)]
+            head, small = n - min(self.tail, n), max(1, self.chunk // 4)
+            self.__dict__["_chunks"] = [(i, min(i + self.chunk, head)) for i in range(0, head, self.chunk)] + [
+                (i, min(i + small, n)) for i in range(head, n, small)]
             self.__dict__["_chunks_key"] = key
         return self.__dict__["_chunks"]
 

@@ -33,7 +33,9 @@ class Parts:
     plan.json holds the plan's key and the SHA-256 of every chunk written (rewritten, atomically,
     after each chunk). A chunk counts as done only when its bytes match that checksum: a chunk
     truncated or changed on disk, or one written but not yet in plan.json (an interrupt between
-    the two), is removed and pressed again on resume (:attr:`damaged` lists them).
+    the two), is removed and pressed again on resume (:attr:`damaged` lists them). Neither is fsynced
+    (a rename, not a sync: two fewer syncs a chunk on the writer's thread): what a power cut loses fails
+    its checksum, or leaves no readable plan.json, and is pressed again. The output is synced.
     """
 
     def __init__(self, out: Path, plan: SweepPlan):
@@ -79,7 +81,7 @@ class Parts:
         """The plan's key but its chunking (which cuts the work, not a number): a folder of the same plan cut
         into other chunks is started again, not refused."""
         if self._base_key is None:
-            self._base_key = replace(self.plan, chunk=0).key()
+            self._base_key = replace(self.plan, chunk=0, tail=0).key()
         return self._base_key
 
     def open(self) -> list[int]:
@@ -138,7 +140,7 @@ class Parts:
 
     def _write_manifest(self) -> None:
         data = {"key": self.key, "base": self.base_key, "points": len(self.plan.vertices), "chunks": {str(i): h for i, h in sorted(self.sums.items())}}
-        atomic_write(self.manifest, lambda tmp: Path(tmp).write_text(json.dumps(data)))
+        atomic_write(self.manifest, lambda tmp: Path(tmp).write_text(json.dumps(data)), sync=False)
 
     def write(self, i: int, columns: dict) -> None:
         """Write chunk `i` atomically, then its checksum into plan.json."""
@@ -146,7 +148,7 @@ class Parts:
             if self._manifest_due:  # before any chunk: a folder with a chunk always has its plan.json
                 self._write_manifest()
                 self._manifest_due = False
-        digest = file_sha256(self.plan.table.write(self.chunk_path(i), columns))
+        digest = file_sha256(self.plan.table.write(self.chunk_path(i), columns, sync=False))
         with self._lock:
             self.sums[i] = digest
             self._write_manifest()
@@ -157,7 +159,7 @@ class Parts:
             begin, end = self.plan.chunks[i]
             for c in self.plan.table.dtypes:
                 self.table[c][begin:end] = columns[c]
-        if self.rows_file is not None:  # the output's rows too, in place (one writer thread: no lock)
+        if self.rows_file is not None:  # the output's rows too, in place (its own lock where it needs one)
             self.rows_file.rows(begin, columns)
 
     def gather(self) -> dict:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import io
 import os
 import struct
+import threading
 import zlib
 from pathlib import Path
 
@@ -53,6 +54,7 @@ class NpzRows:
         self.dtypes = {name: np.dtype(d) for name, d in dtypes.items()}
         self.widths = {name: w for name, w in (widths or {}).items() if w != 1}
         self.tmp, self.fd = temp_path(self.path), None
+        self._crc_lock = threading.Lock()  # rows() from several writing threads: their CRC-32s in order
         try:
             self.fd = os.open(self.tmp, os.O_RDWR)
             self._lay_out()
@@ -73,29 +75,35 @@ class NpzRows:
         self.central = offset
         os.ftruncate(self.fd, offset)
         self.written = np.zeros(self.n, dtype=bool)
-        # each entry's CRC-32 over its bytes so far: rows that come in order are added as they come
+        # each entry's CRC-32 over its bytes so far: rows are added in order, those that come early held
+        # (their values, by first row) until the rows before them have come
         self.crc = [zlib.crc32(head) for _, _, head, _, _ in self.entries]
         self.crc_rows = 0
+        self.early: dict[int, tuple[int, list]] = {}
 
     def rows(self, begin: int, columns: dict) -> None:
-        """Rows begin.. of every column (columns: name -> 1-D array), written in place and flushed to disk."""
+        """Rows begin.. of every column (columns: name -> 1-D array), written in place and flushed to disk
+        (from several threads at once, each its own rows)."""
         try:
             self._rows(begin, columns)
         except OSError as exc:  # a full disk: one line, as atomic_path says it
             raise InputError(f"{self.path}: cannot write: {exc.strerror or exc}") from exc
 
     def _rows(self, begin: int, columns: dict) -> None:
-        in_order = begin == self.crc_rows
-        for k, ((fname, _, _, data, _), (name, dtype)) in enumerate(zip(self.entries, self.dtypes.items())):
+        blocks = []
+        for (fname, _, _, data, _), (name, dtype) in zip(self.entries, self.dtypes.items()):
             row = dtype.itemsize * self.widths.get(name, 1)
             values = memoryview(np.ascontiguousarray(columns[name], dtype=dtype)).cast("B")
             os.pwrite(self.fd, values, data + begin * row)
-            if in_order:
-                self.crc[k] = zlib.crc32(values, self.crc[k])
+            blocks.append(values)
         end = begin + len(values) // row
         self.written[begin:end] = True
-        if in_order:
-            self.crc_rows = end
+        with self._crc_lock:
+            self.early[begin] = (end, blocks)  # views of the caller's columns, which it keeps (Parts.written)
+            while self.crc_rows in self.early:  # the rows that now follow in order, into each entry's CRC-32
+                end, blocks = self.early.pop(self.crc_rows)
+                self.crc = [zlib.crc32(values, crc) for values, crc in zip(blocks, self.crc)]
+                self.crc_rows = end
         os.fdatasync(self.fd)
 
     def finish(self, columns: dict) -> Path:

@@ -87,12 +87,14 @@ def _running(pid: int) -> bool:
     return True
 
 
-def publish(tmp, path) -> Path:
-    """Rename the finished temporary file `tmp` to `path`, its data on disk first (fsync) and with
-    the mode a new file gets (0o666 less the umask; mkstemp makes it owner-only)."""
+def publish(tmp, path, sync: bool = True) -> Path:
+    """Rename the finished temporary file `tmp` to `path`, its data on disk first (fsync; not where `sync`
+    is False: a file whose loss to a power cut costs only its work again, a sweep's parts) and with the
+    mode a new file gets (0o666 less the umask; mkstemp makes it owner-only)."""
     check_regular(path)  # something else may have taken the name since the check before the run
-    with open(tmp, "rb+") as f:
-        os.fsync(f.fileno())
+    if sync:
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
     mask = os.umask(0)
     os.umask(mask)
     os.chmod(tmp, 0o666 & ~mask)
@@ -106,15 +108,15 @@ def discard(tmp) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(path, suffix: str = ".tmp"):
+def atomic_path(path, suffix: str = ".tmp", sync: bool = True):
     """Yield a temporary file's path beside `path`; when the block ends without an error it is
-    published to `path` (:func:`publish`), otherwise removed: nothing is half-written. An OSError
-    becomes an InputError that names `path`."""
+    published to `path` (:func:`publish`, fsynced unless `sync` is False), otherwise removed: nothing is
+    half-written. An OSError becomes an InputError that names `path`."""
     p = Path(path)
     tmp = temp_path(p, suffix)
     try:
         yield str(tmp)
-        publish(tmp, p)
+        publish(tmp, p, sync)
     except BaseException as exc:
         discard(tmp)
         if isinstance(exc, OSError):
@@ -122,9 +124,9 @@ def atomic_path(path, suffix: str = ".tmp"):
         raise
 
 
-def atomic_write(path, write) -> Path:
-    """Call ``write(tmp)`` to write a temporary file beside `path`, then publish it as `path`."""
-    with atomic_path(path) as tmp:
+def atomic_write(path, write, sync: bool = True) -> Path:
+    """Call ``write(tmp)`` to write a temporary file beside `path`, then publish it as `path` (publish's `sync`)."""
+    with atomic_path(path, sync=sync) as tmp:
         write(tmp)
     return Path(path)
 

@@ -16,6 +16,7 @@ without it, one InputError says how to install it.
 from __future__ import annotations
 
 import json
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -127,6 +128,7 @@ class ParquetRows:
         self.schema = arrow_schema(layout, layout.columns(layout.dtypes), info)
         self.tmp, self.writer = temp_path(self.path), None
         self.done, self.waiting, self.held = 0, {}, []  # rows written; blocks ahead of a gap; rows not yet a row group
+        self._lock = threading.Lock()  # rows() from several writing threads
         try:
             self.writer = pq.ParquetWriter(self.tmp, self.schema)
         except OSError as exc:
@@ -134,15 +136,16 @@ class ParquetRows:
             raise InputError(f"{self.path}: cannot write: {exc.strerror or exc}") from exc
 
     def rows(self, begin: int, columns: dict) -> None:
-        """Rows begin.. of every column (columns: name -> array, a row each)."""
+        """Rows begin.. of every column (columns: name -> array, a row each); from any thread."""
         block = self.layout.cast({c: columns[c] for c in self.schema.names})
-        self.waiting[int(begin)] = block
-        while self.done in self.waiting:
-            block = self.waiting.pop(self.done)
-            self.held.append(block)
-            self.done += len(block[self.schema.names[0]])
-        if sum(len(b[self.schema.names[0]]) for b in self.held) >= ROW_GROUP:
-            self._flush()
+        with self._lock:
+            self.waiting[int(begin)] = block
+            while self.done in self.waiting:
+                block = self.waiting.pop(self.done)
+                self.held.append(block)
+                self.done += len(block[self.schema.names[0]])
+            if sum(len(b[self.schema.names[0]]) for b in self.held) >= ROW_GROUP:
+                self._flush()
 
     def _flush(self) -> None:
         if not self.held:

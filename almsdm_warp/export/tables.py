@@ -54,12 +54,12 @@ class TableLayout:
         """`columns` as arrays of their dtypes, in order (a required one missing: KeyError)."""
         return {c: np.asarray(columns[c]).astype(_dtype(self.dtypes[c]), copy=False) for c in self.columns(columns)}
 
-    def write(self, path, columns: dict, info: dict | None = None) -> Path:
-        """Write `columns` to `path` in its suffix's format, atomically; `info`: what made the table, kept
-        where the format can (Parquet's schema metadata)."""
+    def write(self, path, columns: dict, info: dict | None = None, sync: bool = True) -> Path:
+        """Write `columns` to `path` in its suffix's format, atomically (fsynced unless `sync` is False: see
+        export/output.py's publish); `info`: what made the table, kept where the format can (Parquet's schema metadata)."""
         fmt, columns = table_format(path), self.cast(columns)
         fmt.check(path)
-        atomic_write(path, lambda tmp: fmt.write(tmp, columns, self, info))
+        atomic_write(path, lambda tmp: fmt.write(tmp, columns, self, info), sync)
         return Path(path)
 
     def read(self, path) -> dict:
