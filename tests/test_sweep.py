@@ -365,10 +365,10 @@ def test_default_chunk_fills_the_devices():
     assert default_chunk(1_000_000, ["cuda:0", "cuda:1"]) == 65536  # 8 chunks a device
     assert default_chunk(200_000, ["cuda:0", "cuda:1"]) == 25000  # 4 chunks a device
     assert default_chunk(100_000, ["cuda:0"]) == 25000
-    # the last two chunks a device in quarters, where a quarter keeps a launch's fill (16,384 points)
+    # on several GPUs the last two chunks a device in quarters, where a quarter keeps a launch's fill (16,384 points)
     assert default_tail(4_000_000, 65536, ["cuda:0", "cuda:1"]) == 4 * 65536
-    assert default_tail(1_000_000, 65536, ["cuda:0"]) == 2 * 65536
-    assert default_tail(100_000, 25000, ["cuda:0"]) == 0 and default_tail(10_000, 64, ["cpu"]) == 0
+    assert default_tail(1_000_000, 65536, ["cuda:0"]) == 0  # one GPU: nothing to balance
+    assert default_tail(200_000, 25000, ["cuda:0", "cuda:1"]) == 0 and default_tail(10_000, 64, ["cpu", "cpu"]) == 0
 
 
 def test_sweep_on_ray_gives_the_same_file(tmp_path):
