@@ -516,6 +516,25 @@ def test_devices_started_ahead():
     assert all(d.has_context for d in wp.get_cuda_devices())
 
 
+def test_a_gpu_sweep_imports_what_it_needs_ahead(monkeypatch):
+    # the modules a sweep names (preload) are imported on a thread of their own where its --device names
+    # a GPU (the import overlaps Warp's start there); on the CPU nothing is started
+    import importlib
+    import threading
+
+    from almsdm_warp.cli import main as cli
+
+    assert cli.build_parser().parse_args(["sweep", "stomach", "--out", "s.npz"]).preload == ("scipy.spatial", "scipy.sparse.linalg")
+    imported = []
+    monkeypatch.setattr(importlib, "import_module", imported.append)
+    for device in ("cpu", None, "cuda:1", "cpu,all"):
+        before = set(threading.enumerate())
+        cli._start_imports(("json", "math"), device)
+        for thread in set(threading.enumerate()) - before:
+            thread.join()
+    assert imported == ["json", "math"] * 2
+
+
 def test_profile_says_where_the_wall_time_went(tmp_path, capsys):
     # --profile: each phase, the press kernels, the presses' timeline and the way to the first press;
     # the timeline's three parts and the presses' union fit in the wall time

@@ -169,12 +169,13 @@ def _start_warp(args) -> None:
         init_warp(quiet=not (getattr(args, "verbose", False) or verbose()))
 
 
-def _start_imports(names) -> None:
+def _start_imports(names, device) -> None:
     """Import `names` (modules a command needs before its first result) on a thread of their own, begun
-    before Warp's start: their import (scipy.spatial and scipy.sparse.linalg, 0.4-0.7 s each on an H200
-    host) overlaps Warp's native start (its libraries and the CUDA driver), and whoever imports them later
-    waits only for what is left."""
-    if names:
+    before Warp's start, where `device` (a --device value) names a GPU: their import (scipy.spatial and
+    scipy.sparse.linalg, 0.4-0.7 s each on an H200 host) overlaps Warp's native start (its libraries and
+    the CUDA driver), and whoever imports them later waits only for what is left. Not for the CPU, where
+    on two cores it made a sweep no shorter (six alternations each way)."""
+    if names and any(n.strip() == "all" or n.strip().startswith("cuda") for n in str(device or "").split(",")):
         import importlib
         import threading
 
@@ -187,7 +188,7 @@ def _run(argv) -> int:
         if _default_command(argv):
             argv = ["palpate", *argv]  # `almsdm`, `almsdm --depth-mm 5`, `almsdm liver`, `almsdm my.obj`
         args = build_parser().parse_args(argv)
-        _start_imports(getattr(args, "preload", ()))
+        _start_imports(getattr(args, "preload", ()), getattr(args, "device", None))
         _start_warp(args)
         if getattr(args, "start_devices", False):  # their contexts start while the imports below run
             from ..warp_init import start_devices
