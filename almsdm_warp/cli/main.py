@@ -179,7 +179,14 @@ def _start_imports(names, device) -> None:
         import importlib
         import threading
 
-        threading.Thread(target=lambda: [importlib.import_module(n) for n in names], name="imports", daemon=True).start()
+        def imports():
+            for name in names:
+                try:
+                    importlib.import_module(name)
+                except Exception:  # noqa: BLE001 (the import where the module is needed says what is wrong, once)
+                    return
+
+        threading.Thread(target=imports, name="imports", daemon=True).start()
 
 
 def _run(argv) -> int:
