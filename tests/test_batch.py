@@ -28,9 +28,10 @@ def _graph(mesh):
     return sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
 
 
-@pytest.mark.parametrize("rings,capacity", [(1, None), (4, None), (6, 4)])
+@pytest.mark.parametrize("rings,capacity", [(1, None), (4, None), (6, 4), (14, None)])
 def test_batch_regions_match_region_and_bfs(device, stomach, rings, capacity):
-    # capacity 4 is far too small for 6 rings: the build must grow and retry, not truncate
+    # capacity 4 is far too small for 6 rings: the build must grow and retry, not truncate; 14 rings: regions
+    # of hundreds of vertices, whose membership tests binary-search the rings grown (find_local)
     bp = BatchPalpation(stomach, rings=rings, device=device, capacity=capacity).touch(SEEDS)
     hops = shortest_path(_graph(stomach), directed=False, unweighted=True, indices=SEEDS)
     offsets, neighbours, edges = stomach.adjacency
