@@ -167,3 +167,40 @@ def test_bad_probe_sets(device):
     multi.touch([5, 6])
     with pytest.raises(ValueError, match="PROBE_OFF"):
         multi.set_probes([1, 2])
+
+
+def test_a_multi_press_that_diverged_is_pressed_again_from_where_it_began(device):
+    """As Palpation's (test_simulation_press.py): two probes on a neo-Hookean ball, their plan too bold (the
+    patches' critical step taken 2.2x too long, one substep of 1.6x the true one), diverge; the press is
+    pressed again from where it began at twice the substeps and gives the numbers of a plan of two
+    substeps, bit for bit. A press not begun right after touch() is not pressed again."""
+    from almsdm_warp.mesh.primitives import tet_ball
+    from almsdm_warp.solvers.stepper import SimulationDiverged
+    from almsdm_warp.tissue.material import Material
+
+    mesh, tissue = tet_ball(30.0, 8.0), Material(youngs_modulus=5e3, density=1000.0, rayleigh_alpha=60.0)
+    pair = [int(np.argmax(mesh.vertices[:, 2])), int(np.argmax(mesh.vertices[:, 0]))]
+    made = lambda dt: MultiPalpation(mesh, tissue, rings=2, dt=dt, device=device, law="neo-hookean", retire=False)
+    probe = made(1e-3)
+    probe.touch(pair)
+    probe.step()
+    assert len(probe.patches) == 2  # two regions, apart
+    true = probe.critical_dt
+    press = dict(depth=4e-3, ramp=0.02, hold=0.01, settle=0.01)
+    runs = []
+    for estimate in (2.2 * true, true):  # the bold plan (1 substep), and a plan of 2 at the same frame
+        multi = made(1.6 * true)
+        multi.model.critical_dt = lambda *args, _c=estimate, **kw: _c
+        multi.touch(pair)
+        runs.append((multi, multi.press(**press)))
+    (bold, got), (_, want) = runs
+    assert [r.substeps for r in got] == [2, 2] == [r.substeps for r in want] and bold.substeps == 2
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g.force, w.force)
+        np.testing.assert_array_equal(g.displacement, w.displacement)
+    late = made(1.6 * true)
+    late.model.critical_dt = lambda *args, **kw: 2.2 * true
+    late.touch(pair)
+    late.step()  # not right after touch(): its state is not the one a fresh touch makes
+    with pytest.raises(SimulationDiverged):
+        late.press(**press)

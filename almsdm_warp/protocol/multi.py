@@ -24,12 +24,13 @@ from ..kernels.probes.multi import drive_probe_vertices
 from ..kernels.region.state import clear_region
 from ..kernels.region.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from ..solvers.stepper import capture_step_pair, check_results, force_bound, plan_substeps
+from ..solvers.stepper import (REPRESSES, SimulationDiverged, capture_step_pair, check_results, force_bound, plan_substeps,
+                               restore_states, snapshot_states)
 from .palpation import PressResult
 from ..region.region import Region, check_rings
 from ..solvers import make_solver, solver_class
 from .schedule import PressSchedule, check_press
-from ..checks import rings_text
+from ..checks import LIMITS, rings_text
 
 
 class MultiRegion(Region):
@@ -112,8 +113,10 @@ class MultiPalpation:
     the explicit integrator takes each frame of dt in `substeps` under 0.9 x the critical step of
     the patches' free vertices together (re-planned whenever the patches change); past
     LIMITS["substeps"] it runs the implicit integrator instead and says so in `notes`
-    (solvers.stepper.plan_substeps). A press raises SimulationDiverged where a force or a
-    displacement is not finite or runs away.
+    (solvers.stepper.plan_substeps). A press that diverges (a force or a displacement not finite,
+    or running away) where its substeps were planned, begun right after touch(), is pressed again from
+    that state at twice the substeps, up to REPRESSES times, as Palpation's is (PressResult.substeps;
+    the probes keep them until the next touch()); otherwise it raises SimulationDiverged.
     """
 
     def __init__(self, mesh, tissue=None, *, tol=1e-4, rings=None, integrator="explicit", dt=1e-3, device=None,
@@ -151,6 +154,7 @@ class MultiPalpation:
         self._dirty = True
         self.substeps, self._parity = 1, 1
         """Explicit steps in each frame of dt (1 for the implicit integrator)."""
+        self._substeps_floor = 1  # the fewest substeps a plan takes for these probes (raised by a press pressed again)
         self.critical_dt = math.inf
         """Critical step [s] of the explicit integrator over the patches' free vertices (inf: not asked)."""
         self.notes = []
@@ -175,6 +179,7 @@ class MultiPalpation:
         self._driven = np.zeros(len(vertices), dtype=bool)
         self._countdown = self.check_steps
         self._steps = 0
+        self._substeps_floor = 1
         self.retired = []
         for i in range(len(vertices)):
             self.patches.append(Patch(self, [i], self.start_rings))
@@ -270,7 +275,8 @@ class MultiPalpation:
             for p in self.patches:
                 p.solver = make_solver(self.model, self.integrator, **self.solver_kw)
         self.critical_dt = plan.critical_dt
-        self.substeps, self._parity = plan.substeps, plan.substeps & 1
+        n = max(plan.substeps, self._substeps_floor) if solver_class(self.integrator).conditionally_stable else plan.substeps
+        self.substeps, self._parity = n, n & 1
 
     # -- stepping ------------------------------------------------------------------------------
     def _launch_step(self, a, b):
@@ -357,8 +363,28 @@ class MultiPalpation:
     # -- the press protocol --------------------------------------------------------------------
     def press(self, depth=0.01, ramp=0.1, hold=0.2, settle=1.0) -> list:
         """Every probe pressed at once: driven `depth` [m] along its inward normal over `ramp` [s],
-        held `hold` [s], released for `settle` [s]; one PressResult per probe."""
+        held `hold` [s], released for `settle` [s]; one PressResult per probe. A press begun right after
+        touch() that diverges at its planned substeps is pressed again from there at twice them (the
+        class's docstring)."""
         check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
+        start = snapshot_states(self.states, self._cur) if self._steps == 0 and self._may_press_again(REPRESSES) else None
+        for left in range(REPRESSES, -1, -1):
+            try:
+                return self._press(depth, ramp, hold, settle)
+            except SimulationDiverged:
+                if start is None or not self._may_press_again(left):
+                    raise
+                floor = 2 * self.substeps
+                self.touch(self.vertices)  # the patches a fresh touch makes, as the press began with them
+                self._cur = restore_states(self.states, start)
+                self._substeps_floor = floor
+
+    def _may_press_again(self, left: int) -> bool:
+        # an explicit press with re-presses left and room for twice the substeps
+        return left > 0 and solver_class(self.integrator).conditionally_stable and 2 * self.substeps <= LIMITS["substeps"]
+
+    def _press(self, depth, ramp, hold, settle) -> list:
+        # press()'s protocol at the current substeps
         schedule = PressSchedule.from_times(self.dt, ramp, hold, settle)
         total, release = schedule.total, schedule.release_step
         rest, normal = self.rest_positions(), self.inward_normals()
@@ -370,15 +396,17 @@ class MultiPalpation:
             else:
                 self.set_probes(PROBE_OFF)
             f = self.step()
-            force[:, s] = np.linalg.norm(f, axis=1)
             q = self.state.particle_q.numpy()
-            disp[:, s] = np.linalg.norm(q[self.vertices] - rest, axis=1)
+            with np.errstate(over="ignore", invalid="ignore"):  # a press running away: check_results says so, once
+                force[:, s] = np.linalg.norm(f, axis=1)
+                disp[:, s] = np.linalg.norm(q[self.vertices] - rest, axis=1)
         size = float(np.ptp(self.mesh.vertices, axis=0).max())
         check_results(self.integrator, self.vertices, force.max(axis=1), disp.max(axis=1), self._bound, size, self.dt,
                       self.substeps, self.critical_dt)
         return [
             PressResult(
-                vertex=int(v), depth=float(depth), dt=self.dt, release_step=release, force=force[i], displacement=disp[i]
+                vertex=int(v), depth=float(depth), dt=self.dt, release_step=release, force=force[i], displacement=disp[i],
+                substeps=self.substeps,
             )
             for i, v in enumerate(self.vertices)
         ]

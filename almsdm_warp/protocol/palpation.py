@@ -22,7 +22,8 @@ from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE
 from ..region.patch import sphere_patches
 from ..region.region import Region
 from ..solvers import make_solver
-from ..solvers.stepper import REPRESSES, SimulationDiverged, capture_step_pair, diverged, force_bound, plan_substeps, remedies
+from ..solvers.stepper import (REPRESSES, SimulationDiverged, capture_step_pair, diverged, force_bound, plan_substeps, remedies,
+                               restore_states, snapshot_states)
 from ..checks import LIMITS, check_value, fixed_substeps
 from ..errors import InputError
 from .schedule import PressSchedule, check_press
@@ -518,14 +519,14 @@ class Palpation:
         test per step."""
         if self.probe_radius > 0:
             self._patch_at(depth)  # before the snapshot: a press pressed again starts on its region
-        start = self._snapshot() if self._may_press_again(REPRESSES) else None
+        start = snapshot_states(self.states, self._cur) if self._may_press_again(REPRESSES) else None
         for left in range(REPRESSES, -1, -1):
             try:
                 return self._press(depth, ramp, hold, settle, check_every, record, record_every)
             except SimulationDiverged:
                 if start is None or not self._may_press_again(left):
                     raise
-                self._restore(start)
+                self._cur = restore_states(self.states, start)
                 self._substeps_floor = 2 * self.substeps
                 self.plan_substeps()
 
@@ -538,16 +539,6 @@ class Palpation:
         # a planned explicit press with re-presses left and room for twice the substeps
         return (left > 0 and self._fixed_substeps is None and self.solver.conditionally_stable
                 and 2 * self.substeps <= LIMITS["substeps"])
-
-    def _snapshot(self):
-        # the states as a press finds them (positions and velocities of both, and which is current)
-        return self._cur, [(wp.clone(s.particle_q), wp.clone(s.particle_qd)) for s in self.states]
-
-    def _restore(self, snapshot) -> None:
-        self._cur, saved = snapshot[0], snapshot[1]
-        for state, (q, qd) in zip(self.states, saved):
-            wp.copy(state.particle_q, q)
-            wp.copy(state.particle_qd, qd)
 
     def _press(self, depth, ramp, hold, settle, check_every, record, record_every) -> PressResult:
         # press()'s protocol at the current substeps

@@ -91,6 +91,21 @@ compressed elements past it (a stiff lesion pressed 10 mm: docs/datasets.md). Pa
 batches' presses (batch/batch_palpation.py) both."""
 
 
+def snapshot_states(states, current: int):
+    """Where a press pressed again starts from (REPRESSES): `current` (which of `states` is the current one)
+    and a copy of each state's positions and velocities; restore_states puts them back."""
+    return current, [(wp.clone(s.particle_q), wp.clone(s.particle_qd)) for s in states]
+
+
+def restore_states(states, snapshot) -> int:
+    """Copy snapshot_states' copies back into `states`; returns the index of the current state they held."""
+    current, saved = snapshot
+    for state, (q, qd) in zip(states, saved):
+        wp.copy(state.particle_q, q)
+        wp.copy(state.particle_qd, qd)
+    return current
+
+
 def diverged_rows(peak, recovery, bound: float, size: float, hold=None) -> np.ndarray:
     """Which of several presses diverged (bool): a peak force [N] (or `hold` force) or recovery [m] not
     finite, a force past `bound` [N] or a recovery past twice the mesh's `size` [m]."""
