@@ -31,7 +31,7 @@ def find_local(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.array
     # each of its first `sorted_rings` rings (sorted by vertex id: ring_offsets[b, r]..ring_offsets[b, r + 1]),
     # then a linear one of the rest, up to `count` (0 sorted rings: all of it). The same index as a linear
     # search of the whole (each vertex is in the region once), in log time for a large region's rings:
-    # a fine mesh under a sphere has regions of thousands of vertices (a 0.5 mm mesh: 23 s of 16 regions)
+    # a fine mesh under a sphere has regions of thousands of vertices (0.27 mm edges: 16 of ~10,000 took 23 s)
     for r in range(sorted_rings):
         lo = ring_offsets[b, r]
         hi = ring_offsets[b, r + 1]
