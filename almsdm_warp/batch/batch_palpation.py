@@ -21,11 +21,11 @@ from ..kernels.arrays import BatchElements, BatchPress, BatchRegionArrays, Batch
 from ..kernels.explicit import batch as bk
 from ..kernels.explicit import batch_fast as bkf
 from ..kernels.region import batch_rings as br
-from ..checks import LIMITS, fixed_substeps, substeps_for
+from ..checks import fixed_substeps, substeps_for
 from ..checks import check_value
 from ..protocol.palpation import PATCH_DEPTH, check_probe_radius
 from ..solvers import integrators, solver_class
-from ..solvers.stepper import REPRESSES, check_results, diverged_rows, force_bound, plan_substeps
+from ..solvers.stepper import REPRESSES, check_results, diverged_rows, force_bound, may_press_again, plan_substeps
 from ..sim.model import Model
 from ..region.patch import sphere_patches
 from ..region.region import check_rings
@@ -679,7 +679,7 @@ class BatchPalpation:
         )
         bad = np.flatnonzero(diverged_rows(peak_n, recovery, self._row_bounds(), self._mesh_size(), hold_n))
         if len(bad):
-            if not (self.represses > 0 and self.integrator == "explicit" and 2 * self.substeps <= LIMITS["substeps"]):
+            if not may_press_again(self.represses, self.integrator, self.substeps):
                 self._check_results(peak_n, hold_n, recovery)
             self._press_again(result, bad)
         return result

@@ -24,13 +24,13 @@ from ..kernels.probes.multi import drive_probe_vertices
 from ..kernels.region.state import clear_region
 from ..kernels.region.ring_motion import eval_region_motion
 from ..sim.model import PROBE_DISPLACEMENT, PROBE_OFF, Model
-from ..solvers.stepper import (REPRESSES, SimulationDiverged, capture_step_pair, check_results, force_bound, plan_substeps,
-                               restore_states, snapshot_states)
+from ..solvers.stepper import (REPRESSES, SimulationDiverged, capture_step_pair, check_results, force_bound, may_press_again,
+                               plan_substeps, restore_states, snapshot_states)
 from .palpation import PressResult
 from ..region.region import Region, check_rings
 from ..solvers import make_solver, solver_class
 from .schedule import PressSchedule, check_press
-from ..checks import LIMITS, rings_text
+from ..checks import rings_text
 
 
 class MultiRegion(Region):
@@ -367,21 +367,17 @@ class MultiPalpation:
         touch() that diverges at its planned substeps is pressed again from there at twice them (the
         class's docstring)."""
         check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
-        start = snapshot_states(self.states, self._cur) if self._steps == 0 and self._may_press_again(REPRESSES) else None
+        start = snapshot_states(self.states, self._cur) if self._steps == 0 and may_press_again(REPRESSES, self.integrator, self.substeps) else None
         for left in range(REPRESSES, -1, -1):
             try:
                 return self._press(depth, ramp, hold, settle)
             except SimulationDiverged:
-                if start is None or not self._may_press_again(left):
+                if start is None or not may_press_again(left, self.integrator, self.substeps):
                     raise
                 floor = 2 * self.substeps
                 self.touch(self.vertices)  # the patches a fresh touch makes, as the press began with them
                 self._cur = restore_states(self.states, start)
                 self._substeps_floor = floor
-
-    def _may_press_again(self, left: int) -> bool:
-        # an explicit press with re-presses left and room for twice the substeps
-        return left > 0 and solver_class(self.integrator).conditionally_stable and 2 * self.substeps <= LIMITS["substeps"]
 
     def _press(self, depth, ramp, hold, settle) -> list:
         # press()'s protocol at the current substeps

@@ -22,9 +22,9 @@ from ..sim.model import PROBE_DISPLACEMENT, PROBE_FORCE, PROBE_OFF, PROBE_SPHERE
 from ..region.patch import sphere_patches
 from ..region.region import Region
 from ..solvers import make_solver
-from ..solvers.stepper import (REPRESSES, SimulationDiverged, capture_step_pair, diverged, force_bound, plan_substeps, remedies,
-                               restore_states, snapshot_states)
-from ..checks import LIMITS, check_value, fixed_substeps
+from ..solvers.stepper import (REPRESSES, SimulationDiverged, capture_step_pair, diverged, force_bound, may_press_again, plan_substeps,
+                               remedies, restore_states, snapshot_states)
+from ..checks import check_value, fixed_substeps
 from ..errors import InputError
 from .schedule import PressSchedule, check_press
 
@@ -517,8 +517,8 @@ class Palpation:
         multiple of `record_every`, and after the last step; it reads the state itself (a USD
         recorder, say; a press pressed again records its steps again). None (the default) costs one
         test per step."""
-        if self.probe_radius > 0:
-            self._patch_at(depth)  # before the snapshot: a press pressed again starts on its region
+        if self.probe_radius > 0 and self.region is not None and self.patch_depth != depth:
+            self.touch(self.vertex, depth)  # the patch the sphere covers at this depth, before the snapshot
         start = snapshot_states(self.states, self._cur) if self._may_press_again(REPRESSES) else None
         for left in range(REPRESSES, -1, -1):
             try:
@@ -530,22 +530,15 @@ class Palpation:
                 self._substeps_floor = 2 * self.substeps
                 self.plan_substeps()
 
-    def _patch_at(self, depth: float) -> None:
-        # the region grown from the patch the sphere covers at `depth` (touched again where it is another's)
-        if self.region is not None and self.patch_depth != depth:
-            self.touch(self.vertex, depth)
-
     def _may_press_again(self, left: int) -> bool:
         # a planned explicit press with re-presses left and room for twice the substeps
-        return (left > 0 and self._fixed_substeps is None and self.solver.conditionally_stable
-                and 2 * self.substeps <= LIMITS["substeps"])
+        return self._fixed_substeps is None and may_press_again(left, self.solver.integrator, self.substeps)
 
     def _press(self, depth, ramp, hold, settle, check_every, record, record_every) -> PressResult:
         # press()'s protocol at the current substeps
         schedule, rest, direction = self._begin_press(ramp, hold, settle, record, record_every, depth=depth)
         drive, start = PROBE_DISPLACEMENT, rest
-        if self.probe_radius > 0:
-            self._patch_at(depth)
+        if self.probe_radius > 0:  # (its region is the patch's at this depth: press() made it)
             travel = depth / max(schedule.ramp_n, 1)
             if travel >= self.probe_radius:
                 raise ValueError(f"the sphere would move {travel * 1e3:.3g} mm a step, not less than its radius "

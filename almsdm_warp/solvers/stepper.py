@@ -87,8 +87,14 @@ REPRESSES = 2
 """How many times a press of planned substeps (substeps "auto") that diverged is pressed again from where
 it began, each time at twice the substeps (4x the plan's at most, never past LIMITS["substeps"]): the
 plan's margin (0.9 of the critical step) is taken at rest, and a deep press stiffens a tet law's
-compressed elements past it (a stiff lesion pressed 10 mm: docs/datasets.md). Palpation.press and the
-batches' presses (batch/batch_palpation.py) both."""
+compressed elements past it (a stiff lesion pressed 10 mm: docs/datasets.md). Palpation.press,
+MultiPalpation.press and the batches' presses (batch/batch_palpation.py), each by may_press_again."""
+
+
+def may_press_again(left: int, integrator: str, substeps: int) -> bool:
+    """Whether a press of planned substeps that diverged is pressed again (REPRESSES): re-presses `left`, a
+    conditionally stable `integrator` (more substeps make it stable) and room for twice `substeps`."""
+    return left > 0 and solver_class(integrator).conditionally_stable and 2 * substeps <= LIMITS["substeps"]
 
 
 def snapshot_states(states, current: int):
