@@ -193,7 +193,8 @@ def plot_speed_accuracy(acc, extra, path, against_fem=None, depth=None):
         notes += _law_panel(axes[-1], depth)
     fig.suptitle(
         "Speed against accuracy: rings 1..N against the global anchored reference\n"
-        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g} drawn at {FLOOR:g})", y=title_y
+        f"(numbers: rings; stars: auto rings at a tolerance in mm; errors below {FLOOR:g}, or {100 * FLOOR:g} %, drawn there: "
+        f"a model against itself)", y=title_y
     )
     _annotate_apart(fig, notes)
     return _save(fig, path)
