@@ -208,7 +208,46 @@ def test_batch_region_covering_a_small_component(device):
     assert np.all(np.isfinite(bp.press(**SHORT).peak_force))
 
 
+def test_batch_tets_with_supports_as_a_brute_force_search(device):
+    # a tet law's regions reaching below a support: the held vertices leave the free set and go after it,
+    # out of ring order (hold_supports), so each region vertex's local tets and each free vertex's local
+    # neighbours are searched in the region's sorted runs (find_in_runs); the answer: a dictionary of the
+    # region's mesh ids, each tet corner its local index or -(id + 1) outside the region
+    from almsdm_warp.mesh.primitives import tet_ball
+    from almsdm_warp.sim.model import Model
+    from almsdm_warp.tissue.material import Material
+
+    mesh = tet_ball(15.0, 3.0)
+    material = Material(youngs_modulus=5e3, poisson_ratio=0.45, density=1000.0, rayleigh_alpha=60.0)
+    model = Model(mesh, material, device, law="neo-hookean", fixed_below=-6e-3)
+    surface = mesh.surface_vertices
+    z = mesh.vertices[surface, 2]
+    contacts = surface[(z > -4e-3) & (z < -1e-3)][:6]
+    bp = BatchPalpation(model=model, rings=3).touch(contacts)
+    held = model.support_mask
+    offsets, neighbours, _ = mesh.adjacency
+    entry_offsets, entry_topology = model.entry_offsets.numpy(), model.entry_topology.numpy()
+    local_offsets, local_neighbour = bp.regions.local_offsets.numpy(), bp.regions.local_neighbour.numpy()
+    element_offsets, element_topology = bp.element_offsets.numpy(), bp.element_topology.numpy()
+    moved = 0
+    for b in range(len(contacts)):
+        got = bp.region(b)
+        nf = bp.free_vertex_counts[b]
+        ref = Region(mesh, device).build(int(contacts[b]), 3)
+        assert set(got) == set(ref.vertices()) and not held[got[:nf]].any()
+        moved += int(held[ref.vertices()[: ref.free_count]].any())
+        local = {int(v): i for i, v in enumerate(got)}
+        for i in range(nf):
+            k0, k1 = local_offsets[b, i], local_offsets[b, i + 1]
+            np.testing.assert_array_equal(local_neighbour[b, k0:k1], [local[int(u)] for u in neighbours[offsets[got[i]]:offsets[got[i] + 1]]])
+        for i, v in enumerate(got):
+            want = [[local.get(int(c), -int(c) - 1) for c in t] for t in entry_topology[entry_offsets[v]:entry_offsets[v + 1]]]
+            np.testing.assert_array_equal(element_topology[b, element_offsets[b, i]:element_offsets[b, i + 1]], want)
+    assert moved >= 3  # most of these regions had held vertices among their free rings
+
+
 def test_batch_fast_kernel_same_bits_with_fewer_threads_than_free_vertices(stomach):
+
     # with 32 threads the free vertices beyond the block's threads take the shared-memory path
     # instead of registers: where the step's data lives changes, not its arithmetic or order
     ref = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast").touch(SEEDS).press(**SHORT)

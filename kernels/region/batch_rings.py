@@ -8,6 +8,9 @@ neighbours in mesh CSR order as local indices with their mesh edge ids (the step
 built once per region). One thread per palpation; membership is a binary search of each ring built
 so far (each sorted by vertex id) and a linear one of the ring being built (find_local), so that no
 per-mesh-vertex array is needed per palpation (memory stays proportional to B x region, not B x mesh).
+Once built, a region whose support moved vertices out of ring order is searched in its sorted runs
+(sorted_runs, find_in_runs: at most twice its rings and one), never linearly: the liver scene's 6-ring regions,
+nearly all of which reach its support, build their tets 4x sooner (docs/performance.md).
 """
 
 import warp as wp
@@ -53,13 +56,72 @@ def find_local(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.array
 @wp.func
 def rings_sorted(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.array2d(dtype=wp.int32), b: int):
     # the number of palpation b's rings (all of them) when each is sorted by vertex id, as its growth leaves
-    # them; 0 where a support moved vertices out of order (hold_supports): find_local then searches linearly
+    # them; 0 where a support moved vertices out of order (hold_supports): the built region's lookups then
+    # binary-search its sorted runs (find_built)
     rings = ring_offsets.shape[1] - 1
     for r in range(rings):
         for i in range(ring_offsets[b, r] + 1, ring_offsets[b, r + 1]):
             if region_vertex[b, i - 1] > region_vertex[b, i]:
                 return 0
     return rings
+
+
+SEARCH_RUNS = 64
+"""A region's sorted runs that `find_in_runs` binary-searches at most (more: a linear search)."""
+RunEnds = wp.types.vector(length=SEARCH_RUNS + 1, dtype=wp.int32)
+
+
+@wp.func
+def sorted_runs(region_vertex: wp.array2d(dtype=wp.int32), b: int, count: int):
+    # palpation b's region cut into its maximal runs of increasing vertex id: (ends, runs), run r is
+    # region_vertex[b, ends[r]:ends[r + 1]]; runs 0 where there are more than SEARCH_RUNS. Where a support
+    # moved vertices out of ring order (hold_supports), the free vertices left in the set and those it
+    # moved after them are each still in ring order, so a region has at most twice its rings' runs
+    ends = RunEnds()
+    runs = int(0)
+    for i in range(1, count):
+        if region_vertex[b, i - 1] > region_vertex[b, i]:
+            runs += 1
+            if runs < SEARCH_RUNS:
+                ends[runs] = i
+    runs += 1
+    if runs > SEARCH_RUNS:
+        return ends, 0
+    ends[runs] = count
+    return ends, runs
+
+
+@wp.func
+def find_in_runs(region_vertex: wp.array2d(dtype=wp.int32), b: int, ends: RunEnds, runs: int, count: int, u: int):
+    # local index of mesh vertex u in palpation b's built region, -1 when not inside: a binary search of
+    # each of its sorted runs (sorted_runs), or with none given (runs 0) a linear search of all `count`
+    for r in range(runs):
+        lo = ends[r]
+        hi = ends[r + 1]
+        while lo < hi:
+            mid = lo + (hi - lo) // 2
+            w = region_vertex[b, mid]
+            if w < u:
+                lo = mid + 1
+            elif w > u:
+                hi = mid
+            else:
+                return mid
+    if runs == 0:
+        for i in range(count):
+            if region_vertex[b, i] == u:
+                return i
+    return -1
+
+
+@wp.func
+def find_built(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.array2d(dtype=wp.int32), b: int, sorted_rings: int,
+               ends: RunEnds, runs: int, count: int, u: int):
+    # local index of mesh vertex u in palpation b's built region (-1: outside): its rings' binary searches
+    # where each ring is sorted (sorted_rings > 0), else those of its sorted runs
+    if sorted_rings > 0:
+        return find_local(region_vertex, ring_offsets, b, sorted_rings, count, u)
+    return find_in_runs(region_vertex, b, ends, runs, count, u)
 
 
 @wp.func
@@ -137,13 +199,15 @@ def build_batch_regions(
     regions.free_count[b] = nf
     # local topology of the free vertices: neighbours in mesh CSR order, as local indices
     sorted_rings = rings_sorted(regions.region_vertex, regions.ring_offsets, b)
+    ends, runs = sorted_runs(regions.region_vertex, b, count)
     slot = int(0)
     regions.local_offsets[b, 0] = 0
     for i in range(nf):
         v = regions.region_vertex[b, i]
         for k in range(mesh.adj_offsets[v], mesh.adj_offsets[v + 1]):
             if slot < entry_capacity:
-                regions.local_neighbour[b, slot] = find_local(regions.region_vertex, regions.ring_offsets, b, sorted_rings, count, mesh.adj_vertex[k])
+                regions.local_neighbour[b, slot] = find_built(regions.region_vertex, regions.ring_offsets, b, sorted_rings, ends, runs, count,
+                                                              mesh.adj_vertex[k])
                 regions.local_edge[b, slot] = mesh.adj_edge[k]
                 regions.local_owner[b, slot] = i
             else:
@@ -172,9 +236,9 @@ def build_batch_regions(
 
 @wp.func
 def corner_local(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.array2d(dtype=wp.int32), b: int, sorted_rings: int,
-                 count: int, u: int):
+                 ends: RunEnds, runs: int, count: int, u: int):
     # a tet corner's local index in palpation b's region, or -(u + 1) for a mesh vertex outside it
-    i = find_local(region_vertex, ring_offsets, b, sorted_rings, count, u)
+    i = find_built(region_vertex, ring_offsets, b, sorted_rings, ends, runs, count, u)
     if i < 0:
         return -(u + 1)
     return i
@@ -193,16 +257,17 @@ def build_batch_elements(
     b = wp.tid()
     count = region_count[b]
     rings = rings_sorted(region_vertex, ring_offsets, b)
+    ends, runs = sorted_runs(region_vertex, b, count)
     slot = int(0)
     local_offsets[b, 0] = 0
     for i in range(count):
         v = region_vertex[b, i]
         for k in range(entry_offsets[v], entry_offsets[v + 1]):
             t = entry_topology[k]
-            local_topology[b, slot] = wp.vec4i(corner_local(region_vertex, ring_offsets, b, rings, count, t[0]),
-                                               corner_local(region_vertex, ring_offsets, b, rings, count, t[1]),
-                                               corner_local(region_vertex, ring_offsets, b, rings, count, t[2]),
-                                               corner_local(region_vertex, ring_offsets, b, rings, count, t[3]))
+            local_topology[b, slot] = wp.vec4i(corner_local(region_vertex, ring_offsets, b, rings, ends, runs, count, t[0]),
+                                               corner_local(region_vertex, ring_offsets, b, rings, ends, runs, count, t[1]),
+                                               corner_local(region_vertex, ring_offsets, b, rings, ends, runs, count, t[2]),
+                                               corner_local(region_vertex, ring_offsets, b, rings, ends, runs, count, t[3]))
             slot += 1
         local_offsets[b, i + 1] = slot
 
