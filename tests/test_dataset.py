@@ -308,27 +308,3 @@ def test_units_on_several_gpus_split_evenly(items, points, gpus):
     if (items, gpus) == (13, 2):
         assert makespan(item_chunk(points, True, 1)) == 7 * points
     assert item_chunk(SPLIT_POINTS * gpus - 1, True, gpus) == SPLIT_POINTS * gpus - 1  # small items stay whole
-
-
-def test_presses_that_diverge_are_pressed_again_together_with_the_bits_of_each_alone(tmp_path, monkeypatch):
-    """A plan too bold (substeps for 2.5x the critical step) makes the 8x lesion's liver presses diverge:
-    pressed together, the dataset holds its units and presses their diverged presses again in one batch
-    (dataset_press.press_held); each item pressed alone presses its own again at once. The same table."""
-    import math
-
-    from almsdm_warp.batch.batch_palpation import BatchPalpation
-    from almsdm_warp.solvers import stepper
-
-    monkeypatch.setattr(stepper, "substeps_for", lambda dt, critical, safety=0.9: max(1, math.ceil(dt / (2.5 * critical))))
-    presses = []  # press() is a press again's (a sweep's and a dataset's own presses start and finish apart)
-    press = BatchPalpation.press
-    monkeypatch.setattr(BatchPalpation, "press", lambda self, *a, **kw: presses.append((self.batch_size, self.substeps)) or press(self, *a, **kw))
-    spec = spec_file(tmp_path, LIVER.replace("points = 3", "points = 8\nchunk = 2").replace("settle_s = 0.01", "settle_s = 0.1"))
-    alone = pressed(spec, tmp_path / "alone", ["cpu"], together=False)
-    n = len(presses)
-    together = pressed(spec, tmp_path / "together", ["cpu"], together=True)
-    # alone, the lesion's item presses again each chunk's diverged presses at once (three of its four chunks
-    # diverge); together, the units' in one batch: the same presses at the same substeps
-    assert n >= 2 and presses[n:] == [(sum(size for size, _ in presses[:n]), presses[0][1])], presses
-    for c in alone:
-        np.testing.assert_array_equal(together[c], alone[c], err_msg=c)

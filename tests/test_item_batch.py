@@ -111,35 +111,3 @@ def test_a_press_that_diverged_is_pressed_again_at_twice_the_substeps(device):
     bold.known_critical_dt = 16 * base.critical_dt
     with pytest.raises(SimulationDiverged, match="in 8 substep"):
         bold.build(vertices, None, items).plan().press(**PRESS)
-
-
-def test_presses_that_diverged_in_several_batches_are_pressed_again_as_one(device, monkeypatch):
-    """A dataset's units defer their presses again (defer_represses) and press them together
-    (batch/repress.py press_together): two batches' diverged rows in one press of twice the substeps, each
-    row's numbers, bit for bit, those that the batch pressing its own again at once gives."""
-    from almsdm_warp.batch.repress import press_together
-
-    mesh, tissue, models, scales, top = _nh_ball_items(device)
-    base = BatchPalpation(mesh, tissue, rings=2, dt=1e-3, device=device, law="neo-hookean").touch(top)
-    dt = 1.5 * base.critical_dt  # the 4x lesion's item (1) diverges at the plan's 2 substeps, as above
-    stacked = StackedModel(models, device)
-    plans = [(np.repeat(top, 2), np.tile([0, 1], len(top))), (top[::-1].copy(), np.array([1, 1]))]
-
-    def pressed(defer):
-        batch = ItemBatch(stacked, rings=2, dt=dt)
-        batch.known_critical_dt, batch.defer_represses = base.critical_dt, defer
-        return [batch.build(v, None, k).plan().press(**PRESS) for v, k in plans]
-
-    at_once = pressed(False)
-    deferred = pressed(True)
-    assert all(r.again is None for r in at_once)
-    assert [r.again.rows.tolist() for r in deferred] == [[1, 3], [0, 1]]
-    assert deferred[0].substeps.tolist() == [2, 2, 2, 2]  # the diverged press's numbers until pressed again
-    presses = []
-    monkeypatch.setattr(ItemBatch, "press", lambda self, *a, **kw: presses.append(self.batch_size) or BatchPalpation.press(self, *a, **kw))
-    assert press_together([r.again for r in deferred]) == 4
-    assert presses == [4]  # one batch of the four rows
-    for got, want in zip(deferred, at_once):
-        assert got.again is None and got.substeps.tolist() == want.substeps.tolist()
-        for field in ("peak_force", "hold_force", "recovery_error", "free_vertices"):
-            np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)

@@ -30,7 +30,6 @@ from ..sim.model import Model
 from ..region.patch import sphere_patches
 from ..region.region import check_rings
 from .critical_step import certified_critical_dt
-from .repress import PressAgain, press_together
 
 
 KERNELS = ("fast", "exact")
@@ -150,10 +149,6 @@ class BatchResult:
     ring_gap: np.ndarray | None = field(default=None, repr=False)
     """Each press's PressResult.ring_gap [m], [B]: its sphere's least distance at full depth from a vertex
     of its region's fixed outer ring; None but for a sphere on a tet mesh."""
-    again: object = field(default=None, repr=False)
-    """A batch that defers its presses again (BatchPalpation.defer_represses): the rows that diverged, to
-    press again (batch/repress.py's PressAgain, pressed by press_together), until then their numbers
-    are the diverged press's; else None."""
 
     # the names of PressResult, each with its unit (the fields above are SI, named without one)
     @property
@@ -325,9 +320,6 @@ class BatchPalpation:
         self.substeps, self.critical_dt, self.notes = 1, math.inf, []
         self.represses = REPRESSES if self._fixed_substeps is None else 0
         """How many more times a press that diverged is pressed again at twice the substeps (REPRESSES)."""
-        self.defer_represses = False
-        """True: a press's palpations that diverged are not pressed again when it is read but left in
-        BatchResult.again, for the caller to press with other batches' (batch/repress.py press_together)."""
         self.known_critical_dt = None
         """The critical step [s] of the contacts' free vertices where the caller knows it (a re-press:
         the batch's that diverged), or None: estimated at each touch()."""
@@ -689,13 +681,22 @@ class BatchPalpation:
         if len(bad):
             if not may_press_again(self.represses, self.integrator, self.substeps):
                 self._check_results(peak_n, hold_n, recovery)
-            # pressed again at twice the substeps (the same model, regions and press), now or by the caller
-            again = PressAgain(self, result, bad)
-            if self.defer_represses:
-                result.again = again
-            else:
-                press_together([again])
+            self._press_again(result, bad)
         return result
+
+    def _press_again(self, result: BatchResult, rows: np.ndarray) -> None:
+        """Press the palpations `rows` again at twice the substeps (a batch of their own: the same model,
+        regions and press, the next re-press its own) and put their results in `result`'s rows."""
+        again = self._sibling(2 * self.substeps)
+        again.region_table, again.critical_dt_bound = self.region_table, self.critical_dt_bound
+        again.known_critical_dt, again.represses = self.critical_dt, self.represses - 1
+        self._build_rows(again, rows).plan()
+        redo = again.press(*self.press_args)
+        for name in ("peak_force", "hold_force", "recovery_error", "region_vertices", "free_vertices", "substeps", "ring_gap"):
+            if getattr(result, name) is not None:
+                getattr(result, name)[rows] = getattr(redo, name)
+        for name, values in redo.records.items():
+            result.records[name][rows] = values
 
     def _sibling(self, substeps: int) -> "BatchPalpation":
         """A batch of this one's model, rings, frame, kernel and probe that steps `substeps` substeps."""
@@ -706,9 +707,9 @@ class BatchPalpation:
                     threads=self._threads, capacity=self._capacity, probe_radius=self.probe_radius, substeps=substeps,
                     records=self.records.spec if self.records.on else None)
 
-    def _row_columns(self, rows: np.ndarray) -> tuple:
-        """What build() takes after (vertices, depth) for this batch's palpations `rows`: nothing here."""
-        return ()
+    def _build_rows(self, batch: "BatchPalpation", rows: np.ndarray) -> "BatchPalpation":
+        """`batch` built for this batch's palpations `rows`."""
+        return batch.build(self.vertices[rows], self.depth)
 
     def _row_bounds(self):
         """The force [N] past which a palpation's press diverged (solvers.stepper.force_bound): one for all."""

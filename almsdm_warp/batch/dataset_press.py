@@ -136,7 +136,6 @@ class DeviceStack:
             # the implicit fall-back takes one step a frame (its plan's own)
             batch = self._new_batch(rings, integrator, substeps if integrator == self.stack.plan.integrator else "auto")
             batch.region_table, batch.represses = self.table(rings)[0], REPRESSES  # the substeps are a plan's: "auto"
-            batch.defer_represses = True  # a unit's presses that diverge are pressed with other units' (press_held)
             self.batches[key] = batch
         return self.batches[key]
 
@@ -220,49 +219,16 @@ class ItemLane(Lane):
                         pinned = self._read_back(batch, (int(r), integrator, substeps))
                     self.started.append(((idx, items), batch, pinned, events))
 
-    def finish(self, units: DeviceUnits, origin=None):
-        """Wait for the unit started last: {item (stack index): its checked columns}, or, where some of its
-        presses diverged, the UnitRows that give them once those are pressed again (press_held)."""
-        rows = UnitRows(*self.unit, self.results(origin), self.times)
-        return rows if rows.again else rows.columns()
-
-
-class UnitRows:
-    """A unit's BatchResults as read: its columns, once the presses that diverged in it (`again`: their
-    PressAgains, batch/repress.py) are pressed again."""
-
-    def __init__(self, stack: DeviceStack, chunk: int, members: list, results: list, times: SweepTimes):
-        self.stack, self.chunk, self.members, self.results, self.times = stack, chunk, members, results, times
-        self.again = [r.again for _, r in results if r.again is not None]
-
-    def columns(self) -> dict:
-        """{item (stack index): its checked columns}."""
-        rows = {k: [] for k in self.members}
-        for (idx, items), result in self.results:
+    def finish(self, units: DeviceUnits, origin=None) -> dict:
+        """Wait for the unit started last: {item (stack index): its checked columns}."""
+        stack, chunk, members = self.unit
+        results = {k: [] for k in members}
+        for (idx, items), result in self.results(origin):
             for j, k in enumerate(items):
-                rows[k].append((idx, result_rows(result, j * len(idx), (j + 1) * len(idx))))
-        begin, end = self.stack.stack.plan.chunks[self.chunk]
+                results[k].append((idx, result_rows(result, j * len(idx), (j + 1) * len(idx))))
+        begin, end = stack.stack.plan.chunks[chunk]
         with self.times.phase("checks"):
-            return {k: checked_columns(self.stack.stack.works[k].item.plan.columns(begin, end, rows[k])) for k in self.members}
-
-
-HELD_UNITS = 8
-"""Units a device holds, read but with presses to press again, before it presses those together (press_held)."""
-
-
-def press_held(held: list, put, times: SweepTimes) -> None:
-    """Press the presses that diverged in the units `held` ([(unit index, UnitRows)]) again, together
-    (batch/repress.py press_together: a batch of each kind, not one a unit), then put(i, columns) each
-    unit, in order; empties `held`."""
-    from .repress import press_together
-
-    if not held:
-        return
-    with times.phase("pressing again"):
-        times.add_repressed(press_together([a for _, unit in held for a in unit.again]))
-    for i, unit in held:
-        put(i, unit.columns())
-    held.clear()
+            return {k: checked_columns(stack.stack.works[k].item.plan.columns(begin, end, results[k])) for k in members}
 
 
 def stacks_of(works: list[ItemWork]) -> list[SceneStack]:
@@ -335,18 +301,7 @@ def press_stacks(stacks: list[SceneStack], devices: list[str], writer, progress=
         if cuda:
             devices_started()  # before its streams: a context the command line started (warp_init.start_devices)
         lanes = [ItemLane(device, times) for _ in range(2 if cuda else 1)]
-        held = []  # units whose diverged presses wait to be pressed again with other units' (press_held)
-
-        def put_or_hold(i, done):
-            if not isinstance(done, UnitRows):
-                put(i, done)
-                return
-            held.append((i, done))
-            if len(held) >= HELD_UNITS:
-                press_held(held, put, times)
-
-        run_lanes(DeviceUnits(stacks, units, device, times), lanes, take, put_or_hold, times, advance)
-        press_held(held, put, times)
+        run_lanes(DeviceUnits(stacks, units, device, times), lanes, take, put, times, advance)
 
     run_threads(work, devices, stop, writer)
 

@@ -179,8 +179,8 @@ class ItemBatch(BatchPalpation):
         batch.item_critical_dt = self.item_critical_dt
         return batch
 
-    def _row_columns(self, rows: np.ndarray) -> tuple:
-        return (self.items[rows].copy(),)
+    def _build_rows(self, batch: "ItemBatch", rows: np.ndarray) -> "ItemBatch":
+        return batch.build(self.vertices[rows], self.depth, self.items[rows])
 
     def _row_bounds(self) -> np.ndarray:
         return np.array([self.model.force_bound(int(k)) for k in range(self.model.item_count)])[self.items]

@@ -10,9 +10,8 @@ from contextlib import contextmanager
 import numpy as np
 
 PHASES = ("loading", "sampling", "set-up", "waiting for the points", "region build", "critical steps", "planning", "launch",
-          "waiting for the device", "read-back", "checks", "pressing again", "writing", "waiting for the writer", "gather", "output")
-"""The host phases of a sweep's wall time (SweepTimes; "loading": the mesh read, checked and its topology;
-"pressing again": a dataset's diverged presses pressed again together, batch/dataset_press.py press_held); the
+          "waiting for the device", "read-back", "checks", "writing", "waiting for the writer", "gather", "output")
+"""The host phases of a sweep's wall time (SweepTimes; "loading": the mesh read, checked and its topology); the
 device's press time is counted apart."""
 
 
