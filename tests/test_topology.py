@@ -101,3 +101,43 @@ def test_mesh_topology_invariants(path):
     assert offsets[-1] == 2 * mesh.edge_count
     degree = np.bincount(mesh.edges.ravel(), minlength=mesh.vertex_count)
     np.testing.assert_array_equal(np.diff(offsets), degree)
+
+
+def test_vertex_sums_are_np_add_at_bit_for_bit():
+    """The per-vertex sums of a large mesh's set-up (used vertices, masses, areas, normals, each edge's
+    element measure) by counting (np.bincount) give np.unique's ids and np.add.at's sums bit for bit:
+    the same additions in the same order, 5-20x sooner on a 500,000-vertex organ."""
+    from almsdm_warp.sim.model import vertex_normals
+    from almsdm_warp.tissue.material import edge_element_measure, vertex_areas
+
+    rng = np.random.default_rng(7)
+    pts, tets = box_tets(4, 0.02)
+    pts = pts + rng.normal(scale=1e-4, size=pts.shape)  # no two sums alike
+    tri = topo.tet_surface(tets)
+    n = len(pts) + 5  # five vertices no element uses
+    pts = np.concatenate([pts, rng.normal(size=(5, 3))])
+    for elements in (tets, tri, tets[:0]):
+        np.testing.assert_array_equal(topo.used_vertices(elements, n), np.unique(elements).astype(np.int64))
+
+    def add_at(index, values, shape):
+        out = np.zeros(shape)
+        np.add.at(out, index, values)
+        return out
+
+    vol = np.abs(topo.tet_signed_volumes(pts, tets))
+    masses = topo.lumped_masses(pts, tri, tets, 1000.0, 0.0)
+    assert masses.tobytes() == add_at(tets.reshape(-1), np.repeat(vol * 1000.0 / 4.0, 4), n).tobytes()
+    area = topo.triangle_areas(pts, tri)
+    assert vertex_areas(pts, tri).tobytes() == add_at(tri.reshape(-1), np.repeat(area / 3.0, 3), n).tobytes()
+    face = np.cross(pts[tri[:, 1]] - pts[tri[:, 0]], pts[tri[:, 2]] - pts[tri[:, 0]])
+    want = np.zeros((n, 3))
+    for c in range(3):
+        np.add.at(want, tri[:, c], face)
+    length = np.linalg.norm(want, axis=1, keepdims=True)
+    assert vertex_normals(pts, tri).tobytes() == np.divide(want, length, out=np.zeros_like(want), where=length > 0).tobytes()
+    edges = topo.unique_edges(tri, tets)
+    key = {(int(i), int(j)): k for k, (i, j) in enumerate(edges)}
+    local = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    idx = [key[tuple(sorted((int(t[a]), int(t[b]))))] for t in tets for a, b in local]
+    got = edge_element_measure(pts, edges, tri, tets)
+    assert got.tobytes() == add_at(np.array(idx), np.repeat(vol, 6), len(edges)).tobytes()

@@ -93,7 +93,7 @@ class TissueMesh:
     @cached_property
     def surface_vertices(self) -> np.ndarray:
         """Sorted ids of the vertices on the surface (all of them for a surface mesh), int32."""
-        return np.unique(self.triangles).astype(np.int32)
+        return topo.used_vertices(self.triangles, self.vertex_count).astype(np.int32)
 
     @cached_property
     def surface_tree(self):

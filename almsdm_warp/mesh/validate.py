@@ -67,7 +67,7 @@ def repair_arrays(vertices, triangles=None, tetrahedra=None, *, scale: float = 1
         raise InputError(f"{where}: vertex {i} has a non-finite coordinate {_fmt_xyz(v[i])}")
     _check_range(tri, n, where)
     _check_range(tet, n, where)
-    _check_extent(v, np.unique(tet if len(tet) else tri), scale, where)
+    _check_extent(v, topo.used_vertices(tet if len(tet) else tri, n), scale, where)
 
     volume = len(tet) > 0
     if volume and len(tri):
@@ -76,7 +76,7 @@ def repair_arrays(vertices, triangles=None, tetrahedra=None, *, scale: float = 1
     elements = tet if volume else tri
     ids = np.arange(len(elements))  # input element numbers, carried through the filters
 
-    used = np.unique(elements)
+    used = topo.used_vertices(elements, n)
     lo, hi = v[used].min(axis=0), v[used].max(axis=0)
     diag = float(np.linalg.norm(hi - lo))
 
@@ -94,8 +94,10 @@ def repair_arrays(vertices, triangles=None, tetrahedra=None, *, scale: float = 1
         surface = elements
 
     # keep the referenced vertices, in input order; `keep` maps new index -> input index
-    keep = np.unique(elements)
-    unreferenced = np.setdiff1d(np.flatnonzero(remap == np.arange(n)), keep)
+    keep = topo.used_vertices(elements, n)
+    referenced = np.zeros(n, dtype=bool)
+    referenced[keep] = True
+    unreferenced = np.flatnonzero((remap == np.arange(n)) & ~referenced)  # neither merged into another nor used
     if len(unreferenced):
         notes.append(
             f"dropped {len(unreferenced)} unreferenced {_plural(len(unreferenced), 'vertex', 'vertices')}"

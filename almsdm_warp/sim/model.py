@@ -13,6 +13,7 @@ import warp as wp
 
 from ..kernels.arrays import ProbeArrays, ProbeSphereArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
+from ..mesh.topology import corner_cross
 from ..tissue.laws import law_entry, resolve_law
 from ..tissue.material import Material, damping, springs_for_mesh
 from ..tissue.params import TissueParams
@@ -32,11 +33,11 @@ reactions (kernels/probes/sphere.py)."""
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Area-weighted outward vertex normals of a surface (unit length; zero where no face), host."""
     v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    face_n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])  # |n| = 2 x area
-    n = np.zeros_like(v)
-    for c in range(3):
-        np.add.at(n, t[:, c], face_n)
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    face_n = np.stack(corner_cross(v, t)[0], axis=1) if len(t) else np.zeros((0, 3))  # |n| = 2 x area
+    # each vertex's faces summed as np.add.at over corners 0, 1, 2 in turn sums them (bincount adds in input order)
+    corners = t.T.reshape(-1)
+    n = np.stack([np.bincount(corners, np.tile(face_n[:, k], 3), minlength=len(v)) for k in range(3)], axis=1)
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
