@@ -156,6 +156,8 @@ def test_the_critical_step_is_the_same_on_every_call_and_the_dense_answer(stomac
     import subprocess
     import sys
 
+    import scipy.linalg
+
     from almsdm_warp.tissue import laws
 
     scene, mesh = stomach
@@ -171,9 +173,9 @@ def test_the_critical_step_is_the_same_on_every_call_and_the_dense_answer(stomac
     K, C = laws.springs_matrices(model)
     w = np.repeat(1.0 / np.sqrt(model.particle_mass_host), 3)
     Kd, Cd = w[:, None] * K.toarray() * w[None, :], w[:, None] * C.toarray() * w[None, :]
-    lam, vec = np.linalg.eigh(Kd)
-    g = vec[:, -1] @ Cd @ vec[:, -1]
-    dense = (-g + np.sqrt(g * g + 4.0 * lam[-1])) / lam[-1]
+    lam, vec = scipy.linalg.eigh(Kd, subset_by_index=[len(Kd) - 1, len(Kd) - 1])
+    g = vec[:, 0] @ Cd @ vec[:, 0]
+    dense = (-g + np.sqrt(g * g + 4.0 * lam[0])) / lam[0]
     assert model.critical_dt() == pytest.approx(dense, rel=1e-6)
 
 
