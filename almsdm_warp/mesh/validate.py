@@ -95,9 +95,7 @@ def repair_arrays(vertices, triangles=None, tetrahedra=None, *, scale: float = 1
 
     # keep the referenced vertices, in input order; `keep` maps new index -> input index
     keep = topo.used_vertices(elements, n)
-    referenced = np.zeros(n, dtype=bool)
-    referenced[keep] = True
-    unreferenced = np.flatnonzero((remap == np.arange(n)) & ~referenced)  # neither merged into another nor used
+    unreferenced = _unreferenced(remap, keep)
     if len(unreferenced):
         notes.append(
             f"dropped {len(unreferenced)} unreferenced {_plural(len(unreferenced), 'vertex', 'vertices')}"
@@ -123,6 +121,14 @@ def repair_arrays(vertices, triangles=None, tetrahedra=None, *, scale: float = 1
         notes=tuple(notes),
     )
     return fields, keep, where
+
+
+def _unreferenced(remap: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The vertices neither merged into another (remap: each vertex's representative) nor used (`keep`),
+    sorted: np.setdiff1d's answer, by a mask."""
+    referenced = np.zeros(len(remap), dtype=bool)
+    referenced[keep] = True
+    return np.flatnonzero((remap == np.arange(len(remap))) & ~referenced)
 
 
 # -- input checks ---------------------------------------------------------------------------------

@@ -28,6 +28,23 @@ BUILD_CSR_OVERFLOW = 2
 
 
 @wp.func
+def search_sorted(region_vertex: wp.array2d(dtype=wp.int32), b: int, begin: int, end: int, u: int):
+    # the index of mesh vertex u in palpation b's region_vertex[b, begin:end] (sorted by vertex id), else -1
+    lo = begin
+    hi = end
+    while lo < hi:
+        mid = lo + (hi - lo) // 2
+        w = region_vertex[b, mid]
+        if w < u:
+            lo = mid + 1
+        elif w > u:
+            hi = mid
+        else:
+            return mid
+    return -1
+
+
+@wp.func
 def find_local(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.array2d(dtype=wp.int32), b: int, sorted_rings: int,
                count: int, u: int):
     # local index of mesh vertex u in palpation b's region, -1 when not (yet) inside: a binary search of
@@ -36,17 +53,9 @@ def find_local(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.array
     # search of the whole (each vertex is in the region once), in log time for a large region's rings:
     # a fine mesh under a sphere has regions of thousands of vertices (0.27 mm edges: 16 of ~10,000 took 23 s)
     for r in range(sorted_rings):
-        lo = ring_offsets[b, r]
-        hi = ring_offsets[b, r + 1]
-        while lo < hi:
-            mid = lo + (hi - lo) // 2
-            w = region_vertex[b, mid]
-            if w < u:
-                lo = mid + 1
-            elif w > u:
-                hi = mid
-            else:
-                return mid
+        i = search_sorted(region_vertex, b, ring_offsets[b, r], ring_offsets[b, r + 1], u)
+        if i >= 0:
+            return i
     for i in range(ring_offsets[b, sorted_rings], count):
         if region_vertex[b, i] == u:
             return i
@@ -96,17 +105,9 @@ def find_in_runs(region_vertex: wp.array2d(dtype=wp.int32), b: int, ends: RunEnd
     # local index of mesh vertex u in palpation b's built region, -1 when not inside: a binary search of
     # each of its sorted runs (sorted_runs), or with none given (runs 0) a linear search of all `count`
     for r in range(runs):
-        lo = ends[r]
-        hi = ends[r + 1]
-        while lo < hi:
-            mid = lo + (hi - lo) // 2
-            w = region_vertex[b, mid]
-            if w < u:
-                lo = mid + 1
-            elif w > u:
-                hi = mid
-            else:
-                return mid
+        i = search_sorted(region_vertex, b, ends[r], ends[r + 1], u)
+        if i >= 0:
+            return i
     if runs == 0:
         for i in range(count):
             if region_vertex[b, i] == u:
