@@ -50,6 +50,16 @@ def init_warp(quiet: bool | None = None) -> None:
 _device_start = []  # the threads of start_devices, while they run
 
 
+def device_names(spec: str | None) -> list[str]:
+    """The names in a --device value (cpu, cuda:N, a comma list, or all), stripped."""
+    return [n.strip() for n in (spec or "").split(",") if n.strip()]
+
+
+def names_a_gpu(spec: str | None) -> bool:
+    """Whether a --device value names a CUDA device (cuda:N or all)."""
+    return any(n == "all" or n.startswith("cuda") for n in device_names(spec))
+
+
 def start_devices(spec: str | None) -> None:
     """Start the CUDA contexts that `spec` (a --device value: cpu, cuda:N, a comma list, or all) names
     on threads of their own, one a device: a context takes 0.12-0.15 s on an H200 the first time, which
@@ -59,8 +69,8 @@ def start_devices(spec: str | None) -> None:
     is wrong with it."""
     import threading
 
-    names = [n.strip() for n in (spec or "").split(",") if n.strip()]
-    if not any(n == "all" or n.startswith("cuda") for n in names):
+    names = device_names(spec)
+    if not names_a_gpu(spec):
         return
     init_warp()
     import warp as wp

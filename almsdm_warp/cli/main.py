@@ -175,10 +175,9 @@ def _start_imports(names, device) -> None:
     scipy.sparse.linalg, 0.4-0.7 s each on an H200 host) overlaps Warp's native start (its libraries and
     the CUDA driver), and whoever imports them later waits only for what is left. Not for the CPU, where
     on two cores it made a sweep no shorter (six alternations each way)."""
-    if names and any(n.strip() == "all" or n.strip().startswith("cuda") for n in str(device or "").split(",")):
-        import importlib
-        import threading
+    from ..warp_init import names_a_gpu
 
+    if names and names_a_gpu(device):
         def imports():
             for name in names:
                 try:
