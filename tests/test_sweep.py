@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from almsdm_warp.batch.sampling import Sampling, area_uniform_points, pressable_points, sample_points
+from almsdm_warp.batch.sampling import Sampling, area_uniform_points, farthest_points, pressable_points, sample_points
 from almsdm_warp.batch.sweep import SweepDevice, run_local
 from almsdm_warp.batch.sweep_lanes import Lane, RingBatches, press_chunk
 from almsdm_warp.batch.sweep_plan import COLUMNS, SWEEP_TABLE, SweepPlan, default_chunk, default_tail, sweep_critical_dt
@@ -33,6 +33,33 @@ def test_points_spread_evenly_over_the_vertices(stomach):
     covering = tree.query(stomach.vertices[stomach.surface_vertices])[0].max()
     separation = tree.query(points, k=2)[0][:, 1].min()
     assert covering <= separation + 1e-12
+
+
+def brute_farthest_points(p, n, start):
+    # farthest-point sampling as written in the textbook: every point's distance to the chosen set
+    # updated after each choice
+    d = p - p[start]
+    chosen, d2 = [start], np.einsum("ij,ij->i", d, d)
+    for _ in range(1, n):
+        chosen.append(k := int(np.argmax(d2)))
+        d = p - p[k]
+        d2 = np.minimum(d2, np.einsum("ij,ij->i", d, d))
+    return np.array(chosen)
+
+
+@pytest.mark.parametrize("tree", [True, False])
+def test_farthest_points_as_every_point_updated_each_time(stomach, monkeypatch, tree):
+    # the k-d tree's balls (only the points a choice can bring nearer) choose the same points, in the
+    # same order, as updating every point: on a dense area sample of the stomach, on clusters with
+    # exact duplicates and equal distances (a grid), and asking for every point
+    monkeypatch.setattr("almsdm_warp.batch.sampling.TREE_WORK", 0 if tree else 10**18)
+    rng = np.random.default_rng(3)
+    dense = area_uniform_points(stomach.vertices, stomach.triangles, 3000, 0)
+    grid = np.stack(np.meshgrid(*[np.arange(6.0)] * 3, indexing="ij"), axis=-1).reshape(-1, 3) * 1e-3
+    clusters = np.concatenate([rng.normal(c, 1e-3, (150, 3)) for c in rng.uniform(-0.05, 0.05, (4, 3))])
+    clusters = np.concatenate([clusters, clusters[:40]])
+    for p, n in ((dense, 1000), (grid, len(grid)), (clusters, len(clusters))):
+        np.testing.assert_array_equal(farthest_points(p, n, 7), brute_farthest_points(p, n, 7))
 
 
 def test_more_points_than_vertices_snap_to_the_nearest(stomach):

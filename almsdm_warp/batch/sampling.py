@@ -15,22 +15,38 @@ from ..errors import InputError
 
 FPS_MAX = 20000
 """Beyond this many points (and the mesh's vertices), points are area-uniform random, not farthest-point."""
+TREE_WORK = 1_000_000
+"""farthest_points updates only the points near each chosen one (a k-d tree) where n x points exceeds this."""
 
 
 def farthest_points(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
-    """Indices of `n` of `points` chosen greedily, each farthest from those already chosen."""
+    """Indices of `n` of `points` chosen greedily, each farthest from those already chosen (the first
+    of equals: np.argmax).
+
+    Each point's squared distance to the chosen set, d2, only falls, and choosing k (d2[k] = D, the
+    largest) lowers it only for the points nearer to k than their own d2 <= D: those in the ball of
+    radius sqrt(D) around k, found in a k-d tree and updated alone (the same arithmetic a point, so
+    the same bits as updating every point: tests/test_sweep.py). As the chosen points fill the
+    surface the balls shrink: 10,000 of 30,000 points in 0.8 s, against 6.7 s for the whole array
+    each time (docs/performance.md, "Datasets")."""
     p = np.asarray(points, dtype=np.float64)
     n = min(int(n), len(p))
     chosen = np.empty(n, dtype=np.int64)
     chosen[0] = start
     diff = p - p[start]
     d2 = np.einsum("ij,ij->i", diff, diff)
-    tmp = np.empty_like(d2)
-    for i in range(1, n):  # buffers reused: no allocation per point
+    tree = None
+    if n * len(p) > TREE_WORK:
+        from scipy.spatial import cKDTree
+
+        tree = cKDTree(p)
+    near = slice(None)  # few points: every point each time (no tree to build, nor scipy.spatial to import)
+    for i in range(1, n):
         chosen[i] = k = int(np.argmax(d2))
-        np.subtract(p, p[k], out=diff)
-        np.einsum("ij,ij->i", diff, diff, out=tmp)
-        np.minimum(d2, tmp, out=d2)
+        if tree is not None:  # a margin over sqrt(D) for the tree's rounding (a point too many changes nothing)
+            near = np.asarray(tree.query_ball_point(p[k], np.sqrt(d2[k]) * (1.0 + 1e-9), return_sorted=False), dtype=np.int64)
+        diff = p[near] - p[k]
+        d2[near] = np.minimum(d2[near], np.einsum("ij,ij->i", diff, diff))
     return chosen
 
 
