@@ -1,11 +1,13 @@
 """One palpation's CPU step with each tissue law on the same region, interleaved in one process.
 
     python scripts/bench_laws.py [--rings 3] [--blocks 15] [--steps 1000] [--scene liver]
+    python scripts/bench_laws.py --scene liver --integrator implicit --dt-ms 1   # the liver scene's own step
     valgrind --tool=callgrind --instr-atstart=no --callgrind-out-file=/tmp/cg.out python scripts/bench_laws.py --callgrind
         # instructions a step of each law (repeatable on a loaded host)
 
 A 25 mm tet ball of 3 mm edges (mesh.primitives.tet_ball), E 10 kPa, nu 0.45, the top vertex held
-1 mm in, dt 0.1 ms in one substep (under both laws' critical steps); --scene: a shipped scene's mesh,
+1 mm in, dt 0.1 ms in one substep (under both laws' critical steps; --integrator implicit, --dt-ms:
+backward Euler and its frame, as the shipped liver scene steps); --scene: a shipped scene's mesh,
 material, support and ring count instead (its top vertex held 1 mm in); blocks of `steps`
 `Palpation.step()` calls alternate between the laws. Prints each law's median and best
 microseconds a step and their ratio. A benchmark, not a test.
@@ -24,6 +26,8 @@ def main(argv=None):
     ap.add_argument("--blocks", type=int, default=15)
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--scene", default=None, help="a shipped scene (liver) in place of the tet ball")
+    ap.add_argument("--integrator", default="explicit", choices=("explicit", "implicit"))
+    ap.add_argument("--dt-ms", type=float, default=0.1, help="the step [ms] (default 0.1: one explicit substep)")
     ap.add_argument("--callgrind", action="store_true", help="run under valgrind's callgrind: instrument one block of each law, print instructions a step")
     args = ap.parse_args(argv)
     from almsdm_warp.warp_init import init_warp
@@ -45,7 +49,8 @@ def main(argv=None):
     top = int(np.argmax(mesh.vertices[:, 2]))
     pals = {}
     for law in LAWS:
-        p = Palpation(mesh, material, rings=args.rings, law=law, dt=1e-4, device="cpu", substeps=1, fixed_below=fixed_below)
+        p = Palpation(mesh, material, rings=args.rings, law=law, dt=args.dt_ms * 1e-3, device="cpu", substeps=1,
+                      integrator=args.integrator, fixed_below=fixed_below)
         p.touch(top)
         p.set_probe(1, p.rest_position() + p.inward_normal() * 0.001)
         for _ in range(300):

@@ -151,6 +151,25 @@ def test_rest_and_rigid_motions_are_force_free(device, law):
         assert np.abs(forces_at(model, x)).max() < 1e-4
 
 
+def test_each_tet_corner_knows_its_place_in_the_vertexs_row():
+    # TetEntry.slots (where implicit_row adds a corner's block) against a search of the vertex's
+    # adjacency row: each other corner of each entry, on a tet ball; the vertex's own corner -1
+    mesh = tet_ball(10.0, 3.0)
+    model = Model(mesh, MATERIAL, "cpu", law="neo-hookean")
+    offsets, neighbour, _ = mesh.adjacency
+    entry_offsets, topology = model.entry_offsets.numpy(), model.entry_topology.numpy()
+    slots = model.entry_params.numpy()["slots"]
+    checked = 0
+    for a in range(mesh.vertex_count):
+        row = list(neighbour[offsets[a]:offsets[a + 1]])
+        for k in range(entry_offsets[a], entry_offsets[a + 1]):
+            assert topology[k][1] == a and slots[k][1] == -1
+            for c in (0, 2, 3):
+                assert slots[k][c] == row.index(topology[k][c])
+                checked += 1
+    assert checked == 3 * len(topology) > 1000
+
+
 def anp_stiffness(x, tets, young, poisson):
     """Linear elasticity of Lame parameters (mu, lambda) with the volumetric term on nodal volume
     changes: fem.py's P1 stiffness of (mu, 0) (E = 2 mu, nu = 0) plus sum_a S_a/4 lambda (div_a u)^2,

@@ -259,9 +259,29 @@ def tet_entries(model):
     params["mu_v6"] = m0 / (6.0 * v0)
     owner = corner_vertex[order]
     params["nodal"] = np.stack([1.0 / (6.0 * rest[owner]), kappa[owner]], axis=1)
+    params["slots"] = _row_slots(model.mesh.adjacency, owner, topology)
     d = model.device
     return (wp.array(offsets, dtype=wp.int32, device=d), wp.array(topology.astype(np.int32), dtype=wp.vec4i, device=d),
             wp.array(params, dtype=TetEntry, device=d))
+
+
+def _row_slots(adjacency, owner: np.ndarray, topology: np.ndarray) -> np.ndarray:
+    """[entries, 4] int32: each entry's corners' places in its vertex's adjacency row (TetEntry.slots),
+    -1 at the vertex's own corner (1); every other corner shares an edge of the tet with it."""
+    offsets, neighbour = (np.asarray(a, dtype=np.int64) for a in adjacency[:2])
+    n = len(offsets) - 1
+    row = np.repeat(np.arange(n, dtype=np.int64), np.diff(offsets))
+    keys = row * n + neighbour  # sorted: rows in order, each row's neighbours sorted by id
+    owner = np.asarray(owner, dtype=np.int64)
+    wanted = owner[:, None] * n + topology.astype(np.int64)
+    at = np.minimum(np.searchsorted(keys, wanted), len(keys) - 1)
+    found = keys[at] == wanted
+    found[:, 1] = True
+    if not found.all():
+        raise ValueError("a tet's corners do not all share an edge of the mesh: its edges must include the tets'")
+    slots = (at - offsets[owner][:, None]).astype(np.int32)
+    slots[:, 1] = -1
+    return slots
 
 
 def _tet_gradients(model, vertices=None):

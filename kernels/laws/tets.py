@@ -44,6 +44,10 @@ class TetEntry:
     nodal: wp.vec2
     """The vertex's nodal weights, the same in each of its entries: (1 / (6 S_a), kappa_a), S_a = sum V_t
     over its tets, kappa_a = sum V_t lambda_0 / S_a [Pa] (`nodal_pressure`)."""
+    slots: wp.vec4i
+    """Where each corner's block goes in the vertex's row of the implicit system: corner c's place in the
+    vertex's CSR adjacency row (its neighbours sorted by id; the vertex's own corner -1), so that
+    implicit_row adds each block into its entry without searching the row."""
 
 
 VOLUMETRIC = True
@@ -196,9 +200,8 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float, entry_force: A
                 if c == p.corner:
                     D += dt * dt * K
                 else:
-                    for e in range(row_begin, row_end):
-                        if row_neighbour[e] == vc:
-                            csr_block[e + out_shift] = csr_block[e + out_shift] - dt * dt * K
+                    e = row_begin + p.slots[c] + out_shift  # vc's entry in the row (TetEntry.slots)
+                    csr_block[e] = csr_block[e] - dt * dt * K
                     if vc == driven:
                         correction -= dt * dt * K * dv_driven
         return f, D, Kv, correction
