@@ -53,6 +53,7 @@ def test_farthest_points_as_every_point_updated_each_time(stomach, monkeypatch, 
     # same order, as updating every point: on a dense area sample of the stomach, on clusters with
     # exact duplicates and equal distances (a grid), and asking for every point
     monkeypatch.setattr("almsdm_warp.batch.sampling.TREE_WORK", 0 if tree else 10**18)
+    monkeypatch.setattr("almsdm_warp.batch.sampling.TREE_MIN", 0)
     rng = np.random.default_rng(3)
     dense = area_uniform_points(stomach.vertices, stomach.triangles, 3000, 0)
     grid = np.stack(np.meshgrid(*[np.arange(6.0)] * 3, indexing="ij"), axis=-1).reshape(-1, 3) * 1e-3
