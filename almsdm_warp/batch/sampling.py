@@ -31,7 +31,7 @@ def farthest_points(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
     radius sqrt(D) around k, found in a k-d tree and updated alone (the same arithmetic a point, so
     the same bits as updating every point: tests/test_sweep.py). As the chosen points fill the
     surface the balls shrink: 10,000 of 30,000 points in 0.8 s, against 6.7 s for the whole array
-    each time; 2,000 of 501,762 in 2.3 s against 26 s (docs/performance.md, "Datasets")."""
+    each time; 2,000 of 501,762 in 2.6 s against 25 s (docs/performance.md, "Datasets")."""
     p = np.asarray(points, dtype=np.float64)
     n = min(int(n), len(p))
     chosen = np.empty(n, dtype=np.int64)
