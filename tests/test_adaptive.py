@@ -202,6 +202,34 @@ def test_retired_at_rest_and_rebuilt_by_the_next_press(device, integrator):
     assert 0 < moved <= 0.1
 
 
+def test_a_region_that_grows_plans_its_substeps_and_is_not_pressed_again(device, tmp_path, capsys):
+    """A frame between 0.9 of the first region's critical step and 0.9 of the grown region's: the press
+    starts at one substep, the grown region plans two for itself (it held: diverged_at is empty), and
+    the command line says nothing of a divergence (it used to read any rise as one)."""
+    scene, mesh = scene_and_mesh()
+    probe = AdaptivePalpation(mesh, scene.tissue, tol=5e-5, dt=1e-3, device=device)
+    probe.touch(top_vertex(mesh))
+    first = probe.region_critical_dt()
+    probe.press(0.01, ramp=0.1, hold=0.1, settle=0.2)
+    grown = Palpation(mesh, scene.tissue, rings=probe.press_log[0]["rings"], dt=1e-3, device=device)
+    grown.touch(top_vertex(mesh))
+    dt = 0.9 * math.sqrt(first * grown.region_critical_dt())
+    assert 0.9 * grown.region_critical_dt() < dt < 0.9 * first
+    p = AdaptivePalpation(mesh, scene.tissue, tol=5e-5, dt=dt, device=device)
+    p.touch(top_vertex(mesh))
+    assert p.substeps == 1
+    result = p.press(0.01, ramp=0.1, hold=0.1, settle=0.2)
+    assert result.substeps == 2 and result.diverged_at == ()
+    if device == "cpu":
+        out = tmp_path / "auto.json"
+        capsys.readouterr()
+        assert main(["paper_stomach", "--rings", "auto", "--tol-mm", "0.05", "--dt-ms", f"{dt * 1e3!r}", "--ramp-s", "0.1",
+                     "--hold-s", "0.1", "--settle-s", "0.2", "--json", str(out)]) == 0
+        (press,) = json.loads(out.read_text())["presses"]
+        assert press["substeps"] == 2 and press["pressed_again"] == 0
+        assert "diverged" not in capsys.readouterr().out
+
+
 def test_no_retirement_while_pressed_or_when_disabled(device):
     scene, mesh = scene_and_mesh()
     p = AdaptivePalpation(mesh, scene.tissue, tol=1e-4, integrator="implicit", dt=5e-3, device=device, retire=False)

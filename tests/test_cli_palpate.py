@@ -63,10 +63,11 @@ def test_json_keys_and_types(tmp_path_factory):
     assert isinstance(contact["vertex"], int) and len(contact["point_mm"]) == 3
     assert data["press"] == {"depth_mm": pytest.approx(10.0), "ramp_s": 0.1, "hold_s": 0.2, "settle_s": 0.3}
     (press,) = data["presses"]
-    assert set(press) == {"peak_force_N", "hold_force_N", "inverted_tets", "recovery_error_mm", "recovery_time_s", "substeps", "ring_gap_mm"}
+    assert set(press) == {"peak_force_N", "hold_force_N", "inverted_tets", "recovery_error_mm", "recovery_time_s", "substeps",
+                          "pressed_again", "ring_gap_mm"}
     assert press["inverted_tets"] is None  # a surface mesh: no tets to count
-    assert press["substeps"] == data["model"]["substeps"]  # not pressed again
-    assert all(isinstance(v, float) for k, v in press.items() if k not in ("inverted_tets", "substeps", "ring_gap_mm"))
+    assert press["substeps"] == data["model"]["substeps"] and press["pressed_again"] == 0  # not pressed again
+    assert all(isinstance(v, float) for k, v in press.items() if k not in ("inverted_tets", "substeps", "pressed_again", "ring_gap_mm"))
     assert 0 < press["hold_force_N"] <= press["peak_force_N"] and model["law"] == "springs" and data["tissue"]["law"] == "springs"
     assert isinstance(data["step_us_median"], float) and data["step_us_median"] > 0
     assert data["steps_per_s"] == pytest.approx(1e6 / data["step_us_median"])

@@ -195,6 +195,7 @@ def test_a_multi_press_that_diverged_is_pressed_again_from_where_it_began(device
         runs.append((multi, multi.press(**press)))
     (bold, got), (_, want) = runs
     assert [r.substeps for r in got] == [2, 2] == [r.substeps for r in want] and bold.substeps == 2
+    assert [r.diverged_at for r in got] == [(1,), (1,)] and [r.diverged_at for r in want] == [(), ()]
     for g, w in zip(got, want):
         np.testing.assert_array_equal(g.force, w.force)
         np.testing.assert_array_equal(g.displacement, w.displacement)

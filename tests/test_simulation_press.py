@@ -458,7 +458,7 @@ def test_a_press_that_diverged_is_pressed_again_from_where_it_began(device):
     fixed = made(dt=dt, substeps=2)
     fixed.touch(top)
     want = fixed.press(**press)
-    assert got.substeps == 2 and bold.substeps == 2
+    assert got.substeps == 2 and bold.substeps == 2 and got.diverged_at == (1,) and want.diverged_at == ()
     np.testing.assert_array_equal(got.force, want.force)
     assert got.peak_force_N == want.peak_force_N and got.recovery_error_mm == want.recovery_error_mm
     once = made(dt=dt, substeps=1)

@@ -290,7 +290,6 @@ def _press(args, run: _Run, pal) -> list:
         try:
             for i in range(args.presses):
                 bar.label = f"press {i + 1}/{args.presses}"
-                planned = pal.substeps
                 try:
                     result = pal.press(run.depth, ramp, hold, settle, **recording.press_kwargs())
                 except (SimulationDiverged, ValueError) as exc:  # user-chosen parameters: one line, exit 2
@@ -305,9 +304,11 @@ def _press(args, run: _Run, pal) -> list:
                     f"press {i + 1}: peak force {result.peak_force_N:.3f} N, hold force {result.hold_force_N:.3f} N, "
                     f"recovery error {result.recovery_error_mm:.3f} mm, recovery time {rt_text}{auto}"
                 )
-                if result.substeps is not None and result.substeps > planned:
-                    print(f"note: press {i + 1} diverged at {planned} substep(s) of {run.dt / planned * 1e3:.3g} ms (planned at "
-                          f"0.9 of the critical step at rest) and was pressed again at {result.substeps}: these are its numbers")
+                if result.diverged_at:  # (an adaptive region that grew planned more substeps for itself: no note)
+                    n = result.diverged_at[0]
+                    then = "".join(f", then at {m}" for m in result.diverged_at[1:])
+                    print(f"note: press {i + 1} diverged at {n} substep(s) of {run.dt / n * 1e3:.3g} ms (planned at "
+                          f"0.9 of the critical step at rest){then} and was pressed again at {result.substeps}: these are its numbers")
                 for line in press_warnings(result, run.mesh.tet_count, run.probe_radius):
                     print(f"warning: press {i + 1}: {line}", file=sys.stderr)
         finally:
@@ -365,6 +366,7 @@ def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:
                 "hold_force_N": finite(r.hold_force_N),
                 "inverted_tets": r.inverted_tets,
                 "substeps": r.substeps,
+                "pressed_again": len(r.diverged_at),
                 "ring_gap_mm": None if r.ring_gap is None else finite(r.ring_gap * 1e3),
                 "recovery_error_mm": finite(r.recovery_error_mm),
                 "recovery_time_s": finite(r.recovery_time_s),

@@ -368,12 +368,17 @@ class MultiPalpation:
         class's docstring)."""
         check_press(depth=depth, ramp=ramp, hold=hold, settle=settle)
         start = snapshot_states(self.states, self._cur) if self._steps == 0 and may_press_again(REPRESSES, self.integrator, self.substeps) else None
+        diverged_at = []
         for left in range(REPRESSES, -1, -1):
             try:
-                return self._press(depth, ramp, hold, settle)
+                results = self._press(depth, ramp, hold, settle)
+                for r in results:
+                    r.diverged_at = tuple(diverged_at)
+                return results
             except SimulationDiverged:
                 if start is None or not may_press_again(left, self.integrator, self.substeps):
                     raise
+                diverged_at.append(int(self.substeps))
                 floor = 2 * self.substeps
                 self.touch(self.vertices)  # the patches a fresh touch makes, as the press began with them
                 self._cur = restore_states(self.states, start)

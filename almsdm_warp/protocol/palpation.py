@@ -98,8 +98,12 @@ class PressResult:
     """Tets inverted (det F <= 0) at the end of the hold, the deepest frame (mesh.topology.inverted_tets);
     None on a surface mesh or where nothing was counted."""
     substeps: int | None = None
-    """The integrator's steps a frame this press took: the plan's, or more where the press diverged at the
-    plan and was pressed again (REPRESSES); None where not counted."""
+    """The integrator's steps a frame at the press's end: the plan's (an adaptive region that grew during
+    the press planned again for it), or more where the press diverged at the plan and was pressed again
+    (REPRESSES); None where not counted."""
+    diverged_at: tuple = ()
+    """The substeps a frame of each attempt that diverged and was pressed again (REPRESSES), in order;
+    () where the press held as it began."""
     ring_gap: float | None = None
     """The sphere's least distance [m] at full depth from a vertex of the region's fixed outer ring
     (negative: it reaches into the ring, which it cannot move); None for the paper's probe or the global model."""
@@ -520,12 +524,16 @@ class Palpation:
         if self.probe_radius > 0 and self.region is not None and self.patch_depth != depth:
             self.touch(self.vertex, depth)  # the patch the sphere covers at this depth, before the snapshot
         start = snapshot_states(self.states, self._cur) if self._may_press_again(REPRESSES) else None
+        diverged_at = []
         for left in range(REPRESSES, -1, -1):
             try:
-                return self._press(depth, ramp, hold, settle, check_every, record, record_every)
+                result = self._press(depth, ramp, hold, settle, check_every, record, record_every)
+                result.diverged_at = tuple(diverged_at)
+                return result
             except SimulationDiverged:
                 if start is None or not self._may_press_again(left):
                     raise
+                diverged_at.append(int(self.substeps))
                 self._cur = restore_states(self.states, start)
                 self._substeps_floor = 2 * self.substeps
                 self.plan_substeps()
