@@ -247,7 +247,6 @@ def test_batch_tets_with_supports_as_a_brute_force_search(device):
 
 
 def test_batch_fast_kernel_same_bits_with_fewer_threads_than_free_vertices(stomach):
-
     # with 32 threads the free vertices beyond the block's threads take the shared-memory path
     # instead of registers: where the step's data lives changes, not its arithmetic or order
     ref = BatchPalpation(stomach, rings=4, device="cpu", kernel="fast").touch(SEEDS).press(**SHORT)

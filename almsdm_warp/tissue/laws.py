@@ -273,14 +273,13 @@ def _row_slots(adjacency, owner: np.ndarray, topology: np.ndarray) -> np.ndarray
     row = np.repeat(np.arange(n, dtype=np.int64), np.diff(offsets))
     keys = row * n + neighbour  # sorted: rows in order, each row's neighbours sorted by id
     owner = np.asarray(owner, dtype=np.int64)
-    wanted = owner[:, None] * n + topology.astype(np.int64)
+    others = [0, 2, 3]  # corner 1 is the vertex itself
+    wanted = owner[:, None] * n + topology[:, others].astype(np.int64)
     at = np.minimum(np.searchsorted(keys, wanted), len(keys) - 1)
-    found = keys[at] == wanted
-    found[:, 1] = True
-    if not found.all():
+    if not np.array_equal(keys[at], wanted):
         raise ValueError("a tet's corners do not all share an edge of the mesh: its edges must include the tets'")
-    slots = (at - offsets[owner][:, None]).astype(np.int32)
-    slots[:, 1] = -1
+    slots = np.full((len(owner), 4), -1, dtype=np.int32)
+    slots[:, others] = at - offsets[owner][:, None]
     return slots
 
 
