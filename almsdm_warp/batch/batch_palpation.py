@@ -82,19 +82,22 @@ class DeviceBuffers:
         return held
 
     def upload(self, name: str, values: np.ndarray, dtype) -> wp.array:
-        """`values` as a device array under `name` (as array()), copied on the current stream (no wait on CUDA)."""
+        """`values` as a device array of their shape under `name` (as array(); a vector dtype takes the last
+        axis), copied on the current stream (no wait on CUDA)."""
         values = np.ascontiguousarray(values)
         if self.device.is_cpu:
             return wp.array(values, dtype=dtype, device=self.device)
-        out = self.array(name, len(values), dtype, zero=False)
+        out = self.array(name, values.shape[:values.ndim - len(getattr(dtype, "_shape_", ()))], dtype, zero=False)
+        size = out.size
         pinned, event = self._staging.get(name, (None, None))
-        if pinned is None or len(pinned) < len(values) or pinned.dtype != dtype:
-            pinned, event = wp.empty(max(len(values), 1), dtype=dtype, device="cpu", pinned=True), None
+        if pinned is None or len(pinned) < size or pinned.dtype != dtype:
+            pinned, event = wp.empty(max(size, 1), dtype=dtype, device="cpu", pinned=True), None
         if event is not None:
             wp.synchronize_event(event)  # the last copy from this buffer has run
-        view = pinned[: len(values)]
+        view = pinned[:size]
         view.numpy()[...] = values.reshape(view.numpy().shape)
-        wp.copy(out, view)
+        if size:
+            wp.copy(out, view, count=size)  # both contiguous: element for element
         self._staging[name] = (pinned, self.device.stream.record_event())
         return out
 
@@ -534,17 +537,17 @@ class BatchPalpation:
             self.elements.shift = a("element_shift", (1, 1), wp.int32)
             self.elements.pressure = a("element_pressure", (1, 1), wp.float32)
             return
-        offsets = self.model.entry_offsets.numpy()
+        offsets = self._entry_offsets()
         member = np.arange(self.regions.vertex_capacity)[None, :] < self.region_vertex_counts[:, None]
         rv = np.where(member, host_copy(self.regions.region_vertex), 0)
         first = np.where(member, offsets[rv], 0)
         degree = np.where(member, offsets[rv + 1] - offsets[rv], 0)
         local = np.concatenate([np.zeros((B, 1), dtype=np.int64), np.cumsum(degree, axis=1)], axis=1)
-        self.element_offsets = a("element_offsets", (B, rv.shape[1] + 1), wp.int32, zero=False)
+        self.element_offsets = self.buffers.upload("element_offsets", local.astype(np.int32), wp.int32)
         """Each palpation's region vertices' tets (CSR, local entries), [B, vertex capacity + 1]."""
         self.element_topology = a("element_topology", (B, _pow2(int(local[:, -1].max(initial=1)), 16)), wp.vec4i, zero=False)
         """Each local entry's tet, its corners as local indices, [B, entry capacity]."""
-        self.element_shift = wp.array((first - local[:, :-1]).astype(np.int32), dtype=wp.int32, device=self.device)
+        self.element_shift = self.buffers.upload("element_shift", (first - local[:, :-1]).astype(np.int32), wp.int32)
         """Per region vertex: its mesh entries' first index less its local entries' (the law's parameters are the mesh's)."""
         self.element_pressure = a("element_pressure", (B, rv.shape[1]), wp.float32)
         """Each region vertex's nodal pressure [Pa] (the implicit batch's; the explicit one keeps its own working array)."""
@@ -552,6 +555,12 @@ class BatchPalpation:
         self.elements = struct_from(BatchElements, self, offsets=self.element_offsets, topology=self.element_topology,
                                     shift=self.element_shift, pressure=self.element_pressure)
         """The four above as one kernel argument (kernels/arrays.py)."""
+
+    def _entry_offsets(self) -> np.ndarray:
+        # the model's entry offsets on the host, read once (array.numpy() would wait for every stream of the device)
+        if "_entry_offsets_host" not in self.__dict__:
+            self._entry_offsets_host = host_copy(self.model.entry_offsets)
+        return self._entry_offsets_host
 
     def _allocate_states(self) -> None:
         B, cv, a = self.batch_size, self.regions.vertex_capacity, self.buffers.array

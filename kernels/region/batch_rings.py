@@ -246,40 +246,73 @@ def corner_local(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.arr
 
 
 @wp.kernel
+def batch_region_runs(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.array2d(dtype=wp.int32),
+                      region_count: wp.array(dtype=wp.int32), sorted_rings: wp.array(dtype=wp.int32), run_ends: wp.array(dtype=RunEnds),
+                      runs: wp.array(dtype=wp.int32)):
+    # how palpation b's built region is searched (find_built): its sorted rings (rings_sorted), else its
+    # sorted runs (sorted_runs), found once for every lookup of build_batch_elements' threads
+    b = wp.tid()
+    rings = rings_sorted(region_vertex, ring_offsets, b)
+    sorted_rings[b] = rings
+    if rings > 0:
+        runs[b] = 0
+    else:
+        ends, n = sorted_runs(region_vertex, b, region_count[b])
+        run_ends[b] = ends
+        runs[b] = n
+
+
+@wp.kernel
 def build_batch_elements(
     region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: wp.array2d(dtype=wp.int32), region_count: wp.array(dtype=wp.int32),
+    sorted_rings: wp.array(dtype=wp.int32), run_ends: wp.array(dtype=RunEnds), runs: wp.array(dtype=wp.int32), threads: int,
     entry_offsets: wp.array(dtype=wp.int32), entry_topology: wp.array(dtype=wp.vec4i),
     local_offsets: wp.array2d(dtype=wp.int32), local_topology: wp.array2d(dtype=wp.vec4i),
 ):
     # each region vertex's element entries (a volumetric law's incident tets, in the mesh's entry
-    # order), their corners as local indices: every corner of a free vertex's tet is in its region
-    # (one ring out); a fixed-ring vertex's tets outside it have corners outside, written -(id + 1)
-    # (mesh vertex id: at rest), which only its nodal pressure reads
-    b = wp.tid()
+    # order, from local_offsets[b, i]), their corners as local indices: every corner of a free vertex's
+    # tet is in its region (one ring out); a fixed-ring vertex's tets outside it have corners outside,
+    # written -(id + 1) (mesh vertex id: at rest), which only its nodal pressure reads. Thread (b, t)
+    # does palpation b's vertices t, t + threads, ... (on CUDA a thread a vertex; on the CPU one a palpation)
+    b, t = wp.tid()
     count = region_count[b]
-    rings = rings_sorted(region_vertex, ring_offsets, b)
-    ends, runs = sorted_runs(region_vertex, b, count)
-    slot = int(0)
-    local_offsets[b, 0] = 0
-    for i in range(count):
+    rings = sorted_rings[b]
+    ends = run_ends[b]
+    n = runs[b]
+    for i in range(t, count, threads):
         v = region_vertex[b, i]
+        slot = local_offsets[b, i]
         for k in range(entry_offsets[v], entry_offsets[v + 1]):
-            t = entry_topology[k]
-            local_topology[b, slot] = wp.vec4i(corner_local(region_vertex, ring_offsets, b, rings, ends, runs, count, t[0]),
-                                               corner_local(region_vertex, ring_offsets, b, rings, ends, runs, count, t[1]),
-                                               corner_local(region_vertex, ring_offsets, b, rings, ends, runs, count, t[2]),
-                                               corner_local(region_vertex, ring_offsets, b, rings, ends, runs, count, t[3]))
+            e = entry_topology[k]
+            local_topology[b, slot] = wp.vec4i(corner_local(region_vertex, ring_offsets, b, rings, ends, n, count, e[0]),
+                                               corner_local(region_vertex, ring_offsets, b, rings, ends, n, count, e[1]),
+                                               corner_local(region_vertex, ring_offsets, b, rings, ends, n, count, e[2]),
+                                               corner_local(region_vertex, ring_offsets, b, rings, ends, n, count, e[3]))
             slot += 1
-        local_offsets[b, i + 1] = slot
+
+
+ELEMENT_THREADS = 256
+"""Threads a palpation of build_batch_elements on CUDA at most (its region's vertices share them)."""
 
 
 def build_elements(batch, local_offsets, local_topology):
-    """Each palpation's region vertices' element entries of `batch`'s volumetric law, as local tets
-    (local_offsets [B, vertex capacity + 1], local_topology [B, entry capacity]: sized by the caller)."""
-    r, m = batch.regions, batch.model
-    wp.launch(build_batch_elements, dim=batch.batch_size,
-              inputs=[r.region_vertex, r.ring_offsets, r.region_count, m.entry_offsets, m.entry_topology],
-              outputs=[local_offsets, local_topology], device=batch.device)
+    """Each palpation's region vertices' element entries of `batch`'s volumetric law, as local tets into
+    local_topology [B, entry capacity], from their offsets local_offsets [B, vertex capacity + 1] (the
+    caller's: a region vertex's first local entry). Two launches: each region's search (its sorted rings
+    or runs), then a thread a region vertex on CUDA (a palpation's, up to ELEMENT_THREADS, stride over
+    them), one a palpation on the CPU."""
+    r, m, B, a = batch.regions, batch.model, batch.batch_size, batch.buffers.array
+    sorted_rings, runs = a("element_sorted_rings", B, wp.int32, zero=False), a("element_runs", B, wp.int32, zero=False)
+    run_ends = a("element_run_ends", B, RunEnds, zero=False)
+    wp.launch(batch_region_runs, dim=B, inputs=[r.region_vertex, r.ring_offsets, r.region_count], outputs=[sorted_rings, run_ends, runs],
+              device=batch.device)
+    threads = 1
+    if batch.device.is_cuda:
+        threads = min(max(1 << (int(batch.region_vertex_counts.max(initial=1)) - 1).bit_length(), 32), ELEMENT_THREADS)
+    wp.launch(build_batch_elements, dim=(B, threads),
+              inputs=[r.region_vertex, r.ring_offsets, r.region_count, sorted_rings, run_ends, runs, threads, m.entry_offsets,
+                      m.entry_topology, local_offsets],
+              outputs=[local_topology], device=batch.device)
 
 
 def build_regions(dmesh, seed_offsets, seeds, rings, support, arrays):
