@@ -111,3 +111,28 @@ def test_a_press_that_diverged_is_pressed_again_at_twice_the_substeps(device):
     bold.known_critical_dt = 16 * base.critical_dt
     with pytest.raises(SimulationDiverged, match="in 8 substep"):
         bold.build(vertices, None, items).plan().press(**PRESS)
+
+
+def test_regions_from_a_table_give_each_item_the_tets_of_a_build(device):
+    """A batch of tet items whose regions are gathered from a RegionTable (as a dataset's are) and offset to
+    each palpation's item builds the local tets and presses of the same batch built on its own, bit for
+    bit: each item's parameters at its offset (element_shift), its corners outside the region its own."""
+    mesh, tissue, models, _, top = _nh_ball_items(device)
+    stacked = StackedModel(models, device)
+    vertices, items = np.array([top[0], top[1], top[0], top[1], top[0]]), np.array([2, 0, 1, 1, 0])
+    built = ItemBatch(stacked, rings=2, dt=1e-3, substeps=2).build(vertices, None, items).plan()
+    gathered = ItemBatch(stacked, rings=2, dt=1e-3, substeps=2)
+    gathered.cache_regions(top)
+    gathered.build(vertices, None, items).plan()
+    count = built.region_vertex_counts
+    np.testing.assert_array_equal(gathered.region_vertex_counts, count)
+    eo, go = built.element_offsets.numpy(), gathered.element_offsets.numpy()
+    for b, n in enumerate(count):
+        np.testing.assert_array_equal(go[b, :n + 1], eo[b, :n + 1])
+        np.testing.assert_array_equal(gathered.element_shift.numpy()[b, :n], built.element_shift.numpy()[b, :n])
+        np.testing.assert_array_equal(gathered.element_topology.numpy()[b, :go[b, n]], built.element_topology.numpy()[b, :eo[b, n]])
+    shift = built.element_shift.numpy()
+    assert not np.array_equal(shift[0], shift[2]) and not np.array_equal(shift[2], shift[4])  # one vertex, three items' parameters
+    a, b = built.press(**PRESS), gathered.press(**PRESS)
+    for field in ("peak_force", "hold_force", "recovery_error"):
+        np.testing.assert_array_equal(getattr(b, field), getattr(a, field), err_msg=field)

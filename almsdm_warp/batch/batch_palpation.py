@@ -456,7 +456,7 @@ class BatchPalpation:
     def _find_contacts(self, local=None) -> None:
         # each contact vertex's local index (ring 0 is sorted, so a sphere's contact may be anywhere in it)
         if local is None:
-            rv = self.regions.region_vertex.numpy()
+            rv = host_copy(self.regions.region_vertex)
             local = np.argmax(rv == self.vertices[:, None], axis=1).astype(np.int32)
         self.contact_local = self.buffers.upload("contact_local", np.asarray(local, dtype=np.int32), wp.int32)
         """Local index of each palpation's contact vertex in its region, int32 [B]."""

@@ -172,13 +172,14 @@ def springs_entries(model):
 
 
 def springs_stiffness_bound(model) -> float:
-    """The stiffest vertex's springs and anchor together [N/m] (float32 constants as the device holds them)."""
+    """The stiffest vertex's springs and anchor together [N/m] (float32 constants as the device holds them,
+    rounded from the host's: no read from the device, which would wait for each of its streams)."""
     e = model.mesh.edges
     k = np.zeros(model.particle_count)
-    ke = model.spring_ke.numpy().astype(np.float64)
+    ke = model.spring_ke_host.astype(np.float32).astype(np.float64)
     np.add.at(k, e[:, 0], ke)
     np.add.at(k, e[:, 1], ke)
-    k += model.anchor_ke.numpy()
+    k += model.anchor_ke_host.astype(np.float32)
     return float(k.max(initial=0.0))
 
 
