@@ -1,5 +1,5 @@
-"""A sweep's resume heals: a chunk damaged on disk is found by its checksum in plan.json and
-pressed again; the table equals an uninterrupted run's, byte for byte."""
+"""A sweep's resume heals: a chunk damaged on disk is found by its checksum (sums.txt, or an older
+folder's plan.json) and pressed again; the table equals an uninterrupted run's, byte for byte."""
 
 import json
 from pathlib import Path
@@ -26,8 +26,8 @@ def test_damaged_chunks_are_pressed_again(tmp_path, capsys):
     whole, out, parts = whole_and_interrupted(tmp_path, "resumed.csv", 3)
     chunks = sorted(parts.glob("chunk_*.npz"))
     assert len(chunks) == 3
-    sums = json.loads((parts / "plan.json").read_text())["chunks"]
-    assert sorted(sums) == ["0", "1", "2"]
+    sums = dict(line.split() for line in (parts / "sums.txt").read_text().splitlines())
+    assert sorted(sums) == ["0", "1", "2"] and "chunks" not in json.loads((parts / "plan.json").read_text())
     # a chunk cut short (a full disk, a copy interrupted) and one with a byte changed
     data = chunks[0].read_bytes()
     chunks[0].write_bytes(data[: len(data) // 2])
@@ -60,6 +60,29 @@ def test_a_chunk_without_its_checksum_is_pressed_again(tmp_path, capsys):
     cap = capsys.readouterr()
     assert "note: 1 chunk(s)" in cap.err
     assert out.read_text() == whole.read_text()
+
+
+def test_a_torn_checksum_line_and_an_older_folders_checksums(tmp_path, capsys):
+    """sums.txt's last line cut short (a kill mid-append) is no checksum: its chunk is pressed again; a
+    folder of an older version, every checksum in plan.json's "chunks", resumes its chunks as they are."""
+    whole, out, parts = whole_and_interrupted(tmp_path, "torn.csv", 3)
+    log = (parts / "sums.txt").read_text()
+    (parts / "sums.txt").write_text(log[: len(log) - 20])
+    capsys.readouterr()
+    assert main([*ARGS, "--out", str(out)]) == 0
+    cap = capsys.readouterr()
+    assert "resuming: 2 of 4 chunks" in cap.out and "note: 1 chunk(s)" in cap.err
+    assert out.read_text() == whole.read_text()
+    _, old, parts = whole_and_interrupted(tmp_path, "old.csv", 3)
+    manifest = json.loads((parts / "plan.json").read_text())
+    manifest["chunks"] = dict(line.split() for line in (parts / "sums.txt").read_text().splitlines())
+    (parts / "plan.json").write_text(json.dumps(manifest))
+    (parts / "sums.txt").unlink()
+    capsys.readouterr()
+    assert main([*ARGS, "--out", str(old)]) == 0
+    cap = capsys.readouterr()
+    assert "resuming: 3 of 4 chunks" in cap.out and "note:" not in cap.err
+    assert old.read_text() == whole.read_text()
 
 
 def test_a_run_stopped_before_its_first_chunk_leaves_a_folder_taken_as_new(tmp_path, capsys):
