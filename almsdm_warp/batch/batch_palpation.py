@@ -344,6 +344,7 @@ class BatchPalpation:
         self.region_table = None
         """A RegionTable (cache_regions) that build() gathers from where it holds every contact, or None."""
         self._region_host = None  # host copies of the regions' counts where build() has them without a read-back
+        self._entry_offsets_host = None  # the model's entry offsets, read once (_entry_offsets)
         self.buffers = DeviceBuffers(self.device)
         """The per-build device arrays and uploads, reused from one build to the next (DeviceBuffers)."""
         self.vertices = np.zeros(0, dtype=np.int64)
@@ -558,7 +559,7 @@ class BatchPalpation:
 
     def _entry_offsets(self) -> np.ndarray:
         # the model's entry offsets on the host, read once (array.numpy() would wait for every stream of the device)
-        if "_entry_offsets_host" not in self.__dict__:
+        if self._entry_offsets_host is None:
             self._entry_offsets_host = host_copy(self.model.entry_offsets)
         return self._entry_offsets_host
 
