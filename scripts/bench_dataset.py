@@ -4,6 +4,7 @@
     python scripts/bench_dataset.py --points 10000 --device cuda:0
     python scripts/bench_dataset.py --points 10000 --devices all      # every GPU of the host
     python scripts/bench_dataset.py --points 16 --device cpu --item-by-item
+    python scripts/bench_dataset.py --points 10000 --devices all --runs 1 --no-sweeps   # the dataset alone
 
 Presses the spec's dataset (its [dataset] points replaced by --points) with its items together
 (batch/dataset_press.py) into a temporary folder, and with --item-by-item also as before, each item
@@ -99,6 +100,7 @@ def main(argv=None):
     ap.add_argument("--devices", default=None, help="a comma list of devices, or 'all' (every CUDA device)")
     ap.add_argument("--runs", type=int, default=2, help="runs of each; the best is reported (default 2)")
     ap.add_argument("--item-by-item", action="store_true", help="also press the dataset as before, item after item")
+    ap.add_argument("--no-sweeps", action="store_true", help="time the dataset alone (no single sweeps to compare with)")
     args = ap.parse_args(argv)
 
     from almsdm_warp.batch import dataset as ds
@@ -122,6 +124,9 @@ def main(argv=None):
             print(f"dataset ({name}): {len(items)} items, {presses} presses in {pressed:.3f} s: {presses / pressed:,.1f} presses/s "
                   f"(planning its items: {planned:.3f} s, apart)")
         items, presses, _, pressed, times = best["together"]
+        if args.no_sweeps:
+            print(times.table(pressed))
+            return
         equivalent, steps_equivalent = 0.0, 0.0
         for scene in dict.fromkeys(i.scene for i in items):
             mine = [i for i in items if i.scene == scene]

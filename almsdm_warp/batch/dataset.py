@@ -356,20 +356,32 @@ def plan_items(spec: DatasetSpec, cuda: bool = False, on_item=None, gpus: int = 
     return items
 
 
-def item_chunk(points: int, cuda: bool, gpus: int = 1) -> int:
+def item_chunk(points: int, cuda: bool, gpus: int = 1, volumetric: bool = False) -> int:
     """Points a chunk of an item when the spec gives none: 64 on the CPU (a resume loses little); on a GPU
     the item's points in one chunk (each item one launch with its scene's others); on several, where
-    each would still hold SPLIT_POINTS, a chunk a GPU: the (item, chunk) pairs are then a multiple of the
-    GPUs and split evenly over them (13 items of one chunk on two GPUs go 7 against 6). Smaller items stay
-    whole: the parts a chunked item writes, and its table made from them at the end, would cost more."""
+    each would still hold split_points(volumetric), a chunk a GPU: the (item, chunk) pairs are then a
+    multiple of the GPUs and split evenly over them (13 items of one chunk on two GPUs go 7 against 6).
+    Smaller items stay whole: the parts a chunked item writes, and its table made from them at the end,
+    would cost more."""
     if not cuda:
         return 64
-    return -(-points // gpus) if gpus > 1 and points >= SPLIT_POINTS * gpus else max(points, 1)
+    return -(-points // gpus) if gpus > 1 and points >= split_points(volumetric) * gpus else max(points, 1)
 
 
 SPLIT_POINTS = GPU_CHUNK[0]
-"""The fewest points a chunk of an item is cut to on several GPUs (item_chunk): a sweep chunk's least
-on a GPU (sweep_plan.GPU_CHUNK)."""
+"""The fewest points a chunk of an item of springs is cut to on several GPUs (item_chunk): a sweep
+chunk's least on a GPU (sweep_plan.GPU_CHUNK)."""
+
+TET_SPLIT_POINTS = SPLIT_POINTS // 64
+"""The same for a volumetric (tet) law's item: a tet press costs some 100-200 spring presses on a GPU
+(the liver's neo-Hookean sweep 695 presses/s on an H200 against the stomach's 132,633), so 256 of
+them are more work than a springs chunk's 16,384, and the liver's items of 3,100 points at 10,000 a
+scene, left whole, went out as units of 4, 3, 3 and 3 items of some 20 s each: two GPUs a unit apart."""
+
+
+def split_points(volumetric: bool) -> int:
+    """The fewest points a chunk of an item is cut to on several GPUs (item_chunk)."""
+    return TET_SPLIT_POINTS if volumetric else SPLIT_POINTS
 
 
 def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool, gpus: int = 1):
@@ -398,7 +410,7 @@ def _scene_plan(spec: DatasetSpec, scene, name: str, cuda: bool, gpus: int = 1):
     check_probe_radius(scene.probe_radius, mesh)  # before any work, as the batch checks it again
     check_sphere_travel(scene.probe_radius, press["depth"], spec.dt, press["ramp"])
     points, vertices = pressed if pressed is not None else pressable_points(mesh, spec.points, scene.fixed_below)
-    chunk = spec.chunk or item_chunk(len(vertices), cuda, gpus)
+    chunk = spec.chunk or item_chunk(len(vertices), cuda, gpus, law_entry(scene.law).volumetric)
     tol = (scene.tol or AUTO_TOL) if rings == AUTO else None
     plan = SweepPlan(mesh, scene.tissue, None, None, 1 if tol else int(rings), spec.dt, press["depth"], press["ramp"], press["hold"],
                      press["settle"], points, vertices, chunk, spec.integrator, tol, probe_radius=scene.probe_radius,
