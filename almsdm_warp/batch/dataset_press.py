@@ -194,13 +194,14 @@ class ItemLane(Lane):
         self.started, self._pinned, self.unit = [], {}, None
 
     def start(self, units: DeviceUnits, i: int, on_launch=None, origin=None) -> None:
-        """Plan, build and launch unit `i` (each of its items' presses of its chunk), and queue the read-back."""
+        """Plan, build and launch unit `i` (each of its items' presses of its chunk: a batch a ring count
+        and substep count, all planned before the first is launched: Lane.launch), and queue the read-back."""
         stack, chunk, members = self.unit = units.unit(i)
         p = stack.stack.plan
         begin, end = p.chunks[chunk]
         rings = p.point_rings[begin:end]
         per_launch = 200 if self.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
-        self.started = []
+        planned = []
         with self.scope():
             for r in np.unique(rings):
                 idx = np.flatnonzero(rings == r)
@@ -210,14 +211,8 @@ class ItemLane(Lane):
                     batch.item_critical_dt, items = critical, list(critical)
                     with self.times.phase("planning"):
                         batch.build(np.tile(vertices, len(items)), p.depth, np.repeat(items, len(vertices))).plan()
-                    with self.times.phase("launch"):
-                        events = self._record()
-                        batch.start_press(p.depth, p.ramp, p.hold, p.settle, steps_per_launch=per_launch,
-                                          on_launch=frames(on_launch, batch, len(items) * len(vertices)))
-                        events += self._record()
-                        self.times.add_steps(len(items) * len(vertices) * batch.total_steps)
-                        pinned = self._read_back(batch, (int(r), integrator, substeps))
-                    self.started.append(((idx, items), batch, pinned, events))
+                    planned.append(((idx, items), batch, (int(r), integrator, substeps), len(items) * len(vertices)))
+            self.launch(planned, (p.depth, p.ramp, p.hold, p.settle), per_launch, on_launch)
 
     def finish(self, units: DeviceUnits, origin=None) -> dict:
         """Wait for the unit started last: {item (stack index): its checked columns}."""

@@ -132,7 +132,7 @@ class Lane:
         self.times.mark("first chunk's points")
         rings = plan.point_rings[begin:end]
         per_launch = 200 if self.device.is_cpu else None  # on the CPU, launches of 200 steps move the progress bar
-        t0, self.started = time.perf_counter(), []
+        t0, planned = time.perf_counter(), []
         with self.scope():
             for k in np.unique(rings):
                 idx = np.flatnonzero(rings == k)
@@ -143,18 +143,29 @@ class Lane:
                 with self.times.phase("planning"):
                     batch.plan()
                 self.times.mark("first chunk planned")
-                with self.times.phase("launch"):
-                    events = self._record()
-                    batch.start_press(plan.depth, plan.ramp, plan.hold, plan.settle, steps_per_launch=per_launch,
-                                      on_launch=frames(on_launch, batch, len(idx)))
-                    events += self._record()
-                    self.times.add_steps(len(idx) * batch.total_steps)
-                    self.times.mark("first press launched")
-                    self.started.append((idx, batch, self._read_back(batch, int(k)), events))
+                planned.append((idx, batch, int(k), len(idx)))
+            self.launch(planned, (plan.depth, plan.ramp, plan.hold, plan.settle), per_launch, on_launch)
         pressed = 0.0
         if self.stream is None:  # the CPU, synchronous: the launch was the press
             pressed = sum(e[1] - e[0] for *_, e in self.started)
         self.host_s = time.perf_counter() - t0 - pressed
+
+    def launch(self, planned: list, press: tuple, per_launch, on_launch) -> None:
+        """Launch each planned batch, (what it was started with, batch, its read-back key, its presses), in
+        order, pressing `press` (depth, ramp, hold, settle), and queue its read-back (self.started). A
+        chunk's batches (one a ring count, or a dataset unit's one a ring and substep count) are all
+        planned before the first is launched: a plan reads its regions back on this lane's stream
+        (host_copy), which would otherwise wait for the press launched before it, the device idle while
+        the next batch is planned."""
+        self.started = []
+        for what, batch, key, presses in planned:
+            with self.times.phase("launch"):
+                events = self._record()
+                batch.start_press(*press, steps_per_launch=per_launch, on_launch=frames(on_launch, batch, presses))
+                events += self._record()
+                self.times.add_steps(presses * batch.total_steps)
+                self.times.mark("first press launched")
+                self.started.append((what, batch, self._read_back(batch, key), events))
 
     def clock_origin(self):
         """(an event on this stream, the host's time.perf_counter when it ran): the zero of the press
