@@ -333,8 +333,15 @@ def test_stream_lanes_read_back_the_finished_press(stomach, monkeypatch):
         lane.stream = Stream()
     origin = lanes[0].clock_origin()
     serial = RingBatches(plan, plan.model("cpu"))
+    from almsdm_warp.batch.batch_palpation import BatchPalpation
+
+    calls = []
+    for name in ("plan", "start_press"):  # a chunk's batches all planned before the first is launched (Lane.launch)
+        monkeypatch.setattr(BatchPalpation, name, lambda self, *a, _f=getattr(BatchPalpation, name), _n=name, **kw: (calls.append(_n), _f(self, *a, **kw))[1])
     for i, (begin, end) in enumerate(plan.chunks):
+        calls.clear()
         lanes[i % 2].start(plan, i, None, origin)
+        assert calls == ["plan", "plan", "start_press", "start_press"]  # a plan reads back on the lane's stream: after a press, it would wait for it
         got = lanes[i % 2].finish(plan, origin)
         expected = press_chunk(serial, plan, begin, end)()
         for c in COLUMNS:
