@@ -336,8 +336,17 @@ def test_stream_lanes_read_back_the_finished_press(stomach, monkeypatch):
     from almsdm_warp.batch.batch_palpation import BatchPalpation
 
     calls = []
+
+    def recorded(name):
+        method = getattr(BatchPalpation, name)
+
+        def call(self, *args, **kw):
+            calls.append(name)
+            return method(self, *args, **kw)
+        return call
+
     for name in ("plan", "start_press"):  # a chunk's batches all planned before the first is launched (Lane.launch)
-        monkeypatch.setattr(BatchPalpation, name, lambda self, *a, _f=getattr(BatchPalpation, name), _n=name, **kw: (calls.append(_n), _f(self, *a, **kw))[1])
+        monkeypatch.setattr(BatchPalpation, name, recorded(name))
     for i, (begin, end) in enumerate(plan.chunks):
         calls.clear()
         lanes[i % 2].start(plan, i, None, origin)
