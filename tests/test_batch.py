@@ -149,36 +149,6 @@ def test_device_buffers_upload_and_reuse(device):
     assert buffers.array("z", (3, 2), wp.float32).shape == (3, 2)  # another row length: a new array
 
 
-def test_pinned_staging_hands_out_a_buffer_only_after_its_copy_ran(monkeypatch):
-    # the uploads' pinned buffers (PinnedStaging): one whose copy is still queued (behind a press on
-    # another lane's stream) is not written again, a free one is reused without allocating (an
-    # allocation of pinned memory stalls the other lane), a larger need grows the largest free one to
-    # twice its size, and the outgrown one is kept, not freed
-    from almsdm_warp.batch import batch_palpation as bp
-
-    empty, made = wp.empty, []
-    monkeypatch.setattr(wp, "empty", lambda shape, pinned=False, **kw: made.append(shape) or empty(shape, **kw))
-    monkeypatch.setattr(bp, "PINNED_RETIRED", [])
-
-    class Event:
-        def __init__(self, done):
-            self.is_complete = done
-
-    staging = bp.PinnedStaging()
-    a = staging.take("cuda:0", "rows", 10, wp.int32)
-    assert len(a) == 10 and made == [10]
-    staging.give("cuda:0", "rows", a, Event(False))  # its copy not run yet
-    b = staging.take("cuda:0", "rows", 8, wp.int32)
-    assert b is not a and made == [10, 8]
-    staging.give("cuda:0", "rows", b, Event(True))
-    assert staging.take("cuda:0", "rows", 6, wp.int32) is b and made == [10, 8]  # its copy ran: reused
-    staging.give("cuda:0", "rows", b, Event(True))
-    c = staging.take("cuda:0", "rows", 12, wp.int32)  # more than any free one holds
-    assert len(c) == 16 and made[-1] == 16 and bp.PINNED_RETIRED == [b]
-    d = staging.take("cuda:1", "rows", 4, wp.int32)  # another device's: its own
-    assert d is not a and made[-1] == 4
-
-
 @pytest.mark.parametrize("radius", [0.0, 0.004])
 def test_region_table_gathers_the_built_regions(stomach, radius):
     # a batch of repeated contacts gathered from the table of its distinct ones against the same batch

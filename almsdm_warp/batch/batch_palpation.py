@@ -11,7 +11,6 @@ step's, so a palpation of the exact kernel gives the same bits as ``Palpation`` 
 from __future__ import annotations
 
 import math
-import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,62 +49,9 @@ def host_copy(a: wp.array) -> np.ndarray:
     return host.numpy()
 
 
-def pinned_at_least(held, size: int, dtype) -> wp.array:
-    """A pinned host array of `dtype` with at least `size` elements: `held` where it is one, else a new
-    one of at least twice its size, `held` kept alive (PINNED_RETIRED). An allocation of page-locked
-    memory keeps the streams' work issued after it from running beside work issued before it (CUDA's
-    implicit synchronization: a chunk built on one stream then waits for the whole press on the other),
-    and freeing it waits for the whole device: pinned buffers are made rarely, and never freed while
-    the process runs."""
-    if held is not None and len(held) >= size and held.dtype == dtype:
-        return held
-    grown = 2 * len(held) if held is not None and held.dtype == dtype else 0
-    if held is not None:
-        PINNED_RETIRED.append(held)
-    return wp.empty(max(size, grown, 1), dtype=dtype, device="cpu", pinned=True)
-
-
-PINNED_RETIRED: list = []
-"""Pinned host buffers outgrown (pinned_at_least): kept, not freed, while the process runs."""
-
-
-class PinnedStaging:
-    """The uploads' pinned host buffers of one process, by device and upload name, shared by every
-    DeviceBuffers: an upload takes a buffer of its name whose last copy has run (its event complete),
-    growing the largest such one (pinned_at_least), or a new one where every buffer of the name still
-    waits for its copy (a copy queued behind a press on another lane's stream). A batch made while
-    another lane presses (a new ring or substep count's, a diverged press's again) then finds its
-    buffers made, and allocates no pinned memory."""
-
-    def __init__(self):
-        self._free: dict = {}
-        """(device, name) -> [(pinned buffer, the event after the copy that read it last, or None)]."""
-        self._lock = threading.Lock()
-
-    def take(self, device, name: str, size: int, dtype) -> wp.array:
-        """A pinned buffer of at least `size` elements of `dtype` for upload `name` on `device`, free to
-        write (hand it back with give after its copy is queued)."""
-        with self._lock:
-            pool = self._free.setdefault((str(device), name), [])
-            ready = [i for i, (_, event) in enumerate(pool) if event is None or event.is_complete]
-            if ready:
-                i = max(ready, key=lambda i: len(pool[i][0]))
-                return pinned_at_least(pool.pop(i)[0], size, dtype)
-        return pinned_at_least(None, size, dtype)
-
-    def give(self, device, name: str, buffer: wp.array, event) -> None:
-        """Hand `buffer` back: free again once `event` (recorded after the copy that reads it) has run."""
-        with self._lock:
-            self._free.setdefault((str(device), name), []).append((buffer, event))
-
-
-STAGING = PinnedStaging()
-"""The process's upload staging (DeviceBuffers.upload)."""
-
-
 class DeviceBuffers:
     """A batch's per-build device arrays, kept from one build to the next of the same size, and its
-    uploads, copied on the device's current stream from pinned host buffers.
+    uploads, copied on the device's current stream from pinned host buffers kept likewise.
 
     A sweep builds and launches one chunk on a stream while another chunk presses on a second
     stream. A new device array per build frees the last one on the CUDA null stream (Warp's
@@ -113,12 +59,12 @@ class DeviceBuffers:
     together they make the host wait for the other chunk's press. Arrays of the same shape are
     therefore reused (their earlier contents are only read by work queued before, on the same
     stream), and uploads go through pinned memory without a host wait: a pinned buffer is written
-    again only after the copy that read it last has run (its event). The pinned buffers are the
-    process's (STAGING, PinnedStaging): a batch made while another lane presses allocates none."""
+    again only after the copy that read it last has run (its event)."""
 
     def __init__(self, device):
         self.device = device
         self._arrays: dict = {}
+        self._staging: dict = {}
 
     def array(self, name: str, shape, dtype, zero: bool = True) -> wp.array:
         """A device array of `shape` and `dtype` under `name`: the one held there where it has the same
@@ -143,12 +89,16 @@ class DeviceBuffers:
             return wp.array(values, dtype=dtype, device=self.device)
         out = self.array(name, values.shape[:values.ndim - len(getattr(dtype, "_shape_", ()))], dtype, zero=False)
         size = out.size
-        pinned = STAGING.take(self.device, name, size, dtype)
+        pinned, event = self._staging.get(name, (None, None))
+        if pinned is None or len(pinned) < size or pinned.dtype != dtype:
+            pinned, event = wp.empty(max(size, 1), dtype=dtype, device="cpu", pinned=True), None
+        if event is not None:
+            wp.synchronize_event(event)  # the last copy from this buffer has run
         view = pinned[:size]
         view.numpy()[...] = values.reshape(view.numpy().shape)
         if size:
             wp.copy(out, view, count=size)  # both contiguous: element for element
-        STAGING.give(self.device, name, pinned, self.device.stream.record_event())
+        self._staging[name] = (pinned, self.device.stream.record_event())
         return out
 
 

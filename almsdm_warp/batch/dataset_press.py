@@ -192,8 +192,6 @@ class ItemLane(Lane):
         self.device, self.times = wp.get_device(device), times
         self.stream = wp.Stream(self.device) if self.device.is_cuda else None
         self.started, self._pinned, self.unit = [], {}, None
-        if self.stream is not None:
-            self.reserve(LAUNCH_PRESSES)  # a unit's presses at most
 
     def start(self, units: DeviceUnits, i: int, on_launch=None, origin=None) -> None:
         """Plan, build and launch unit `i` (each of its items' presses of its chunk: a batch a ring count
@@ -213,7 +211,7 @@ class ItemLane(Lane):
                     batch.item_critical_dt, items = critical, list(critical)
                     with self.times.phase("planning"):
                         batch.build(np.tile(vertices, len(items)), p.depth, np.repeat(items, len(vertices))).plan()
-                    planned.append(((idx, items), batch, len(items) * len(vertices)))
+                    planned.append(((idx, items), batch, (int(r), integrator, substeps), len(items) * len(vertices)))
             self.launch(planned, (p.depth, p.ramp, p.hold, p.settle), per_launch, on_launch)
 
     def finish(self, units: DeviceUnits, origin=None) -> dict:

@@ -107,8 +107,6 @@ class Lane:
         self.started = []
         """(indices in the chunk, batch, pinned (peak, hold, q0), events) of the chunk in flight."""
         self._pinned = {}
-        if self.stream is not None:
-            self.reserve(batches.plan.chunk)
 
     @contextmanager
     def scope(self):
@@ -145,7 +143,7 @@ class Lane:
                 with self.times.phase("planning"):
                     batch.plan()
                 self.times.mark("first chunk planned")
-                planned.append((idx, batch, len(idx)))
+                planned.append((idx, batch, int(k), len(idx)))
             self.launch(planned, (plan.depth, plan.ramp, plan.hold, plan.settle), per_launch, on_launch)
         pressed = 0.0
         if self.stream is None:  # the CPU, synchronous: the launch was the press
@@ -153,21 +151,21 @@ class Lane:
         self.host_s = time.perf_counter() - t0 - pressed
 
     def launch(self, planned: list, press: tuple, per_launch, on_launch) -> None:
-        """Launch each planned batch, (what it was started with, batch, its presses), in order, pressing
-        `press` (depth, ramp, hold, settle), and queue its read-back (self.started) into the buffers of
-        its position (reserve). A chunk's batches (one a ring count, or a dataset unit's one a ring and
-        substep count) are all planned before the first is launched: a plan reads its regions back on
-        this lane's stream (host_copy), which would otherwise wait for the press launched before it, the
-        device idle while the next batch is planned."""
+        """Launch each planned batch, (what it was started with, batch, its read-back key, its presses), in
+        order, pressing `press` (depth, ramp, hold, settle), and queue its read-back (self.started). A
+        chunk's batches (one a ring count, or a dataset unit's one a ring and substep count) are all
+        planned before the first is launched: a plan reads its regions back on this lane's stream
+        (host_copy), which would otherwise wait for the press launched before it, the device idle while
+        the next batch is planned."""
         self.started = []
-        for position, (what, batch, presses) in enumerate(planned):
+        for what, batch, key, presses in planned:
             with self.times.phase("launch"):
                 events = self._record()
                 batch.start_press(*press, steps_per_launch=per_launch, on_launch=frames(on_launch, batch, presses))
                 events += self._record()
                 self.times.add_steps(presses * batch.total_steps)
                 self.times.mark("first press launched")
-                self.started.append((what, batch, self._read_back(batch, position), events))
+                self.started.append((what, batch, self._read_back(batch, key), events))
 
     def clock_origin(self):
         """(an event on this stream, the host's time.perf_counter when it ran): the zero of the press
@@ -189,9 +187,8 @@ class Lane:
         self.stream.record_event(event)
         return [event]
 
-    def _read_back(self, batch, position: int):
-        # the results copied into pinned host buffers on this stream, after the press: no wait here; the
-        # buffers this lane's `position`-th batch of a chunk reads into (made ahead: reserve)
+    def _read_back(self, batch, rings: int):
+        # the results copied into pinned host buffers on this stream, after the press: no wait here
         import warp as wp
 
         from ..kernels.explicit.batch import contact_positions
@@ -199,27 +196,19 @@ class Lane:
         if self.stream is None:
             return None
         n = batch.batch_size
-        self.reserve(n, position + 1)
-        out = [b[:n] for b in self._pinned[position]]
+        buffers = self._pinned.get(rings)
+        if buffers is None or len(buffers[0]) < n:
+            buffers = self._pinned[rings] = [wp.empty(n, dtype=wp.vec3, device="cpu", pinned=True) for _ in range(3)]
+        out = [b[:n] for b in buffers]
         for dst, src in zip(out, (batch.peak_reaction, batch.hold_reaction, contact_positions(batch))):
             wp.copy(dst, src, stream=self.stream)
         if batch.ring_gap is not None:  # a sphere on tets: each press's distance from its fixed ring
-            out.append(self._pinned[("gap", position)][:n])
+            gaps = self._pinned.get(("gap", rings))
+            if gaps is None or len(gaps) < n:
+                gaps = self._pinned[("gap", rings)] = wp.empty(n, dtype=wp.float32, device="cpu", pinned=True)
+            out.append(gaps[:n])
             wp.copy(out[-1], batch.ring_gap, stream=self.stream)
         return out
-
-    def reserve(self, presses: int, positions: int = 2) -> None:
-        """Pinned read-back buffers for `presses` presses in each of a chunk's first `positions` batches,
-        made now where missing or smaller (batch_palpation.pinned_at_least: an allocation of pinned memory
-        while the other lane presses would keep this lane's next work from running beside it)."""
-        import warp as wp
-
-        from .batch_palpation import pinned_at_least
-
-        for j in range(positions):
-            held = self._pinned.get(j, [None] * 3)
-            self._pinned[j] = [pinned_at_least(h, presses, wp.vec3) for h in held]
-            self._pinned[("gap", j)] = pinned_at_least(self._pinned.get(("gap", j)), presses, wp.float32)
 
     def results(self, origin=None) -> list:
         """Wait for what the lane started last (its press intervals in `busy`), then [(what each batch was
