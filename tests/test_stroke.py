@@ -168,3 +168,58 @@ def test_a_build_spread_over_steps_is_the_same_region(device):
     np.testing.assert_array_equal(spread.boundary(), whole.boundary())
     np.testing.assert_array_equal(np.sort(spread.springs()), np.sort(whole.springs()))
     assert spread.free_count == whole.free_count and spread.spring_count == whole.spring_count
+
+
+def test_a_jump_of_a_radius_while_touching_or_into_the_organ_is_refused(bed):
+    # the travel check: a sphere that moves its radius or more in one step while it touches the organ,
+    # or onto it, would pass through vertices; a lifted sphere may jump clear of the organ
+    mesh, tissue, area = bed
+    c = np.array([0.0, 0.0, R - 1e-4])  # the bed lies in z = 0: 0.1 mm in, less than the guard (a quarter mm)
+    for jump in (0.99, 1.001):
+        stroke = ProbeStroke(mesh, tissue, probe_radius=R, rings=2, device="cpu", anchor_scale=area)
+        stroke.step([0.0, 0.0, R + 1e-3])  # 1 mm clear of it
+        stroke.step(c)
+        assert stroke.touching[0] > 0  # touching, not inside
+        if jump < 1.0:
+            stroke.step(c + [jump * R, 0.0, 0.0])  # under a radius: a step, however fast
+            continue
+        with pytest.raises(ValueError, match=r"would move 10(\.\d+)? mm in one step of 1 ms while it touches the organ"):
+            stroke.step(c + [jump * R, 0.0, 0.0])
+
+    lifted = ProbeStroke(mesh, tissue, probe_radius=R, rings=2, device="cpu", anchor_scale=area)
+    above = np.array([0.0, 0.0, 3.0 * R])  # the bed lies in z = 0: the sphere is 2 R clear of it
+    lifted.step(above)
+    lifted.step(above + [3.0 * R, 0.0, 0.0])  # a jump of 3 R, clear of the organ: allowed
+    assert lifted.touching[0] == 0
+    with pytest.raises(ValueError, match="into the organ"):
+        lifted.step(above + [3.0 * R, 0.0, -2.5 * R])  # 2.5 R down, its centre 0.5 R above the bed: inside
+    with pytest.raises(ValueError, match="starts .* inside the organ"):
+        ProbeStroke(mesh, tissue, probe_radius=R, rings=2, device="cpu", anchor_scale=area).step([0.0, 0.0, 0.5 * R])
+
+
+@pytest.mark.parametrize("bad", ["nan", "far"])
+def test_a_state_that_ran_away_is_found_within_the_check_period(device, bed, bad):
+    # a vertex outside the region, which no force reads, made not finite (or put three mesh sizes away):
+    # the state check finds it within CHECK_EVERY steps, whichever step it starts at
+    from almsdm_warp.protocol.stroke import CHECK_EVERY
+    from almsdm_warp.solvers.stepper import SimulationDiverged
+
+    mesh, tissue, area = bed
+    path = builtin_stroke(mesh, R, depth=DEPTH, length=2e-3, speed=10e-3, vertex=vertex_at(mesh, 0, 0), hold=0.2)
+    held = np.flatnonzero(path.phase == 0)
+    for start in (held[-CHECK_EVERY - 5], held[-CHECK_EVERY - 5] + CHECK_EVERY // 2):
+        stroke = ProbeStroke(mesh, tissue, probe_radius=R, rings=2, device=device, anchor_scale=area)
+        for c in path.centre[:start]:
+            stroke.step(c)
+        outside = np.setdiff1d(np.arange(len(mesh.vertices)), stroke.region_vertex_ids())
+        v = int(outside[len(outside) // 2])
+        for state in stroke.states:
+            q = state.particle_q.numpy()
+            q[v] = math.nan if bad == "nan" else q[v] + [0.0, 0.0, 3.0 * np.ptp(mesh.vertices, axis=0).max()]
+            state.particle_q.assign(q)
+        steps = 0
+        with pytest.raises(SimulationDiverged, match="ran away|diverged"):
+            for c in path.centre[start : start + CHECK_EVERY]:
+                steps += 1
+                stroke.step(c)
+        assert 1 <= steps <= CHECK_EVERY

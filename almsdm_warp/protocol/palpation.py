@@ -7,6 +7,7 @@ no allocation and no extra copy on the CPU (on CUDA, pinned buffers copied insid
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 from dataclasses import dataclass, field
@@ -48,6 +49,14 @@ NEAR_RING = 0.5
 on a tet mesh is warned of: the ring holds still tissue the press moves (a 10 mm sphere pressed
 10 mm into a 25 mm ball on a support collapsed to 0.23-0.39 of the global model's force with the ring
 1.2-1.4 mm from it, and held, 13-17% high, at 8.8 mm: docs/calibration.md)."""
+
+
+def runaway(q: np.ndarray, qd: np.ndarray, rest: np.ndarray, size: float) -> bool:
+    """Whether a state (positions q [m], velocities qd [m/s], rest positions, host arrays [n, 3]) ran away:
+    a value not finite, or a vertex more than twice the mesh's size `size` [m] from rest."""
+    if not len(q):
+        return False
+    return not (float(np.abs(q - rest).max()) < 2.0 * size and float(np.abs(qd).max()) < math.inf)
 
 
 def check_probe_radius(radius, mesh=None) -> float:
@@ -479,26 +488,30 @@ class Palpation:
     def check_finite(self, step_index: int) -> None:
         """Raise SimulationDiverged if the region's state is not finite or has run away."""
         q = self.state.particle_q.numpy()
-        qd = self.state.particle_qd.numpy()
-        size = float(np.ptp(self.mesh.vertices, axis=0).max())
-        ok = np.all(np.isfinite(q)) and np.all(np.isfinite(qd))
-        if ok:
-            ok = float(np.abs(q - self.model.particle_q_rest.numpy()).max()) < 2.0 * size
-        if not ok:
-            free = self.region.vertices()[: self.region.free_count] if self.region is not None else None
-            crit = self.model.critical_dt(free, anchors=self.solver.anchor_scale > 0)
-            if self.solver.conditionally_stable and self.step_dt > crit:
-                raise SimulationDiverged(
-                    f"the {self.solver.integrator} integrator diverged at step {step_index} "
-                    f"(t = {step_index * self.dt:.4g} s): its step {self.step_dt * 1e3:.4g} ms exceeds the critical "
-                    f"step of about {crit * 1e3:.4g} ms; use a smaller --dt-ms or --integrator implicit"
-                )
-            raise SimulationDiverged(  # under the critical step at rest: a deep press stiffens the tissue past it
-                f"the {self.solver.integrator} integrator ran away at step {step_index} "
-                f"(t = {step_index * self.dt:.4g} s): a vertex is not finite or more than twice the mesh's size "
-                f"({size * 1e3:.4g} mm) from rest, with a step of {self.step_dt * 1e3:.4g} ms under the critical step at rest "
-                f"(about {crit * 1e3:.4g} ms), which a deep press shortens; {remedies(self.solver.integrator)}"
+        if runaway(q, self.state.particle_qd.numpy(), self.model.particle_q_rest.numpy(), self.mesh_size):
+            self.raise_runaway(step_index)
+
+    @functools.cached_property
+    def mesh_size(self) -> float:
+        """The mesh's largest extent [m]: a vertex twice as far from rest has run away (check_finite)."""
+        return float(np.ptp(self.mesh.vertices, axis=0).max())
+
+    def raise_runaway(self, step_index: int):
+        """The SimulationDiverged for a state that ran away at step `step_index` (check_finite found it)."""
+        free = self.region.vertices()[: self.region.free_count] if self.region is not None else None
+        crit = self.model.critical_dt(free, anchors=self.solver.anchor_scale > 0)
+        if self.solver.conditionally_stable and self.step_dt > crit:
+            raise SimulationDiverged(
+                f"the {self.solver.integrator} integrator diverged at step {step_index} "
+                f"(t = {step_index * self.dt:.4g} s): its step {self.step_dt * 1e3:.4g} ms exceeds the critical "
+                f"step of about {crit * 1e3:.4g} ms; use a smaller --dt-ms or --integrator implicit"
             )
+        raise SimulationDiverged(  # under the critical step at rest: a deep press stiffens the tissue past it
+            f"the {self.solver.integrator} integrator ran away at step {step_index} "
+            f"(t = {step_index * self.dt:.4g} s): a vertex is not finite or more than twice the mesh's size "
+            f"({self.mesh_size * 1e3:.4g} mm) from rest, with a step of {self.step_dt * 1e3:.4g} ms under the critical step at rest "
+            f"(about {crit * 1e3:.4g} ms), which a deep press shortens; {remedies(self.solver.integrator)}"
+        )
 
     # -- the press protocol --------------------------------------------------------------------
     def _begin_press(self, ramp, hold, settle, record, record_every, **amplitude):

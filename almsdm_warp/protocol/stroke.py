@@ -43,12 +43,12 @@ from ..kernels.arrays import ProbeArrays
 from ..region.region import Region
 from ..sim.model import PROBE_SPHERE
 from ..solvers.stepper import diverged, replayer
-from .palpation import Palpation, check_probe_radius
+from .palpation import Palpation, check_probe_radius, runaway
 
 WAKE_TIME = 0.01
 """[s] A vertex faster than tol / WAKE_TIME is still moving: it stays free when the region moves."""
 CHECK_EVERY = 50
-"""Steps between two checks of the whole state (finite, within twice the mesh's size of rest: check_finite)
+"""Steps in which the whole state is checked (finite, within twice the mesh's size of rest: check_finite)
 beside the force's bound every step: a stroke whose tissue ran away while the force read 0 raises."""
 
 
@@ -222,7 +222,7 @@ class ProbeStroke(Palpation):
         if c.shape != (self.probe_count, 3):
             raise ValueError(f"centres must have shape ({self.probe_count}, 3) [m]"
                              f"{' or (3,)' if self.probe_count == 1 else ''}, got {c.shape}")
-        if not np.all(np.isfinite(c)):
+        if not math.isfinite(float(c.sum())):  # a nan or an inf anywhere makes the sum one (a whole-array test costs more)
             raise ValueError(f"centres must be finite [m], got {c.tolist()}")
         self._check_travel(c)
         self._centre[:] = c
@@ -239,8 +239,7 @@ class ProbeStroke(Palpation):
                     self._pending = ("seeds", self.seeds(c))
         self._advance()
         self._steps += 1
-        if self._steps % CHECK_EVERY == 0:
-            self.check_finite(self._steps)
+        self._check_state()
         f = self._sphere_force.astype(np.float64)
         total = float(np.abs(f).sum())
         if not total < self._bound:
@@ -251,24 +250,46 @@ class ProbeStroke(Palpation):
     def _check_travel(self, c) -> None:
         """ValueError where a sphere would start inside the organ (a stroke touches down from outside), or
         move its radius or more in one step while it touches the organ or onto it (it would pass through
-        vertices, as a sweep's press may not). A lifted sphere may jump: a touch-down elsewhere, clear of it."""
-        clear = self.clearance(c)
-        p = int(np.argmin(clear))
-        inside = clear[p] < self.radius - self.guard
+        vertices, as a sweep's press may not). A lifted sphere may jump: a touch-down elsewhere, clear of it.
+        The surface's clearance (a tree query, the step's dearest host work) is asked only at the first step
+        and for a step of a radius or more."""
         if self._last is None:
-            if inside:
+            clear = self.clearance(c)
+            p = int(np.argmin(clear))
+            if clear[p] < self.radius - self.guard:
                 raise ValueError(f"the sphere starts {(self.radius - clear[p]) * 1e3:.3g} mm inside the organ (its centre "
                                  f"{np.round(c[p] * 1e3, 3).tolist()} mm, radius {self.radius * 1e3:g} mm, the surface at rest "
                                  f"{clear[p] * 1e3:.3g} mm from it): start the path clear of the organ")
-        else:
-            travel = np.linalg.norm(c - self._last, axis=1)
-            far = travel >= self.radius
-            if far.any() and (inside or (self._touching[far] != 0).any()):
+            self._last = c.copy()
+            return
+        d = c - self._last
+        travel = np.sqrt(np.einsum("ij,ij->i", d, d))
+        far = travel >= self.radius
+        if far.any():
+            inside = bool(self.clearance(c).min() < self.radius - self.guard)
+            if inside or (self._touching[far] != 0).any():
                 p = int(np.argmax(travel))
                 raise ValueError(f"the sphere would move {travel[p] * 1e3:.3g} mm in one step of {self.dt * 1e3:g} ms "
                                  f"{'into' if inside else 'while it touches'} the organ, not less than its radius "
                                  f"{self.radius * 1e3:g} mm: it would pass through vertices; slow the path or use a smaller dt")
-        self._last = c.copy()
+        self._last[:] = c
+
+    def _check_state(self) -> None:
+        # the state's check (Palpation.check_finite: finite, within twice the mesh's size of rest): on the CPU a
+        # CHECK_EVERY-th of the vertices every step (host views: no copy, and no step much dearer than the
+        # others); on CUDA the whole state every CHECK_EVERY steps (one copy)
+        k = self._steps % CHECK_EVERY
+        if not self._cpu:
+            if k == 0:
+                self.check_finite(self._steps)
+            return
+        n = self.model.particle_count
+        chunk = -(-n // CHECK_EVERY)
+        part = slice(k * chunk, (k + 1) * chunk)
+        state = self.state
+        if runaway(self.host(state.particle_q)[part], self.host(state.particle_qd)[part],
+                   self.host(self.model.particle_q_rest)[part], self.mesh_size):
+            self.raise_runaway(self._steps)
 
     def clearance(self, points) -> np.ndarray:
         """How far [m] each of `points` [n, 3] lies outside the surface at rest, along the outward normal of its
@@ -298,6 +319,8 @@ class ProbeStroke(Palpation):
         # of the path: it must find free vertices this step); "soon": a sphere nears the outer rings
         # or the surface outside them (the move is spread over the next steps); None: neither
         soon = bool(self._near.any())
+        if self._touching.all():  # every sphere touches: the contact pass's flag says all
+            return "soon" if soon else None
         for p in np.flatnonzero(self._touching == 0):
             # lifted: a touch-down outside the region's inner rings moves it (the surface there is at rest)
             d, k = self._tree.query(c[p])
