@@ -70,3 +70,32 @@ def test_touch_a_shared_volume_mesh(tmp_path, capsys):
     assert main(["touch", str(path), "--rings", "2", "--json", str(out)]) == 0
     data = json.loads(out.read_text())
     assert data["mesh"]["tetrahedra"] == 1493 and data["mesh"]["vertices"] == 507
+
+
+@pytest.mark.parametrize("case", ["plain", "thread", "profiler"])
+def test_the_process_ends_at_once_with_its_output_whole(tmp_path, case):
+    # the command line's run() ends the process without the interpreter's teardown (an atexit handler does
+    # not run), its table whole and its exit status kept; with a thread still running or a profiler on, it
+    # exits as usual (the handler runs)
+    flag, out = tmp_path / "teardown", tmp_path / "s.csv"
+    code = "\n".join([
+        "import atexit, sys, threading, time",
+        f"atexit.register(lambda: open({str(flag)!r}, 'w').close())",
+        "wait = lambda: [time.sleep(0.01) for _ in iter(threading.main_thread().is_alive, False)]",  # till main ends
+        "if sys.argv[1] == 'thread': threading.Thread(target=wait).start()",
+        "if sys.argv[1] == 'profiler': sys.setprofile(lambda *a: None)",
+        "sys.argv = ['almsdm', 'sweep', 'stomach', '--points', '64', '--ramp-s', '0.02', '--hold-s', '0.02',"
+        f" '--settle-s', '0.02', '--no-progress', '--out', {str(out)!r}]",
+        "from almsdm_warp.cli.main import run",
+        "run()",
+    ])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    r = subprocess.run([sys.executable, "-c", code, case], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert f"wrote {out}" in r.stdout
+    lines = out.read_text().splitlines()
+    assert len(lines) == 65 and len(lines[-1].split(",")) == len(lines[0].split(","))  # a header and 64 rows
+    assert flag.exists() == (case != "plain")
+    bad = subprocess.run([sys.executable, "-c", code.replace("'64'", "'-3'"), case], capture_output=True, text=True, cwd=ROOT,
+                         env=env, timeout=300)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1, bad.stderr
