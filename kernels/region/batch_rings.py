@@ -255,6 +255,7 @@ def batch_region_runs(region_vertex: wp.array2d(dtype=wp.int32), ring_offsets: w
     rings = rings_sorted(region_vertex, ring_offsets, b)
     sorted_rings[b] = rings
     if rings > 0:
+        run_ends[b] = RunEnds()  # unused (find_built searches the rings), but never left unwritten for the next kernel to read
         runs[b] = 0
     else:
         ends, n = sorted_runs(region_vertex, b, region_count[b])
