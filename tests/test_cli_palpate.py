@@ -124,6 +124,32 @@ def test_a_scene_name_without_the_command(tmp_path, capsys):
     assert main(["liver", "--settle-s", "0.2", "--json", str(out)]) == 0
     data = json.loads(out.read_text())
     assert data["scene"].endswith("liver.toml") and data["mesh"]["tetrahedra"] > 0
+    # a tet law's model line names its tets, not the springs it has none of
+    tets = data["model"]["region_tets"]
+    assert isinstance(tets, int) and 0 < tets <= data["mesh"]["tetrahedra"]
+    assert f"{tets} tets (neo-hookean)" in capsys.readouterr().out
+
+
+def test_a_tet_law_counts_the_tets_its_region_integrates():
+    # against the law's own entries: the distinct tets among the free vertices' incident tets
+    import numpy as np
+
+    from almsdm_warp.protocol.palpation import Palpation
+    from almsdm_warp.scene.loader import default_scene_path, load_scene
+
+    scene = load_scene(default_scene_path("liver"))
+    mesh = scene.load_mesh()
+    top = int(np.argmax(mesh.vertices[:, 2]))
+    for law in ("neo-hookean", "springs"):
+        pal = Palpation(mesh, scene.tissue, rings=2, fixed_below=scene.fixed_below, device="cpu", law=law)
+        pal.touch(top)
+        if law == "springs":
+            assert pal.region_tets is None
+            continue
+        free = pal.solver.free_vertex.numpy()[: pal.solver.free_count]
+        offsets, topology = pal.model.entry_offsets.numpy(), pal.model.entry_topology.numpy()
+        tets = {tuple(sorted(topology[k])) for v in free for k in range(offsets[v], offsets[v + 1])}
+        assert pal.region_tets == len(tets) > 20
 
 
 def test_a_shared_mesh_file_takes_default_tissue(tmp_path, capsys):

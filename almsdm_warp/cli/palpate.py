@@ -236,7 +236,7 @@ def _build(args, run: _Run):
 
 
 def _report_model(args, run: _Run, pal):
-    """Print the model line: region, springs, integrator and the explicit critical step; returns
+    """Print the model line: region, springs (or a tet law's tets), integrator and the explicit critical step; returns
     (critical step [s], free vertices)."""
     rings, tol, dt = run.rings, run.tol, run.dt
     anchored = rings != "global-free"
@@ -258,8 +258,10 @@ def _report_model(args, run: _Run, pal):
         print(f"note: {note}")
     beyond = ", at the start" if tol is not None else ""
     steps = f" in {pal.substeps} substeps of {pal.step_dt * 1e3:.3g} ms" if pal.substeps > 1 else ""
+    tets = pal.region_tets
+    elements = f"{pal.region_springs} springs" if tets is None else f"{tets} tets ({pal.model.law})"
     print(
-        f"model: {what}, {pal.region_springs} springs; {pal.solver.integrator} integrator, dt {dt * 1e3:g} ms{steps} "
+        f"model: {what}, {elements}; {pal.solver.integrator} integrator, dt {dt * 1e3:g} ms{steps} "
         f"(explicit critical step {critical * 1e3:.3g} ms{beyond}), device {run.device}"
     )
     return critical, free_count
@@ -352,6 +354,7 @@ def _record(args, run: _Run, pal, presses, critical, free_count) -> dict:
             **(_auto_json(pal, tol) if tol is not None else {}),
             "region_vertices": int(pal.region_vertices),
             "region_springs": int(pal.region_springs),
+            "region_tets": pal.region_tets,
             "free_vertices": int(free_count),
             "integrator": pal.solver.integrator,
             "law": pal.model.law,

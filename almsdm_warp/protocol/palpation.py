@@ -267,7 +267,17 @@ class Palpation:
 
     @property
     def region_springs(self) -> int:
+        """The region's springs: the springs law's, or for a tet law the edges among its vertices (its topology)."""
         return self.region.spring_count if self.region is not None else self.model.spring_count
+
+    @property
+    def region_tets(self) -> int | None:
+        """The tets the region integrates (those with a free vertex): a volumetric law's elements; None for springs."""
+        if not self.model.law_entry.volumetric:
+            return None
+        free = np.zeros(self.model.particle_count, dtype=bool)
+        free[self.solver.free_vertex.numpy()[: self.solver.free_count]] = True
+        return int(np.count_nonzero(free[self.mesh.tetrahedra].any(axis=1)))
 
     def touch(self, vertex: int, depth: float | None = None) -> None:
         """Put the probe on `vertex`; the local model builds its region there (relocating it). With a
