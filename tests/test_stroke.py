@@ -223,3 +223,32 @@ def test_a_state_that_ran_away_is_found_within_the_check_period(device, bed, bad
                 steps += 1
                 stroke.step(c)
         assert 1 <= steps <= CHECK_EVERY
+
+
+def test_the_seeds_are_the_surface_near_each_centre_and_the_wake(device):
+    # brute force over every surface vertex: those within radius + lead of a centre (or a centre's nearest where
+    # none is), and the region's free vertices still moving (off rest by more than tol, or faster than tol / WAKE_TIME)
+    from almsdm_warp.protocol.stroke import WAKE_TIME
+
+    mesh = primitives.icosphere(40.0, 3)
+    path = builtin_stroke(mesh, R, depth=6e-3, length=20e-3, speed=40e-3)
+    stroke = ProbeStroke(mesh, probe_radius=R, rings=3, device=device, probes=2)
+    surface = mesh.surface_vertices
+    far = np.array([0.0, 0.0, 0.2])  # the second sphere 0.2 m up: no surface vertex within its reach
+    checked = 0
+    for k, c in enumerate(path.centre):
+        centres = np.stack([c, far])
+        stroke.step(centres)
+        if k % 15:
+            continue
+        got = stroke.seeds(centres)
+        dist = np.linalg.norm(mesh.vertices[surface][None] - centres[:, None], axis=2)  # [centre, surface vertex]
+        want = set(surface[np.flatnonzero((dist <= stroke.radius + stroke.lead).any(axis=0))])
+        want |= {int(surface[np.argmin(d)]) for d in dist if not (d <= stroke.radius + stroke.lead).any()}
+        free = stroke.region.vertices()[: stroke.region.free_count]
+        q, qd = stroke.positions()[free], stroke.state.particle_qd.numpy()[free]
+        off = np.linalg.norm(q - mesh.vertices[free], axis=1) > stroke.tol
+        want |= set(free[off | (np.linalg.norm(qd, axis=1) * WAKE_TIME > stroke.tol)].tolist())
+        assert set(got.tolist()) == want and len(got) == len(want)
+        checked += 1
+    assert checked >= 5

@@ -27,6 +27,7 @@ graphs captured at the first step, one per region buffer and state, serve every 
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from typing import NamedTuple
 
@@ -336,16 +337,19 @@ class ProbeStroke(Palpation):
         """Ring 0 of the region around `centres`: the surface vertices at rest within radius + lead of a
         centre, and the vertices of the current region still moving (the wake); at least the nearest
         surface vertex of each centre."""
+        # the step of a relocation that takes them is a haptic loop's slowest (a few hundred us, each NumPy call
+        # cold): as few calls as give the same set
         c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
         near = self._tree.query_ball_point(c, self.radius + self.lead)
-        picked = [self._surface[np.asarray(k, dtype=np.int64)] for k in near]
-        picked.append(self._surface[self._tree.query(c)[1]])
+        picked = [self._surface[np.fromiter(itertools.chain.from_iterable(near), dtype=np.int64)]]
+        lone = [p for p, k in enumerate(near) if not k]  # the nearest is in a centre's ball where the ball has any
+        if lone:
+            picked.append(self._surface[self._tree.query(c[lone])[1]])
         if self.region is not None and self.region.vertex_count:
             verts = self.host(self.region.region_vertex)[: self.region.free_count]
-            q = self.host(self.state.particle_q)[verts]
-            qd = self.host(self.state.particle_qd)[verts]
-            rest = self.mesh.vertices[verts]
-            moving = (np.linalg.norm(q - rest, axis=1) > self.tol) | (np.linalg.norm(qd, axis=1) * WAKE_TIME > self.tol)
+            d = self.host(self.state.particle_q)[verts] - self.mesh.vertices[verts]
+            u = self.host(self.state.particle_qd)[verts]
+            moving = (np.sqrt(np.einsum("ij,ij->i", d, d)) > self.tol) | (np.sqrt(np.einsum("ij,ij->i", u, u)) * WAKE_TIME > self.tol)
             picked.append(verts[moving])
         seeds = np.unique(np.concatenate(picked)).astype(np.int32)
         if self.model.support_count:
