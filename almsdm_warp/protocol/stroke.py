@@ -202,6 +202,7 @@ class ProbeStroke(Palpation):
         self._slot = 0  # self._slots[_slot] holds the current region
         self._frames = None  # the explicit frames: [slot][state], captured once at the first step
         self._views = {}
+        self._state_views = {}  # _check_state's host views, by the current state's index
         self._started = False
         self._last = None  # the spheres' centres [m] at the last step (None before the first)
         self._steps = 0
@@ -264,9 +265,10 @@ class ProbeStroke(Palpation):
             self._last = c.copy()
             return
         d = c - self._last
-        travel = np.sqrt(np.einsum("ij,ij->i", d, d))
-        far = travel >= self.radius
-        if far.any():
+        travel2 = np.einsum("ij,ij->i", d, d)
+        if travel2.max() >= self.radius * self.radius:  # a step of a radius or more (rare): the full test
+            travel = np.sqrt(travel2)
+            far = travel >= self.radius
             inside = bool(self.clearance(c).min() < self.radius - self.guard)
             if inside or (self._touching[far] != 0).any():
                 p = int(np.argmax(travel))
@@ -284,12 +286,14 @@ class ProbeStroke(Palpation):
             if k == 0:
                 self.check_finite(self._steps)
             return
-        n = self.model.particle_count
-        chunk = -(-n // CHECK_EVERY)
+        views = self._state_views.get(self._cur)
+        if views is None:  # the current state's positions and velocities and the rest positions, host views
+            state, n = self.state, self.model.particle_count
+            views = self._state_views[self._cur] = (self.host(state.particle_q), self.host(state.particle_qd),
+                                                    self.host(self.model.particle_q_rest), -(-n // CHECK_EVERY))
+        q, qd, rest, chunk = views
         part = slice(k * chunk, (k + 1) * chunk)
-        state = self.state
-        if runaway(self.host(state.particle_q)[part], self.host(state.particle_qd)[part],
-                   self.host(self.model.particle_q_rest)[part], self.mesh_size):
+        if runaway(q[part], qd[part], rest[part], self.mesh_size):
             self.raise_runaway(self._steps)
 
     def clearance(self, points) -> np.ndarray:
@@ -319,9 +323,14 @@ class ProbeStroke(Palpation):
         # "now": a lifted sphere already touches the surface outside the region's inner rings (a jump
         # of the path: it must find free vertices this step); "soon": a sphere nears the outer rings
         # or the surface outside them (the move is spread over the next steps); None: neither
-        soon = bool(self._near.any())
-        if self._touching.all():  # every sphere touches: the contact pass's flag says all
-            return "soon" if soon else None
+        if self.probe_count == 1:  # one sphere: its flags as scalars (a reduction costs a microsecond)
+            soon = bool(self._near[0])
+            if self._touching[0]:  # touching: the contact pass's flag says all
+                return "soon" if soon else None
+        else:
+            soon = bool(self._near.any())
+            if self._touching.all():
+                return "soon" if soon else None
         for p in np.flatnonzero(self._touching == 0):
             # lifted: a touch-down outside the region's inner rings moves it (the surface there is at rest)
             d, k = self._tree.query(c[p])
