@@ -323,14 +323,9 @@ class ProbeStroke(Palpation):
         # "now": a lifted sphere already touches the surface outside the region's inner rings (a jump
         # of the path: it must find free vertices this step); "soon": a sphere nears the outer rings
         # or the surface outside them (the move is spread over the next steps); None: neither
-        if self.probe_count == 1:  # one sphere: its flags as scalars (a reduction costs a microsecond)
-            soon = bool(self._near[0])
-            if self._touching[0]:  # touching: the contact pass's flag says all
-                return "soon" if soon else None
-        else:
-            soon = bool(self._near.any())
-            if self._touching.all():
-                return "soon" if soon else None
+        soon = any(self._near.tolist())  # a few flags: as Python values (a NumPy reduction costs a microsecond)
+        if all(self._touching.tolist()):  # every sphere touches: the contact pass's flag says all
+            return "soon" if soon else None
         for p in np.flatnonzero(self._touching == 0):
             # lifted: a touch-down outside the region's inner rings moves it (the surface there is at rest)
             d, k = self._tree.query(c[p])
