@@ -46,6 +46,7 @@ from typing import Any
 
 import warp as wp
 
+from ..index import nonneg
 from .tets import ENTRY_PARAMS, ENTRY_TOPOLOGY, VOLUMETRIC, Entries, TetEntry, column, nodal_pressure, tet_law  # noqa: F401
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
@@ -65,14 +66,14 @@ def entry_force(x: wp.vec3, t: wp.vec4i, p: TetEntry, q: Any, pressure: Any):
     # corner_force on the entry's vertex at x written without F (a third of the arithmetic), the tet
     # seen as (i, a, j, k), the vertex a (TetEntry): -V_0 mu F b_a = -(shear . edges from x_i) and
     # -V_0 dJ b_a = -(x_j - x_i) x (x_k - x_i) / 6, the gradient of the deformed volume
-    xi = q[t[0]]
+    xi = q[nonneg(t[0])]
     eia = x - xi
-    eij = q[t[2]] - xi
-    eik = q[t[3]] - xi
+    eij = q[nonneg(t[2])] - xi
+    eik = q[nonneg(t[3])] - xi
     n6 = wp.cross(eij, eik)
     v6 = wp.dot(n6, eia)
     s = p.shear
-    pt = 0.25 * ((pressure[t[0]] + pressure[t[1]]) + (pressure[t[2]] + pressure[t[3]]))
+    pt = 0.25 * ((pressure[nonneg(t[0])] + pressure[nonneg(t[1])]) + (pressure[nonneg(t[2])] + pressure[nonneg(t[3])]))
     return -((s[0] * eia + s[1] * eij + s[2] * eik) + ((p.mu_v6 * v6 - 2.0 * p.mu + pt) * (1.0 / 6.0)) * n6)
 
 

@@ -13,6 +13,7 @@ from typing import Any
 
 import warp as wp
 
+from ..index import nonneg
 from .springs import anchor_force, anchor_row, row_unknown
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
@@ -103,21 +104,33 @@ def corner_position(q: Any, rest: Any, c: int):
 
 
 @wp.func
+def tet_volume6(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3):
+    # six times the volume of the tet (x0, x1, x2, x3), positive where it keeps its rest orientation
+    return wp.dot(wp.cross(x2 - x0, x3 - x0), x1 - x0)
+
+
+@wp.func
+def nodal_value(volume6: float, nodal: wp.vec2):
+    # p_a = kappa_a (J_a - 1) of a vertex whose tets' deformed volumes sum to volume6 / 6, its nodal
+    # weights (1 / (6 S_a), kappa_a) (TetEntry.nodal)
+    return nodal[1] * (volume6 * nodal[0] - 1.0)
+
+
+@wp.func
 def nodal_pressure(begin: int, end: int, topology: Any, params: Any, shift: int, q: Any, rest: Any):
     # p_a = kappa_a (J_a - 1) of a vertex from its incident tets, entries begin..end (corner positions
     # from q, or `rest` for a negative corner: corner_position): J_a = sum v_t / S_a, with the vertex's
-    # weights (1 / (6 S_a), kappa_a) from its first entry (TetEntry.nodal; the module's docstring)
+    # weights from its first entry (nodal_value; the module's docstring)
     if begin >= end:
         return 0.0
     volume6 = float(0.0)
     k = begin
     while k < end:  # a while loop: here 17% fewer instructions than range() on the CPU (callgrind)
-        t = topology[k]
-        x0 = corner_position(q, rest, t[0])
-        volume6 += wp.dot(wp.cross(corner_position(q, rest, t[2]) - x0, corner_position(q, rest, t[3]) - x0), corner_position(q, rest, t[1]) - x0)
+        t = topology[nonneg(k)]
+        volume6 += tet_volume6(corner_position(q, rest, t[0]), corner_position(q, rest, t[1]), corner_position(q, rest, t[2]),
+                               corner_position(q, rest, t[3]))
         k += 1
-    nodal = params[begin + shift].nodal
-    return nodal[1] * (volume6 * nodal[0] - 1.0)
+    return nodal_value(volume6, params[begin + shift].nodal)
 
 
 @wp.func
@@ -167,7 +180,7 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float, entry_force: A
         # data params[k + shift]; corner positions from q, nodal pressures from `pressure`, indexed as q)
         f = anchor_force(x, u, x_rest, ka, kda, scale)
         for k in range(begin, end):
-            f += ENTRY_FORCE(x, topology[k], params[k + shift], q, pressure)
+            f += ENTRY_FORCE(x, topology[nonneg(k)], params[nonneg(k + shift)], q, pressure)
         return f
 
     @wp.func
