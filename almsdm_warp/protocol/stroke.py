@@ -407,6 +407,8 @@ class ProbeStroke(Palpation):
         self._near_ring = max(region.outer_ring - self.margin, 1)
         self._slot ^= 1
         self._slots[self._slot].load(self.solver, region.vertex_count, self._near_ring)
+        if self.solver.conditionally_stable:  # the frames' explicit step reads the new region's tets (captured once)
+            self.solver.built_tets(self.state.particle_q)
         self._near[:] = 0
         self._fresh = True
         self._pending = None
@@ -495,7 +497,7 @@ class ProbeStroke(Palpation):
             if solver.conditionally_stable:
                 # the Control is off here (the stroke's spheres are put on by the contact pass below)
                 calls.append(functools.partial(integrate_explicit, self.model, slot.free_vertex, slot.counts, threads,
-                                               solver.anchor_scale, a, b, self.control, h))
+                                               solver.anchor_scale, a, b, self.control, h, solver.built_tets(a.particle_q)))
             else:
                 calls.append(functools.partial(solver.step, a, b, self.control, h))
             calls.append(functools.partial(

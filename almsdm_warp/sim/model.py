@@ -14,7 +14,7 @@ import warp as wp
 from ..kernels.arrays import ProbeArrays, ProbeSphereArrays, TissueArrays, struct_from
 from ..mesh.device_mesh import as_device_mesh
 from ..mesh.topology import corner_cross
-from ..tissue.laws import law_entry, resolve_law
+from ..tissue.laws import law_entry, resolve_law, tet_entry_tets
 from ..tissue.material import Material, damping, springs_for_mesh
 from ..tissue.params import TissueParams
 
@@ -164,6 +164,13 @@ class Model:
         """The four above as one kernel argument (the law's Entries struct)."""
         self.entries.offsets, self.entries.topology, self.entries.params = self.entry_offsets, self.entry_topology, self.entry_params
         self.entries.pressure = self.nodal_pressure
+
+    def entry_tets(self):
+        """A tet law's (entry_tet, tet_corners) on the device (tissue.laws.tet_entry_tets), made on first use."""
+        if getattr(self, "_entry_tets", None) is None:
+            entry_tet, tets = tet_entry_tets(self)
+            self._entry_tets = (wp.array(entry_tet, dtype=wp.int32, device=self.device), wp.array(tets, dtype=wp.vec4i, device=self.device))
+        return self._entry_tets
 
     def _tissue_constants(self, t):
         """(k_ij, d_ij per edge; k_i, d_i, m_i per vertex), float64 host arrays, from either tissue."""

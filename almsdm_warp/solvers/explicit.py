@@ -5,6 +5,7 @@ from __future__ import annotations
 from ..kernels.explicit import batch as batch_kernels
 from ..kernels.explicit import batch_fast
 from ..kernels.explicit.step import integrate_explicit
+from ..kernels.region.volumes import RegionTets
 from .base import SolverBase
 
 
@@ -15,9 +16,39 @@ class SolverExplicit(SolverBase):
     integrator = "explicit"
     conditionally_stable = True
 
+    def __init__(self, model):
+        super().__init__(model)
+        self.pressure_pass = "auto"
+        """A volumetric law's nodal pressure pass: "tets" (each tet's volume once a step, the region's tets
+        listed once a free set: kernels/region/volumes.py), "vertices" (each vertex's tets, every step:
+        kernels/explicit/step.py), or "auto": tets on the CPU (one thread, where the repeated volumes cost),
+        vertices on CUDA (where they run in parallel and the one-thread listing would not)."""
+        self.region_tets = None
+        """The RegionTets of the "tets" pass, made at its first step."""
+        self._tets_built = False
+
+    def set_free(self, *args, **kw) -> None:
+        super().set_free(*args, **kw)
+        self._tets_built = False
+
+    def built_tets(self, q):
+        """The region's RegionTets for the current free set, built at positions `q` (the state the next
+        step starts from) once a free set; None where the per-vertex pass runs."""
+        m = self.model
+        per_tet = m.device.is_cpu if self.pressure_pass == "auto" else self.pressure_pass == "tets"
+        if not (m.law_entry.volumetric and per_tet):
+            return None
+        if self.region_tets is None:
+            self.region_tets = RegionTets(m)
+        if not self._tets_built:
+            self.region_tets.build(self.free_vertex, self.counts, self.vertex_local, q)
+            self._tets_built = True
+        return self.region_tets
+
     def integrate(self, state_in, state_out, control, dt: float) -> None:
         threads = 1 if self.model.device.is_cpu else self.free_count
-        integrate_explicit(self.model, self.free_vertex, self.counts, threads, self.anchor_scale, state_in, state_out, control, dt)
+        integrate_explicit(self.model, self.free_vertex, self.counts, threads, self.anchor_scale, state_in, state_out, control, dt,
+                           self.built_tets(state_in.particle_q))
 
     @staticmethod
     def press_batch(batch, total: int, steps_per_launch: int | None, on_launch) -> None:

@@ -266,6 +266,15 @@ def tet_entries(model):
             wp.array(params, dtype=TetEntry, device=d))
 
 
+def tet_entry_tets(model):
+    """(entry_tet, tet_corners): each of a tet law's entries' tet (the order of tet_entries), int32
+    [entries], and each tet's corners as oriented there, int32 [tets, 4]: for a pass over each tet once
+    (kernels/region/volumes.py)."""
+    tets = _tet_material(model)[0]
+    order = np.argsort(tets.ravel(), kind="stable")  # tet_entries' order: by vertex, then tet, then corner
+    return (order // 4).astype(np.int32), tets.astype(np.int32)
+
+
 def _row_slots(adjacency, owner: np.ndarray, topology: np.ndarray) -> np.ndarray:
     """[entries, 4] int32: each entry's corners' places in its vertex's adjacency row (TetEntry.slots),
     -1 at the vertex's own corner (1); every other corner shares an edge of the tet with it."""

@@ -162,13 +162,18 @@ def constrain_sphere_explicit(
     probe.probe_reaction[0] = total
 
 
-def integrate_explicit(model, free_vertex, counts, threads, anchor_scale, state_in, state_out, control, dt):
+def integrate_explicit(model, free_vertex, counts, threads, anchor_scale, state_in, state_out, control, dt, tets=None):
     """Advance the free vertices (the first counts[0] of `free_vertex`; counts: a device int32 array,
     read when the launch runs, counts[1] the region's vertices, free and fixed ring) by one
     semi-implicit Euler step of `dt` [s], on `threads` threads (1 on the CPU; on CUDA at least the
     free count: both launches stride over their vertices); a volumetric law's nodal pressures first
-    (update_pressure), a Control with a sphere adds the sphere's contact (a one-thread launch after)."""
-    update_pressure(model, free_vertex, counts, threads, state_in.particle_q)
+    (`tets`, the region's RegionTets built for this free set: each tet once, kernels/region/volumes.py;
+    None: update_pressure, each vertex's tets), a Control with a sphere adds the sphere's contact (a
+    one-thread launch after)."""
+    if tets is not None:
+        tets.pressures(free_vertex, counts, threads, state_in.particle_q)
+    else:
+        update_pressure(model, free_vertex, counts, threads, state_in.particle_q)
     wp.launch(
         region_kernel(model.law),
         dim=threads,

@@ -1,0 +1,148 @@
+"""A region's tets for a volumetric law's nodal pressure pass on the CPU: each tet's volume once a step.
+
+The pass of kernels/explicit/step.py (`nodal_pressure`, kernels/laws/tets.py) sums, for each region
+vertex, its incident tets' deformed volumes: a tet is computed once for each of its region corners
+(on the tet ball of scripts/bench_laws.py, 2,087 volumes a step for 737 tets), and the tets with no
+free corner, most of a fixed-ring vertex's, do not change while the region stays. Here the region's
+tets are listed once, when its free set is set (`build_region_tets`, one thread):
+- the *active* tets, those with a free corner, each once (by its first free corner in local order),
+  in their own corner order;
+- each entry of a region vertex gets a slot in `volume6`: its tet's among the active ones, or, for a
+  tet with no free corner, a slot of its own holding that tet's volume at the build, which no step
+  changes (the vertices outside the free set do not move while the region stays: a protocol that
+  moves the free set builds again).
+A step is then two passes (`region_pressures`): each active tet's volume, then each region vertex's
+sum of its entries' slots in entry order and its nodal pressure (nodal_value, the law's). Grid-stride
+as the step; the build is one thread, so a CUDA step keeps the per-vertex pass, which runs in
+parallel there (integrate_explicit chooses). The volumes are the same function of the positions as
+the per-vertex pass's; each tet is rounded once, in its own corner order, not once a corner.
+"""
+
+import warp as wp
+
+from ..index import nonneg
+from ..laws.tets import ENTRY_PARAMS, nodal_value, tet_volume6
+
+# no adjoints: nothing here is differentiated (smaller code, faster compiles)
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class RegionTetArrays:
+    """A region's tets for the per-tet nodal pressure pass (RegionTets.arrays)."""
+
+    tets: wp.array(dtype=wp.vec4i)
+    """The active tets' corners (mesh ids, each tet's own oriented order), [tet_count]."""
+    count: wp.array(dtype=wp.int32)
+    """[1]: how many tets are active (the first slots of volume6)."""
+    entry_slot: wp.array(dtype=wp.int32)
+    """Each entry's slot in volume6, [entries] (written for the region vertices' entries only)."""
+    volume6: wp.array(dtype=wp.float32)
+    """Six times the tets' deformed volumes [m^3]: the active ones (each step), then one a fixed-ring
+    entry of a tet with no free corner (at the build), [entries]."""
+    tet_slot: wp.array(dtype=wp.int32)
+    """Scratch of the build: each active tet's slot, [tet_count]."""
+
+
+@wp.func
+def free_before(vertex_local: wp.array(dtype=wp.int32), c: int, limit: int):
+    # whether mesh vertex c is free with a local index under `limit` (vertex_local: -1 outside the region)
+    lc = vertex_local[nonneg(c)]
+    return lc >= 0 and lc < limit
+
+
+@wp.kernel
+def build_region_tets(
+    free_vertex: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), vertex_local: wp.array(dtype=wp.int32),
+    entry_offsets: wp.array(dtype=wp.int32), entry_tet: wp.array(dtype=wp.int32), tet_corners: wp.array(dtype=wp.vec4i),
+    q: wp.array(dtype=wp.vec3), out: RegionTetArrays,
+):
+    # one thread: the active tets, each by its first free corner in local order, then the fixed ring's entries
+    free = counts[0]
+    active = int(0)
+    for i in range(free):
+        v = free_vertex[i]
+        for k in range(entry_offsets[v], entry_offsets[v + 1]):
+            t = entry_tet[k]
+            c = tet_corners[t]
+            if not (free_before(vertex_local, c[0], i) or free_before(vertex_local, c[1], i)
+                    or free_before(vertex_local, c[2], i) or free_before(vertex_local, c[3], i)):
+                out.tets[active] = c
+                out.tet_slot[t] = active
+                active += 1
+            out.entry_slot[k] = out.tet_slot[t]
+    out.count[0] = active
+    slot = active
+    for i in range(free, counts[1]):
+        v = free_vertex[i]
+        for k in range(entry_offsets[v], entry_offsets[v + 1]):
+            t = entry_tet[k]
+            c = tet_corners[t]
+            if (free_before(vertex_local, c[0], free) or free_before(vertex_local, c[1], free)
+                    or free_before(vertex_local, c[2], free) or free_before(vertex_local, c[3], free)):
+                out.entry_slot[k] = out.tet_slot[t]
+            else:
+                out.volume6[slot] = tet_volume6(q[c[0]], q[c[1]], q[c[2]], q[c[3]])
+                out.entry_slot[k] = slot
+                slot += 1
+
+
+@wp.kernel
+def active_volumes(out: RegionTetArrays, stride: int, q: wp.array(dtype=wp.vec3)):
+    # each active tet's six volumes at q
+    for s in range(wp.tid(), out.count[0], stride):
+        c = out.tets[s]
+        out.volume6[s] = tet_volume6(q[nonneg(c[0])], q[nonneg(c[1])], q[nonneg(c[2])], q[nonneg(c[3])])
+
+
+@wp.kernel
+def slot_pressures(
+    region_vertex: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), stride: int, entry_offsets: wp.array(dtype=wp.int32),
+    entry_params: ENTRY_PARAMS, out: RegionTetArrays, pressure: wp.array(dtype=wp.float32),
+):
+    # each region vertex's nodal pressure from its entries' slots, in entry order
+    for i in range(wp.tid(), counts[1], stride):
+        v = region_vertex[i]
+        begin = entry_offsets[v]
+        end = entry_offsets[v + 1]
+        if begin < end:
+            volume6 = float(0.0)
+            k = begin
+            while k < end:
+                volume6 += out.volume6[nonneg(out.entry_slot[nonneg(k)])]
+                k += 1
+            pressure[v] = nodal_value(volume6, entry_params[begin].nodal)
+        else:
+            pressure[v] = 0.0
+
+
+class RegionTets:
+    """The arrays of one region's tets (RegionTetArrays), sized for any region of `model`'s mesh."""
+
+    def __init__(self, model):
+        entry_tet, tet_corners = model.entry_tets()
+        d = model.device
+        entries, tets = int(entry_tet.shape[0]), int(tet_corners.shape[0])
+        self.model, self.entry_tet, self.tet_corners = model, entry_tet, tet_corners
+        self.arrays = RegionTetArrays()
+        self.arrays.tets = wp.zeros(tets, dtype=wp.vec4i, device=d)
+        self.arrays.count = wp.zeros(1, dtype=wp.int32, device=d)
+        self.arrays.entry_slot = wp.zeros(entries, dtype=wp.int32, device=d)
+        self.arrays.volume6 = wp.zeros(entries, dtype=wp.float32, device=d)
+        self.arrays.tet_slot = wp.zeros(tets, dtype=wp.int32, device=d)
+
+    def build(self, free_vertex, counts, vertex_local, q) -> None:
+        """List the tets of the region whose free vertices are the first counts[0] of `free_vertex`
+        (its first counts[1] the region's, free and fixed ring; vertex_local: each mesh vertex's index
+        in it, -1 outside), the fixed ones' volumes at positions `q`."""
+        m = self.model
+        wp.launch(build_region_tets, dim=1, inputs=[free_vertex, counts, vertex_local, m.entry_offsets, self.entry_tet, self.tet_corners, q,
+                                                     self.arrays], device=m.device)
+
+    def pressures(self, region_vertex, counts, threads: int, q) -> None:
+        """The nodal pressures (model.nodal_pressure) of the first counts[1] vertices of `region_vertex`
+        at positions `q`: the region built last (build)."""
+        m = self.model
+        wp.launch(active_volumes, dim=threads, inputs=[self.arrays, threads, q], device=m.device)
+        wp.launch(slot_pressures, dim=threads, inputs=[region_vertex, counts, threads, m.entry_offsets, m.entry_params, self.arrays],
+                  outputs=[m.nodal_pressure], device=m.device)
