@@ -19,6 +19,8 @@ from typing import Any
 
 import warp as wp
 
+from ..index import nonneg
+
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
@@ -122,8 +124,8 @@ def vertex_force(
     # (`pressure`: a volumetric law's nodal pressures, which springs have none of)
     f = anchor_force(x, u, x_rest, ka, kda, scale)
     for k in range(begin, end):
-        j = neighbour[k]
-        s = spring[k + shift]
+        j = nonneg(neighbour[nonneg(k)])
+        s = spring[nonneg(k + shift)]
         f = add_spring_force(f, x, u, q[j], qd[j], s[0], s[1], s[2])
     return f
 

@@ -11,9 +11,9 @@ tets are listed once, when its free set is set (`build_region_tets`, one thread)
   tet with no free corner, a slot of its own holding that tet's volume at the build, which no step
   changes (the vertices outside the free set do not move while the region stays: a protocol that
   moves the free set builds again).
-A step is then two passes (`region_pressures`): each active tet's volume, then each region vertex's
-sum of its entries' slots in entry order and its nodal pressure (nodal_value, the law's). Grid-stride
-as the step; the build is one thread, so a CUDA step keeps the per-vertex pass, which runs in
+A step is then two passes (`region_pressures`, one launch on one thread, else two): each active tet's
+volume, then each region vertex's sum of its entries' slots in entry order and its nodal pressure
+(nodal_value, the law's). Grid-stride as the step; the build is one thread, so a CUDA step keeps the per-vertex pass, which runs in
 parallel there (integrate_explicit chooses). The volumes are the same function of the positions as
 the per-vertex pass's; each tet is rounded once, in its own corner order, not once a corner.
 """
@@ -87,33 +87,48 @@ def build_region_tets(
                 slot += 1
 
 
-@wp.kernel
-def active_volumes(out: RegionTetArrays, stride: int, q: wp.array(dtype=wp.vec3)):
-    # each active tet's six volumes at q
-    for s in range(wp.tid(), out.count[0], stride):
-        c = out.tets[s]
-        out.volume6[s] = tet_volume6(q[nonneg(c[0])], q[nonneg(c[1])], q[nonneg(c[2])], q[nonneg(c[3])])
+@wp.func
+def active_volumes(out: RegionTetArrays, thread: int, stride: int, q: wp.array(dtype=wp.vec3)):
+    # each active tet's six volumes at q (grid-stride; while loops: fewer instructions than range() on the CPU)
+    s = thread
+    count = out.count[0]
+    while s < count:
+        c = out.tets[nonneg(s)]
+        out.volume6[nonneg(s)] = tet_volume6(q[nonneg(c[0])], q[nonneg(c[1])], q[nonneg(c[2])], q[nonneg(c[3])])
+        s += stride
 
 
-@wp.kernel
-def slot_pressures(
-    region_vertex: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), stride: int, entry_offsets: wp.array(dtype=wp.int32),
-    entry_params: ENTRY_PARAMS, out: RegionTetArrays, pressure: wp.array(dtype=wp.float32),
-):
+@wp.func
+def slot_pressures(region_vertex: wp.array(dtype=wp.int32), count: int, thread: int, stride: int, entry_offsets: wp.array(dtype=wp.int32),
+                   entry_params: ENTRY_PARAMS, out: RegionTetArrays, pressure: wp.array(dtype=wp.float32)):
     # each region vertex's nodal pressure from its entries' slots, in entry order
-    for i in range(wp.tid(), counts[1], stride):
-        v = region_vertex[i]
+    i = thread
+    while i < count:
+        v = nonneg(region_vertex[nonneg(i)])
         begin = entry_offsets[v]
         end = entry_offsets[v + 1]
+        p = float(0.0)
         if begin < end:
             volume6 = float(0.0)
             k = begin
             while k < end:
                 volume6 += out.volume6[nonneg(out.entry_slot[nonneg(k)])]
                 k += 1
-            pressure[v] = nodal_value(volume6, entry_params[begin].nodal)
-        else:
-            pressure[v] = 0.0
+            p = nodal_value(volume6, entry_params[nonneg(begin)].nodal)
+        pressure[v] = p
+        i += stride
+
+
+@wp.kernel
+def region_pressures(
+    region_vertex: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), stride: int, entry_offsets: wp.array(dtype=wp.int32),
+    entry_params: ENTRY_PARAMS, out: RegionTetArrays, q: wp.array(dtype=wp.vec3), phases: int, pressure: wp.array(dtype=wp.float32),
+):
+    # phases: 1 the active tets' volumes, 2 the region vertices' pressures from them, 3 both (one thread)
+    if phases & 1:
+        active_volumes(out, wp.tid(), stride, q)
+    if phases & 2:
+        slot_pressures(region_vertex, counts[1], wp.tid(), stride, entry_offsets, entry_params, out, pressure)
 
 
 class RegionTets:
@@ -141,8 +156,9 @@ class RegionTets:
 
     def pressures(self, region_vertex, counts, threads: int, q) -> None:
         """The nodal pressures (model.nodal_pressure) of the first counts[1] vertices of `region_vertex`
-        at positions `q`: the region built last (build)."""
+        at positions `q`: the region built last (build). One launch on one thread, else two (the
+        volumes, then the pressures that read them)."""
         m = self.model
-        wp.launch(active_volumes, dim=threads, inputs=[self.arrays, threads, q], device=m.device)
-        wp.launch(slot_pressures, dim=threads, inputs=[region_vertex, counts, threads, m.entry_offsets, m.entry_params, self.arrays],
-                  outputs=[m.nodal_pressure], device=m.device)
+        for phases in ((3,) if threads == 1 else (1, 2)):
+            wp.launch(region_pressures, dim=threads, inputs=[region_vertex, counts, threads, m.entry_offsets, m.entry_params, self.arrays, q, phases],
+                      outputs=[m.nodal_pressure], device=m.device)
