@@ -216,3 +216,20 @@ class BatchSphere:
     """1 for each mesh vertex the sphere may touch (a surface vertex), [particle_count]."""
     contact_local: wp.array(dtype=wp.int32)
     """Local index of each palpation's contact vertex in its region (0 without a sphere), [B]."""
+
+
+@wp.struct
+class RegionTetArrays:
+    """A region's tets for the per-tet nodal pressure pass (RegionTets.arrays)."""
+
+    tets: wp.array(dtype=wp.vec4i)
+    """The active tets' corners (mesh ids, each tet's own oriented order), [tet_count]."""
+    count: wp.array(dtype=wp.int32)
+    """[1]: how many tets are active (the first slots of volume6)."""
+    entry_slot: wp.array(dtype=wp.int32)
+    """Each entry's slot in volume6, [entries] (written for the region vertices' entries only)."""
+    volume6: wp.array(dtype=wp.float32)
+    """Six times the tets' deformed volumes [m^3]: the active ones (each step), then one a fixed-ring
+    entry of a tet with no free corner (at the build), [entries]."""
+    tet_slot: wp.array(dtype=wp.int32)
+    """Scratch of the build: each active tet's slot, [tet_count]."""
