@@ -233,3 +233,9 @@ class RegionTetArrays:
     entry of a tet with no free corner (at the build), [entries]."""
     tet_slot: wp.array(dtype=wp.int32)
     """Scratch of the build: each active tet's slot, [tet_count]."""
+    tet_id: wp.array(dtype=wp.int32)
+    """Each active tet's id (its TetRest), [tet_count]."""
+    entry_corner: wp.array(dtype=wp.int32)
+    """Each free vertex's entry: 4 x its tet's slot + its corner there, the entry's force in `force`, [entries]."""
+    force: wp.array(dtype=wp.vec3)
+    """Each active tet's elastic forces on its four corners [N] (entry_corner), [4 tet_count]."""

@@ -12,6 +12,7 @@ import numpy as np
 import warp as wp
 
 from ..kernels.arrays import ProbeArrays, ProbeSphereArrays, TissueArrays, struct_from
+from ..kernels.laws.tets import TetRest
 from ..mesh.device_mesh import as_device_mesh
 from ..mesh.topology import corner_cross
 from ..tissue.laws import law_entry, resolve_law, tet_entry_tets
@@ -166,10 +167,12 @@ class Model:
         self.entries.pressure = self.nodal_pressure
 
     def entry_tets(self):
-        """A tet law's (entry_tet, tet_corners) on the device (tissue.laws.tet_entry_tets), made on first use."""
+        """A tet law's (entry_tet, tet_corners, tet_rest) on the device (tissue.laws.tet_entry_tets), made on first use."""
         if getattr(self, "_entry_tets", None) is None:
-            entry_tet, tets = tet_entry_tets(self)
-            self._entry_tets = (wp.array(entry_tet, dtype=wp.int32, device=self.device), wp.array(tets, dtype=wp.vec4i, device=self.device))
+            entry_tet, tets, rest = tet_entry_tets(self)
+            d = self.device
+            self._entry_tets = (wp.array(entry_tet, dtype=wp.int32, device=d), wp.array(tets, dtype=wp.vec4i, device=d),
+                                wp.array(rest, dtype=TetRest, device=d))
         return self._entry_tets
 
     def _tissue_constants(self, t):

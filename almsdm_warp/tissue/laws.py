@@ -267,12 +267,20 @@ def tet_entries(model):
 
 
 def tet_entry_tets(model):
-    """(entry_tet, tet_corners): each of a tet law's entries' tet (the order of tet_entries), int32
-    [entries], and each tet's corners as oriented there, int32 [tets, 4]: for a pass over each tet once
+    """(entry_tet, tet_corners, tet_rest): each of a tet law's entries' tet (the order of tet_entries),
+    int32 [entries]; each tet's corners as oriented there, int32 [tets, 4]; and its rest data in that
+    order (kernels/laws/tets.py TetRest: D_m^-1, V_0, mu_0, the shear weights), for a pass over each tet once
     (kernels/region/volumes.py)."""
-    tets = _tet_material(model)[0]
+    from ..kernels.laws.tets import TetRest
+
+    tets, dm, volume, (mu, _) = _tet_material(model)
     order = np.argsort(tets.ravel(), kind="stable")  # tet_entries' order: by vertex, then tet, then corner
-    return (order // 4).astype(np.int32), tets.astype(np.int32)
+    rest = np.zeros(len(tets), dtype=TetRest.numpy_dtype())
+    dm_inv = np.linalg.inv(dm)
+    rest["dm_inv"], rest["volume"], rest["mu"] = dm_inv, volume, mu
+    rest["shear"] = (mu * volume)[:, None, None] * np.einsum("tck,tdk->tcd", dm_inv, dm_inv)  # mu V_0 (b_c . b_d), rows of D_m^-1
+    rest["mu_v6"] = mu / (6.0 * volume)
+    return (order // 4).astype(np.int32), tets.astype(np.int32), rest
 
 
 def _row_slots(adjacency, owner: np.ndarray, topology: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ import warp as wp
 
 from ..arrays import ProbeArrays, ProbeSphereArrays
 from ..laws import LAWS
+from ..laws.tets import gathered_force
 from ..probes.press import drive_vertex
 from ..probes.sphere import sphere_contact_step
 
@@ -73,11 +74,16 @@ def update_pressure(model, region_vertex, counts, threads, q) -> None:
 
 
 @functools.cache
-def region_kernel(law: str):
+def region_kernel(law: str, per_tet: bool = False):
     """The explicit one-region step of tissue law `law` (a key of kernels.laws.LAWS): its entries'
-    arrays are typed by the law (ENTRY_TOPOLOGY, ENTRY_PARAMS)."""
-    vertex_force = LAWS[law].vertex_force
-    TOPOLOGY, PARAMS = LAWS[law].ENTRY_TOPOLOGY, LAWS[law].ENTRY_PARAMS
+    arrays are typed by the law (ENTRY_TOPOLOGY, ENTRY_PARAMS). per_tet (a tet law): each free vertex
+    sums its tets' forces computed once a tet (gathered_force; the entries' arrays are then each
+    entry's place in the region's tet forces and those forces: kernels/region/volumes.py)."""
+    if per_tet:
+        vertex_force, TOPOLOGY, PARAMS = gathered_force, wp.array(dtype=wp.int32), wp.array(dtype=wp.vec3)
+    else:
+        vertex_force = LAWS[law].vertex_force
+        TOPOLOGY, PARAMS = LAWS[law].ENTRY_TOPOLOGY, LAWS[law].ENTRY_PARAMS
 
     @wp.kernel(module="unique", enable_backward=False)
     def integrate_region_explicit(
@@ -167,18 +173,20 @@ def integrate_explicit(model, free_vertex, counts, threads, anchor_scale, state_
     read when the launch runs, counts[1] the region's vertices, free and fixed ring) by one
     semi-implicit Euler step of `dt` [s], on `threads` threads (1 on the CPU; on CUDA at least the
     free count: both launches stride over their vertices); a volumetric law's nodal pressures first
-    (`tets`, the region's RegionTets built for this free set: each tet once, kernels/region/volumes.py;
-    None: update_pressure, each vertex's tets), a Control with a sphere adds the sphere's contact (a
+    (`tets`, the region's RegionTets built for this free set: each tet's volume and forces once,
+    kernels/region/volumes.py; None: update_pressure, each vertex's tets), a Control with a sphere adds the sphere's contact (a
     one-thread launch after)."""
     if tets is not None:
-        tets.pressures(free_vertex, counts, threads, state_in.particle_q)
+        tets.pressures(free_vertex, counts, threads, state_in.particle_q, forces=True)
+        topology, params = tets.arrays.entry_corner, tets.arrays.force
     else:
         update_pressure(model, free_vertex, counts, threads, state_in.particle_q)
+        topology, params = model.entry_topology, model.entry_params
     wp.launch(
-        region_kernel(model.law),
+        region_kernel(model.law, tets is not None),
         dim=threads,
         inputs=[
-            free_vertex, counts, threads, model.entry_offsets, model.entry_topology, model.entry_params, model.nodal_pressure,
+            free_vertex, counts, threads, model.entry_offsets, topology, params, model.nodal_pressure,
             model.particle_q_rest,
             model.particle_mass, model.anchor_ke, model.anchor_kd, anchor_scale,
             control.probe_vertex, control.probe_mode, control.probe_target, control.probe_force, dt,

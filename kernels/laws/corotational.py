@@ -47,10 +47,10 @@ def rotation(F: wp.mat33):
 
 
 @wp.func
-def corner_force(F: wp.mat33, dJ: wp.mat33, p: TetEntry, pressure: float):
-    # the tet's elastic force on its corner, -V_0 (2 mu (F - R) + p_t dJ) b
-    return (-p.volume) * ((2.0 * p.mu) * ((F - rotation(F)) * p.gradient) + pressure * (dJ * p.gradient))
+def stress(F: wp.mat33, dJ: wp.mat33, mu: float, pressure: float):
+    # the first Piola-Kirchhoff stress P = 2 mu (F - R) + p_t dJ
+    return (2.0 * mu) * (F - rotation(F)) + pressure * dJ
 
 
-vertex_force, implicit_row, static_row = tet_law(corner_force, shear=2.0, element_bulk=0.0)
+vertex_force, implicit_row, static_row, tet_forces = tet_law(stress, shear=2.0, element_bulk=0.0)
 """The step kernels' functions (kernels/laws/tets.py)."""

@@ -47,23 +47,23 @@ from typing import Any
 import warp as wp
 
 from ..index import nonneg
-from .tets import ENTRY_PARAMS, ENTRY_TOPOLOGY, VOLUMETRIC, Entries, TetEntry, column, nodal_pressure, tet_law  # noqa: F401
+from .tets import ENTRY_PARAMS, ENTRY_TOPOLOGY, VOLUMETRIC, Entries, TetEntry, TetRest, column, nodal_pressure, tet_law  # noqa: F401
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
 
 
 @wp.func
-def corner_force(F: wp.mat33, dJ: wp.mat33, p: TetEntry, pressure: float):
-    # the tet's elastic force on its corner, -V_0 P b, P = mu F + (mu (J - 2) + p_t) dJ (the module's
-    # docstring), p_t the mean of its corners' nodal pressures
+def stress(F: wp.mat33, dJ: wp.mat33, mu: float, pressure: float):
+    # the first Piola-Kirchhoff stress P = mu F + (mu (J - 2) + p_t) dJ (the module's docstring), p_t
+    # the mean of the tet's corners' nodal pressures
     J = wp.dot(column(F, 0), column(dJ, 0))
-    return (-p.volume) * (p.mu * (F * p.gradient) + (p.mu * (J - 2.0) + pressure) * (dJ * p.gradient))
+    return mu * F + (mu * (J - 2.0) + pressure) * dJ
 
 
 @wp.func
 def entry_force(x: wp.vec3, t: wp.vec4i, p: TetEntry, q: Any, pressure: Any):
-    # corner_force on the entry's vertex at x written without F (a third of the arithmetic), the tet
+    # -V_0 P b_a on the entry's vertex at x written without F (a third of the arithmetic), the tet
     # seen as (i, a, j, k), the vertex a (TetEntry): -V_0 mu F b_a = -(shear . edges from x_i) and
     # -V_0 dJ b_a = -(x_j - x_i) x (x_k - x_i) / 6, the gradient of the deformed volume
     xi = q[nonneg(t[0])]
@@ -77,6 +77,26 @@ def entry_force(x: wp.vec3, t: wp.vec4i, p: TetEntry, q: Any, pressure: Any):
     return -((s[0] * eia + s[1] * eij + s[2] * eik) + ((p.mu_v6 * v6 - 2.0 * p.mu + pt) * (1.0 / 6.0)) * n6)
 
 
-vertex_force, implicit_row, static_row = tet_law(corner_force, shear=1.0, element_bulk=1.0, entry_force=entry_force)
+@wp.func
+def tet_forces(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, r: TetRest, pressure: float):
+    # the forces on the tet's four corners as entry_force writes one: with E the edges from x_0 as
+    # columns, -V_0 mu F b_c = -(E r.shear)_c and -V_0 dJ b_c = -(the deformed volume's gradient at x_c)
+    # for c = 1..3; corner 0's minus their sum (the forces of a tet sum to zero)
+    e1 = x1 - x0
+    e2 = x2 - x0
+    e3 = x3 - x0
+    n1 = wp.cross(e2, e3)
+    n2 = wp.cross(e3, e1)
+    n3 = wp.cross(e1, e2)
+    s = (r.mu_v6 * wp.dot(e1, n1) - 2.0 * r.mu + pressure) * (1.0 / 6.0)
+    G = wp.matrix_from_cols(e1, e2, e3) * r.shear
+    h1 = -(column(G, 0) + s * n1)
+    h2 = -(column(G, 1) + s * n2)
+    h3 = -(column(G, 2) + s * n3)
+    return -(h1 + h2 + h3), h1, h2, h3
+
+
+vertex_force, implicit_row, static_row, tet_forces = tet_law(stress, shear=1.0, element_bulk=1.0, entry_force=entry_force,
+                                                             tet_forces=tet_forces)
 """The step kernels' functions (kernels/laws/tets.py): the explicit gather from entry_force; Gauss-Newton
 blocks V_0 (mu (b_a . b_b) I + (mu + lambda_0) (dJ b_a)(dJ b_b)^T)."""

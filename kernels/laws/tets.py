@@ -1,12 +1,12 @@
 """What every tet law shares (kernels/laws/neo_hookean.py, kernels/laws/corotational.py): a vertex's
-incident tets as its entries, the nodal pressure pass, and the three functions a law gives the step
-kernels (vertex_force, implicit_row, static_row), made by `tet_law` from the law's element force.
+incident tets as its entries, the nodal pressure pass, and the functions a law gives the step kernels
+(vertex_force, implicit_row, static_row, tet_forces), made by `tet_law` from the law's stress.
 
 A tet law's energy is a sum over its tets of an element energy with a small bulk modulus of its own,
 plus a sum over vertices of lambda_0 on each vertex's nodal volume change (average nodal pressure:
-Bonet & Burton 1998; neo_hookean.py's docstring says why and how): the element force on a corner is
-the law's (`corner_force(F, dJ, p, pressure)`, pressure the tet's mean nodal pressure p_t, to add as
-p_t dJ/dF to its stress); the rest is here, once.
+Bonet & Burton 1998; neo_hookean.py's docstring says why and how): the element's first Piola-Kirchhoff
+stress is the law's (`stress(F, dJ, mu, pressure)`, pressure the tet's mean nodal pressure p_t, added
+as p_t dJ/dF), and a tet's force on its corner c is -V_0 P b_c; the rest is here, once.
 """
 
 from typing import Any
@@ -49,6 +49,24 @@ class TetEntry:
     """Where each corner's block goes in the vertex's row of the implicit system: corner c's place in the
     vertex's CSR adjacency row (its neighbours sorted by id; the vertex's own corner -1), so that
     implicit_row adds each block into its entry without searching the row."""
+
+
+@wp.struct
+class TetRest:
+    """One tet's rest data, for a pass over each tet once (kernels/region/volumes.py): its corners as
+    oriented in tissue/laws.py (`tet_entry_tets`)."""
+
+    dm_inv: wp.mat33
+    """D_m^-1 of its corners in that order [1/m]."""
+    volume: float
+    """Rest volume V_0 [m^3]."""
+    mu: float
+    """mu [Pa]."""
+    shear: wp.mat33
+    """mu V_0 (b_c . b_d) for corners c, d = 1..3 [N/m], so that mu V_0 F b_c is column c of E shear (E: the
+    edges from corner 0 as columns)."""
+    mu_v6: float
+    """mu / (6 V_0) [Pa/m^3]: mu J = mu_v6 v6, v6 six times the deformed volume."""
 
 
 VOLUMETRIC = True
@@ -134,6 +152,21 @@ def nodal_pressure(begin: int, end: int, topology: Any, params: Any, shift: int,
 
 
 @wp.func
+def gathered_force(
+    x: wp.vec3, u: wp.vec3, x_rest: wp.vec3, ka: float, kda: float, scale: float,
+    begin: int, end: int, corner: Any, force: Any, shift: int, q: Any, qd: Any, pressure: Any,
+):
+    # vertex_force's sum with its tets' forces computed once a tet (tet_forces, kernels/region/volumes.py):
+    # the anchor and damper, then force[corner[k]] for the entries begin..end, in entry order
+    f = anchor_force(x, u, x_rest, ka, kda, scale)
+    k = begin
+    while k < end:
+        f += force[nonneg(corner[nonneg(k)])]
+        k += 1
+    return f
+
+
+@wp.func
 def corner_gradient(dm_inv: wp.mat33, c: int):
     # b_c: the gradient of corner c's barycentric coordinate at rest (rows of D_m^-1; corner 0 minus their sum)
     if c == 0:
@@ -142,14 +175,36 @@ def corner_gradient(dm_inv: wp.mat33, c: int):
     return wp.vec3(dm_inv[c - 1, 0], dm_inv[c - 1, 1], dm_inv[c - 1, 2])
 
 
-def tet_law(corner_force: Any, shear: float, element_bulk: float, entry_force: Any = None):
-    """(vertex_force, implicit_row, static_row) of a tet law whose element force on a corner is
-    `corner_force(F, dJ, p, pressure)` (p: the TetEntry; pressure: the tet's mean nodal pressure), and
-    whose Gauss-Newton blocks are K_ab = V_0 (shear mu (b_a . b_b) I + (element_bulk mu + lambda_0)
-    (dJ b_a)(dJ b_b)^T): positive semi-definite in every state (neo_hookean.py's docstring).
-    `entry_force(x, t, p, q, pressure)`: the same force on the entry's vertex (at x) written for the
-    explicit kernels' gather (vertex_force), where a law has a cheaper form; default corner_force's."""
+def tet_law(stress: Any, shear: float, element_bulk: float, entry_force: Any = None, tet_forces: Any = None):
+    """(vertex_force, implicit_row, static_row, tet_forces) of a tet law whose first Piola-Kirchhoff
+    stress is `stress(F, dJ, mu, pressure)` (pressure: the tet's mean nodal pressure), so that a tet's
+    force on its corner c is -V_0 P b_c, and whose Gauss-Newton blocks are K_ab = V_0 (shear mu (b_a .
+    b_b) I + (element_bulk mu + lambda_0) (dJ b_a)(dJ b_b)^T): positive semi-definite in every state
+    (neo_hookean.py's docstring). `entry_force(x, t, p, q, pressure)`: the same force on the entry's
+    vertex (at x) written for the explicit kernels' gather (vertex_force), where a law has a cheaper
+    form; default corner_force's. tet_forces(x0, x1, x2, x3, r, pressure): the four corners' forces of
+    a tet (TetRest r), where a law has a cheaper form than its stress once (default)."""
     SHEAR, ELEMENT_BULK = float(shear), float(element_bulk)
+
+    @wp.func
+    def corner_force(F: wp.mat33, dJ: wp.mat33, p: TetEntry, pressure: float):
+        # the tet's elastic force on the entry's corner, -V_0 P b
+        return (-p.volume) * (stress(F, dJ, p.mu, pressure) * p.gradient)
+
+    @wp.func
+    def stress_tet_forces(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, r: TetRest, pressure: float):
+        # the elastic forces on the tet's corners 0..3: -V_0 P b_c, b_1..b_3 the rows of D_m^-1 (the
+        # columns of -V_0 P D_m^-T), b_0 minus their sum
+        F = wp.matrix_from_cols(x1 - x0, x2 - x0, x3 - x0) * r.dm_inv
+        f0 = column(F, 0)
+        f1 = column(F, 1)
+        f2 = column(F, 2)
+        dJ = wp.matrix_from_cols(wp.cross(f1, f2), wp.cross(f2, f0), wp.cross(f0, f1))
+        H = (-r.volume) * (stress(F, dJ, r.mu, pressure) * wp.transpose(r.dm_inv))
+        h1 = column(H, 0)
+        h2 = column(H, 1)
+        h3 = column(H, 2)
+        return -(h1 + h2 + h3), h1, h2, h3
 
     @wp.func
     def tet_term(q: Any, t: wp.vec4i, p: TetEntry, pressure: Any):
@@ -164,6 +219,7 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float, entry_force: A
         return fc
 
     ENTRY_FORCE = corner_entry_force if entry_force is None else entry_force
+    TET_FORCES = stress_tet_forces if tet_forces is None else tet_forces
 
     @wp.func
     def block(p: TetEntry, g_a: wp.vec3, b_a: wp.vec3, b_c: wp.vec3, g_c: wp.vec3):
@@ -236,4 +292,4 @@ def tet_law(corner_force: Any, shear: float, element_bulk: float, entry_force: A
             D += block(p, g_a, p.gradient, p.gradient, g_a)
         return f, D
 
-    return vertex_force, implicit_row, static_row
+    return vertex_force, implicit_row, static_row, TET_FORCES

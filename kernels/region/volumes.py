@@ -1,4 +1,4 @@
-"""A region's tets for a volumetric law's nodal pressure pass on the CPU: each tet's volume once a step.
+"""A region's tets for a volumetric law's step on the CPU: each tet's volume and forces once a step.
 
 The pass of kernels/explicit/step.py (`nodal_pressure`, kernels/laws/tets.py) sums, for each region
 vertex, its incident tets' deformed volumes: a tet is computed once for each of its region corners
@@ -11,18 +11,24 @@ tets are listed once, when its free set is set (`build_region_tets`, one thread)
   tet with no free corner, a slot of its own holding that tet's volume at the build, which no step
   changes (the vertices outside the free set do not move while the region stays: a protocol that
   moves the free set builds again).
-A step is then two passes (`region_pressures`, one launch on one thread, else two): each active tet's
-volume, then each region vertex's sum of its entries' slots in entry order and its nodal pressure
-(nodal_value, the law's). Grid-stride as the step; the build is one thread, so a CUDA step keeps the per-vertex pass, which runs in
+A step is then three passes (`tet_pass_kernel`, one launch on one thread, else one each): each active
+tet's volume; each region vertex's sum of its entries' slots in entry order and its nodal pressure
+(nodal_value, the law's); each active tet's forces on its four corners, its stress once (the law's
+tet_forces), which the step's gather then sums for each free vertex in entry order (gathered_force,
+kernels/laws/tets.py) in place of a tet's force computed at each of its free corners. Grid-stride
+as the step; the build is one thread, so a CUDA step keeps the per-vertex pass, which runs in
 parallel there (integrate_explicit chooses). The volumes are the same function of the positions as
 the per-vertex pass's; each tet is rounded once, in its own corner order, not once a corner.
 """
+
+import functools
 
 import warp as wp
 
 from ..arrays import RegionTetArrays
 from ..index import nonneg
-from ..laws.tets import ENTRY_PARAMS, nodal_value, tet_volume6
+from ..laws import LAWS
+from ..laws.tets import ENTRY_PARAMS, TetRest, nodal_value, tet_pressure, tet_volume6
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -33,6 +39,16 @@ def free_before(vertex_local: wp.array(dtype=wp.int32), c: int, limit: int):
     # whether mesh vertex c is free with a local index under `limit` (vertex_local: -1 outside the region)
     lc = vertex_local[nonneg(c)]
     return lc >= 0 and lc < limit
+
+
+@wp.func
+def corner_of(c: wp.vec4i, v: int):
+    # which corner of the tet c vertex v is
+    m = int(0)
+    for j in range(1, 4):
+        if c[j] == v:
+            m = j
+    return m
 
 
 @wp.kernel
@@ -52,9 +68,11 @@ def build_region_tets(
             if not (free_before(vertex_local, c[0], i) or free_before(vertex_local, c[1], i)
                     or free_before(vertex_local, c[2], i) or free_before(vertex_local, c[3], i)):
                 out.tets[active] = c
+                out.tet_id[active] = t
                 out.tet_slot[t] = active
                 active += 1
             out.entry_slot[k] = out.tet_slot[t]
+            out.entry_corner[k] = 4 * out.tet_slot[t] + corner_of(c, v)
     out.count[0] = active
     slot = active
     for i in range(free, counts[1]):
@@ -103,32 +121,58 @@ def slot_pressures(region_vertex: wp.array(dtype=wp.int32), count: int, thread: 
         i += stride
 
 
-@wp.kernel
-def region_pressures(
-    region_vertex: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), stride: int, entry_offsets: wp.array(dtype=wp.int32),
-    entry_params: ENTRY_PARAMS, out: RegionTetArrays, q: wp.array(dtype=wp.vec3), phases: int, pressure: wp.array(dtype=wp.float32),
-):
-    # phases: 1 the active tets' volumes, 2 the region vertices' pressures from them, 3 both (one thread)
-    if phases & 1:
-        active_volumes(out, wp.tid(), stride, q)
-    if phases & 2:
-        slot_pressures(region_vertex, counts[1], wp.tid(), stride, entry_offsets, entry_params, out, pressure)
+@functools.cache
+def tet_pass_kernel(law: str):
+    """The per-tet passes of tet law `law` over a listed region (RegionTets), in phases: 1 the active
+    tets' volumes, 2 the region vertices' nodal pressures from them, 4 each active tet's forces on its
+    corners (the law's tet_forces, the mean of its corners' pressures); one thread runs them all in
+    one launch (phases 7), more threads one phase a launch."""
+    tet_forces = LAWS[law].tet_forces
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def region_tet_pass(
+        region_vertex: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), stride: int, entry_offsets: wp.array(dtype=wp.int32),
+        entry_params: ENTRY_PARAMS, tet_rest: wp.array(dtype=TetRest), out: RegionTetArrays, q: wp.array(dtype=wp.vec3), phases: int,
+        pressure: wp.array(dtype=wp.float32),
+    ):
+        if phases & 1:
+            active_volumes(out, wp.tid(), stride, q)
+        if phases & 2:
+            slot_pressures(region_vertex, counts[1], wp.tid(), stride, entry_offsets, entry_params, out, pressure)
+        if phases & 4:
+            s = wp.tid()
+            count = out.count[0]
+            while s < count:
+                c = out.tets[nonneg(s)]
+                f0, f1, f2, f3 = tet_forces(q[nonneg(c[0])], q[nonneg(c[1])], q[nonneg(c[2])], q[nonneg(c[3])],
+                                            tet_rest[nonneg(out.tet_id[nonneg(s)])], tet_pressure(c, pressure))
+                b = 4 * nonneg(s)
+                out.force[b] = f0
+                out.force[b + 1] = f1
+                out.force[b + 2] = f2
+                out.force[b + 3] = f3
+                s += stride
+
+    return region_tet_pass
 
 
 class RegionTets:
     """The arrays of one region's tets (RegionTetArrays), sized for any region of `model`'s mesh."""
 
     def __init__(self, model):
-        entry_tet, tet_corners = model.entry_tets()
+        entry_tet, tet_corners, tet_rest = model.entry_tets()
         d = model.device
         entries, tets = int(entry_tet.shape[0]), int(tet_corners.shape[0])
-        self.model, self.entry_tet, self.tet_corners = model, entry_tet, tet_corners
+        self.model, self.entry_tet, self.tet_corners, self.tet_rest = model, entry_tet, tet_corners, tet_rest
         self.arrays = RegionTetArrays()
         self.arrays.tets = wp.zeros(tets, dtype=wp.vec4i, device=d)
         self.arrays.count = wp.zeros(1, dtype=wp.int32, device=d)
         self.arrays.entry_slot = wp.zeros(entries, dtype=wp.int32, device=d)
         self.arrays.volume6 = wp.zeros(entries, dtype=wp.float32, device=d)
         self.arrays.tet_slot = wp.zeros(tets, dtype=wp.int32, device=d)
+        self.arrays.tet_id = wp.zeros(tets, dtype=wp.int32, device=d)
+        self.arrays.entry_corner = wp.zeros(entries, dtype=wp.int32, device=d)
+        self.arrays.force = wp.zeros(4 * tets, dtype=wp.vec3, device=d)
 
     def build(self, free_vertex, counts, vertex_local, q) -> None:
         """List the tets of the region whose free vertices are the first counts[0] of `free_vertex`
@@ -138,11 +182,13 @@ class RegionTets:
         wp.launch(build_region_tets, dim=1, inputs=[free_vertex, counts, vertex_local, m.entry_offsets, self.entry_tet, self.tet_corners, q,
                                                      self.arrays], device=m.device)
 
-    def pressures(self, region_vertex, counts, threads: int, q) -> None:
+    def pressures(self, region_vertex, counts, threads: int, q, forces: bool = False) -> None:
         """The nodal pressures (model.nodal_pressure) of the first counts[1] vertices of `region_vertex`
-        at positions `q`: the region built last (build). One launch on one thread, else two (the
-        volumes, then the pressures that read them)."""
+        at positions `q`, and with `forces` each listed tet's forces on its corners (arrays.force): the
+        region built last (build). One launch on one thread, else one a phase."""
         m = self.model
-        for phases in ((3,) if threads == 1 else (1, 2)):
-            wp.launch(region_pressures, dim=threads, inputs=[region_vertex, counts, threads, m.entry_offsets, m.entry_params, self.arrays, q, phases],
-                      outputs=[m.nodal_pressure], device=m.device)
+        phases = (1, 2, 4) if forces else (1, 2)
+        kernel = tet_pass_kernel(m.law)
+        for phase in ((sum(phases),) if threads == 1 else phases):
+            wp.launch(kernel, dim=threads, inputs=[region_vertex, counts, threads, m.entry_offsets, m.entry_params, self.tet_rest, self.arrays,
+                                                   q, phase], outputs=[m.nodal_pressure], device=m.device)
