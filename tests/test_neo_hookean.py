@@ -317,7 +317,7 @@ def test_a_batch_presses_as_each_palpation_bit_for_bit(device, integrator, law):
         pal = Palpation(mesh, MATERIAL, rings=2, law=law, integrator=integrator, dt=dt, device=device, fixed_below=-8e-3, **steps)
         pal.touch(int(v))
         if integrator == "explicit":
-            pal.solver.pressure_pass = "vertices"  # the batch's exact kernel's pass (the CPU's default: test_region_tets.py)
+            pal.solver.tet_pass = "vertices"  # the batch's exact kernel's pass (the CPU's default: test_region_tets.py)
         want = pal.press(1e-3, ramp=0.05, hold=0.1, settle=0.05)
         assert want.peak_force_N > 0.02
         if device == "cpu":

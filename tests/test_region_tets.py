@@ -83,12 +83,12 @@ def test_each_tet_with_a_free_corner_once_and_pressures_as_brute_force(device, b
 @pytest.mark.parametrize("law", ["neo-hookean", "corotational"])
 def test_a_press_with_either_pass_is_the_same_press(device, ball, law):
     """A 1 mm press, a region of 2 rings, the same on either nodal pressure pass to float32's rounding;
-    the CPU's default is the per-tet pass, CUDA's the per-vertex one (SolverExplicit.pressure_pass)."""
+    the CPU's default is the per-tet pass, CUDA's the per-vertex one (SolverExplicit.tet_pass)."""
     got = {}
     for kind in ("tets", "vertices"):
         pal = Palpation(ball, MATERIAL, rings=2, law=law, dt=1e-3, device=device, substeps=6, fixed_below=-8e-3)
         pal.touch(int(np.argmax(ball.vertices[:, 2])))
-        pal.solver.pressure_pass = kind
+        pal.solver.tet_pass = kind
         r = pal.press(1e-3, ramp=0.05, hold=0.1, settle=0.05)
         assert (pal.solver.region_tets is not None) == (kind == "tets")
         got[kind] = (r.peak_force_N, r.displacement[-1])
@@ -107,7 +107,7 @@ def test_a_stroke_rebuilds_its_tets_when_its_region_moves(ball):
     got = {}
     for kind in ("tets", "vertices"):
         s = ProbeStroke(ball, MATERIAL, probe_radius=5e-3, rings=2, dt=1e-3, device="cpu", law="neo-hookean")
-        s.solver.pressure_pass = kind
+        s.solver.tet_pass = kind
         got[kind] = np.array([np.array(s.step(c), dtype=np.float64).ravel() for c in path.centre])
         moves = s.relocations
     assert moves >= 2
@@ -128,7 +128,7 @@ def test_one_step_with_each_tets_forces_once_is_the_per_vertex_step(device, ball
     for kind in ("tets", "vertices"):
         pal = Palpation(ball, MATERIAL, rings=2, law=law, dt=1e-4, device=device, substeps=1)
         pal.touch(int(np.argmax(ball.vertices[:, 2])))
-        pal.solver.pressure_pass = kind
+        pal.solver.tet_pass = kind
         a, b = pal.states
         for s in (a, b):
             s.particle_q.assign(q)

@@ -18,11 +18,12 @@ class SolverExplicit(SolverBase):
 
     def __init__(self, model):
         super().__init__(model)
-        self.pressure_pass = "auto"
-        """A volumetric law's nodal pressure pass: "tets" (each tet's volume once a step, the region's tets
-        listed once a free set: kernels/region/volumes.py), "vertices" (each vertex's tets, every step:
-        kernels/explicit/step.py), or "auto": tets on the CPU (one thread, where the repeated volumes cost),
-        vertices on CUDA (where they run in parallel and the one-thread listing would not)."""
+        self.tet_pass = "auto"
+        """How a volumetric law's step goes over its tets: "tets" (each tet's volume and forces once a
+        step, the region's tets listed once a free set: kernels/region/volumes.py), "vertices" (each
+        vertex's tets, a tet at each of its corners: kernels/explicit/step.py), or "auto": tets on the
+        CPU (one thread, where the repeated tets cost), vertices on CUDA (a thread a vertex there, and the
+        listing is one thread)."""
         self.region_tets = None
         """The RegionTets of the "tets" pass, made at its first step."""
         self._tets_built = False
@@ -33,9 +34,9 @@ class SolverExplicit(SolverBase):
 
     def built_tets(self, q):
         """The region's RegionTets for the current free set, built at positions `q` (the state the next
-        step starts from) once a free set; None where the per-vertex pass runs."""
+        step starts from) once a free set; None where the step goes over each vertex's tets (tet_pass)."""
         m = self.model
-        per_tet = m.device.is_cpu if self.pressure_pass == "auto" else self.pressure_pass == "tets"
+        per_tet = m.device.is_cpu if self.tet_pass == "auto" else self.tet_pass == "tets"
         if not (m.law_entry.volumetric and per_tet):
             return None
         if self.region_tets is None:

@@ -1,10 +1,10 @@
-"""The liver stroke's step with each nodal pressure pass of the explicit step ("tets" / "vertices",
-SolverExplicit.pressure_pass), interleaved in one process on one core.
+"""The liver stroke's step with each way of the explicit step over a tet law's tets ("tets": each tet
+once; "vertices": each vertex's; SolverExplicit.tet_pass), interleaved in one process on one core.
 
-    python scripts/ab_pressure_pass.py [--core 1] [--runs 3] [--scene liver]
+    python scripts/ab_tet_pass.py [--core 1] [--runs 3] [--scene liver]
 
 The scene's ProbeStroke (its law, rings, support) along the built-in stroke, as `almsdm trace` steps
-it: one warm-up run each, then `--runs` runs of each pass in alternation on fresh strokes, each step
+it: one warm-up run each, then `--runs` runs of each in alternation on fresh strokes, each step
 timed (perf_counter and this thread's CPU time) with the garbage collector frozen. Prints p50 / p99 /
 max of each and the largest force difference between the two. A benchmark, not a test.
 """
@@ -38,7 +38,7 @@ def main(argv=None):
     def run(kind):
         s = ProbeStroke(mesh, scene.tissue, probe_radius=radius, rings=scene.rings, integrator="explicit", dt=1e-3,
                         device="cpu", fixed_below=scene.fixed_below, law=scene.law)
-        s.solver.pressure_pass = kind
+        s.solver.tet_pass = kind
         wall, cpu, force = [], [], []
         gc.collect()
         gc.freeze()
