@@ -31,7 +31,10 @@ gradient of E, so that a held press settles to E's minimum.
 The law's entries are a vertex's incident tets (vertex-to-tet incidence, CSR): entry k holds the
 tet's four vertex ids (`ENTRY_TOPOLOGY`) and its rest data with the vertex's corner (`TetEntry`).
 `vertex_force` gathers them as the springs law gathers its springs: each tet's force is computed
-by each of its free corners (no atomics: the same bits on every run).
+by each of its free corners (no atomics: the same bits on every run). On the CPU the explicit step
+instead computes each of the region's tets once (`tet_forces`, all four corners; kernels/region/
+volumes.py) and each free vertex sums its tets' forces in entry order: the same forces, rounded once
+a tet.
 
 `implicit_row` assembles a vertex's row of the implicit step with a positive semi-definite part of
 each tet's Hessian, K_ab = V_0 (mu (b_a . b_b) I + (mu + lambda_0) (dJ b_a)(dJ b_b)^T) (Gauss-Newton):
