@@ -252,3 +252,34 @@ def test_the_seeds_are_the_surface_near_each_centre_and_the_wake(device):
         assert set(got.tolist()) == want and len(got) == len(want)
         checked += 1
     assert checked >= 5
+
+
+def test_a_hovering_sphere_moves_the_region_where_the_nearest_vertex_query_would(bed):
+    """A lifted sphere's check (_needs_move) keeps a bound of its clearance from the surface outside the
+    region's inner rings instead of a k-d tree query each step: along a hovering path of small steps
+    and jumps, over the region and past it, it answers as the query of the nearest surface vertex does."""
+    mesh, tissue, area = bed
+    stroke = ProbeStroke(mesh, tissue, probe_radius=R, rings=3, device="cpu", anchor_scale=area)
+    stroke.step([0.0, 0.0, R + 1e-3])
+    stroke.step([0.0, 0.0, R - DEPTH])  # a region around the centre
+    rng = np.random.default_rng(7)
+    steps = rng.normal(scale=5e-5, size=(3000, 3))
+    steps[::250] += rng.normal(scale=2e-3, size=(12, 3))  # some jumps
+    path = np.cumsum(steps, axis=0) + [0.0, 0.0, R + 4e-4]
+    path[:, :2] = np.clip(path[:, :2], -0.012, 0.012)
+    path[:, 2] = np.clip(path[:, 2], R - 2e-4, R + 2e-3)  # hovering, sometimes within reach of the surface
+    stroke._touching[:] = 0
+    stroke._near[:] = 0
+    reach = stroke.radius + stroke.guard
+
+    def nearest_query(c):  # the check before the bound: the nearest surface vertex, if outside the inner rings
+        d, k = stroke._tree.query(c)
+        ring = stroke._ring_of[stroke._surface[k]]
+        if d < reach and (ring < 0 or ring >= stroke._near_ring):
+            return "now" if d < stroke.radius else "soon"
+        return None
+
+    got = [stroke._needs_move(c[None, :]) for c in path]
+    want = [nearest_query(c) for c in path]
+    assert got == want
+    assert {"now", "soon", None} <= set(want)  # the path reaches the surface outside the inner rings, near it and clear of it
