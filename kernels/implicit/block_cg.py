@@ -26,6 +26,7 @@ wrong dv (a vertex left deep inside the sphere, a force spike, another hold equi
 import warp as wp
 
 from ..arrays import CG_FIELDS, BatchCGArrays, CGArrays, struct_from
+from ..index import nonneg
 
 # no adjoints: nothing here is differentiated (smaller code, faster compiles)
 wp.set_module_options({"enable_backward": False})
@@ -121,9 +122,9 @@ def solve_block_cg(
                     row = rows[i]
                 Ap = block_diag[i] * cg_p[i]
                 for k in range(offsets[row], offsets[row + 1]):
-                    lj = csr_local[k]
+                    lj = csr_local[nonneg(k)]
                     if lj >= 0:
-                        Ap -= csr_block[k] * cg_p[lj]
+                        Ap -= csr_block[nonneg(k)] * cg_p[lj]
                 if constrained != 0:
                     Ap = filter_normal(Ap, normal[i])
             cg_Ap[i] = Ap
