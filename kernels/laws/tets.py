@@ -256,20 +256,20 @@ def tet_law(stress: Any, shear: float, element_bulk: float, entry_force: Any = N
             csr_block[k + out_shift] = wp.mat33(0.0)
             csr_local[k + out_shift] = row_unknown(row_neighbour[k], local_of, by_local, self_id, driven, free_count)
         for k in range(begin, end):
-            t = topology[k]
-            p = params[k + shift]
+            t = topology[nonneg(k)]
+            p = params[nonneg(k + shift)]
             dJ, fc = tet_term(q, t, p, pressure)
             f += fc
             g_a = dJ * p.gradient
             for c in range(4):
                 b_c = corner_gradient(p.dm_inv, c)
                 K = block(p, g_a, p.gradient, b_c, dJ * b_c)
-                vc = t[c]
+                vc = nonneg(t[c])
                 Kv += K * qd[vc]
                 if c == p.corner:
                     D += dt * dt * K
                 else:
-                    e = row_begin + p.slots[c] + out_shift  # vc's entry in the row (TetEntry.slots)
+                    e = nonneg(row_begin + p.slots[c] + out_shift)  # vc's entry in the row (TetEntry.slots)
                     csr_block[e] = csr_block[e] - dt * dt * K
                     if vc == driven:
                         correction -= dt * dt * K * dv_driven
