@@ -16,9 +16,10 @@ tet's volume; each region vertex's sum of its entries' slots in entry order and 
 (nodal_value, the law's); each active tet's forces on its four corners, its stress once (the law's
 tet_forces), which the step's gather then sums for each free vertex in entry order (gathered_force,
 kernels/laws/tets.py) in place of a tet's force computed at each of its free corners. Grid-stride
-as the step; the build is one thread, so a CUDA step keeps the per-vertex pass, which runs in
-parallel there (integrate_explicit chooses). The volumes are the same function of the positions as
-the per-vertex pass's; each tet is rounded once, in its own corner order, not once a corner.
+as the step; the build is one thread, so a CUDA step keeps going over each vertex's tets, which runs
+in parallel there (SolverExplicit.tet_pass chooses). The volumes and forces are the same functions of
+the positions as the per-vertex pass's; each tet is rounded once, in its own corner order, not once a
+corner.
 """
 
 import functools
