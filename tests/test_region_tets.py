@@ -90,7 +90,7 @@ def test_a_press_with_either_pass_is_the_same_press(device, ball, law):
         pal.touch(int(np.argmax(ball.vertices[:, 2])))
         pal.solver.tet_pass = kind
         r = pal.press(1e-3, ramp=0.05, hold=0.1, settle=0.05)
-        assert (pal.solver.region_tets is not None) == (kind == "tets")
+        assert (pal.solver.tet_listing is not None) == (kind == "tets")
         got[kind] = (r.peak_force_N, r.displacement[-1])
     assert got["tets"][0] > 0.02
     np.testing.assert_allclose(got["tets"][0], got["vertices"][0], rtol=1e-5)

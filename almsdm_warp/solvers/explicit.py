@@ -24,8 +24,8 @@ class SolverExplicit(SolverBase):
         vertex's tets, a tet at each of its corners: kernels/explicit/step.py), or "auto": tets on the
         CPU (one thread, where the repeated tets cost), vertices on CUDA (a thread a vertex there, and the
         listing is one thread)."""
-        self.region_tets = None
-        """The RegionTets of the "tets" pass, made at its first step."""
+        self.tet_listing = None
+        """The RegionTets of the "tets" pass, made at its first step (Palpation.region_tets is their count)."""
         self._tets_built = False
 
     def set_free(self, *args, **kw) -> None:
@@ -39,12 +39,12 @@ class SolverExplicit(SolverBase):
         per_tet = m.device.is_cpu if self.tet_pass == "auto" else self.tet_pass == "tets"
         if not (m.law_entry.volumetric and per_tet):
             return None
-        if self.region_tets is None:
-            self.region_tets = RegionTets(m)
+        if self.tet_listing is None:
+            self.tet_listing = RegionTets(m)
         if not self._tets_built:
-            self.region_tets.build(self.free_vertex, self.counts, self.vertex_local, q)
+            self.tet_listing.build(self.free_vertex, self.counts, self.vertex_local, q)
             self._tets_built = True
-        return self.region_tets
+        return self.tet_listing
 
     def integrate(self, state_in, state_out, control, dt: float) -> None:
         threads = 1 if self.model.device.is_cpu else self.free_count
